@@ -1,0 +1,138 @@
+"""Evaluate a per-interaction CasADi kernel over many interactions, fast.
+
+A kernel is a small SX ``casadi.Function`` whose inputs and outputs are column vectors
+describing ONE interaction (a pair of agents, a spring).  :class:`MappedKernel` lifts it
+over an index list with ``Function.map`` in fixed-size chunks and evaluates each chunk
+through ``Function.buffer`` bound to numpy arrays, so no element-by-element conversion
+happens.  Each mapped chunk function is JIT-compiled with the system C compiler when one is
+found (``-O3``); otherwise, or when ``CASADI_KEYFRAME_JIT=0``, CasADi's virtual machine
+evaluates it with identical results.
+
+Array layout: an input of size k over P interactions is a C-ordered ``(P, k)`` float64
+array, which is exactly the Fortran-ordered ``(k, P)`` matrix the mapped function expects.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import warnings
+
+import casadi as ca
+import numpy as np
+
+CHUNKS = (2048, 64)
+_COMPILED: dict = {}
+_JIT_FAILED = False
+
+
+def jit_available() -> bool:
+    """True when kernels will be JIT-compiled (a C compiler exists and JIT is not disabled)."""
+    if os.environ.get("CASADI_KEYFRAME_JIT", "1") == "0" or _JIT_FAILED:
+        return False
+    return shutil.which("gcc") is not None or shutil.which("cc") is not None
+
+
+def _jit_options() -> dict:
+    compiler = "gcc" if shutil.which("gcc") else "cc"
+    return {
+        "jit": True,
+        "compiler": "shell",
+        "jit_options": {"flags": ["-O3"], "verbose": False, "compiler": compiler,
+                        "directory": tempfile.gettempdir() + os.sep},
+    }
+
+
+def _mapped_function(kernel: ca.Function, chunk: int, jit: bool) -> ca.Function:
+    """The kernel mapped over ``chunk`` interactions, compiled once per process."""
+    global _JIT_FAILED
+    key = (kernel.serialize(), chunk, jit)
+    if key in _COMPILED:
+        return _COMPILED[key]
+    mapped = kernel.map(chunk)
+    args = [ca.MX.sym(f"a{i}", kernel.size1_in(i), chunk) for i in range(kernel.n_in())]
+    outs = mapped(*args)
+    outs = list(outs) if isinstance(outs, (list, tuple)) else [outs]
+    name = f"{kernel.name()}_x{chunk}"
+    fn = None
+    if jit:
+        try:
+            fn = ca.Function(name, args, outs, _jit_options())
+        except Exception as err:  # no working compiler: fall back to the VM
+            _JIT_FAILED = True
+            warnings.warn(f"JIT compilation failed ({err}); using CasADi's virtual machine")
+    if fn is None:
+        fn = ca.Function(name, args, outs)
+    _COMPILED[key] = fn
+    return fn
+
+
+class _Chunk:
+    """One mapped function with its buffer and padded staging arrays."""
+
+    def __init__(self, fn: ca.Function, size: int):
+        self.size = size
+        self.buf, self.trigger = fn.buffer()
+        self.in_stage = [np.zeros((size, fn.size1_in(i))) for i in range(fn.n_in())]
+        self.out_stage = [np.zeros((size, fn.size1_out(i))) for i in range(fn.n_out())]
+
+    def run(self, inputs, outputs, lo: int, count: int) -> None:
+        """Evaluate interactions ``lo:lo+count`` (``count <= size``), padding when short."""
+        full = count == self.size
+        for i, a in enumerate(inputs):
+            if full:
+                self.buf.set_arg(i, memoryview(a[lo:lo + count]))
+            else:
+                self.in_stage[i][:count] = a[lo:lo + count]
+                self.buf.set_arg(i, memoryview(self.in_stage[i]))
+        for j, r in enumerate(outputs):
+            target = r[lo:lo + count] if full else self.out_stage[j]
+            self.buf.set_res(j, memoryview(target))
+        self.trigger()
+        if not full:
+            for j, r in enumerate(outputs):
+                r[lo:lo + count] = self.out_stage[j][:count]
+
+
+class MappedKernel:
+    """Evaluate ``kernel`` over P interactions given as ``(P, k_i)`` arrays.
+
+    ``MappedKernel(kernel)(a, b, ...)`` returns a list of ``(P, m_j)`` arrays, one per kernel
+    output.  Large batches run in chunks of ``CHUNKS[0]``; the remainder in padded chunks of
+    ``CHUNKS[-1]``, so tiny systems do not pay for a big chunk.
+    """
+
+    def __init__(self, kernel: ca.Function, *, jit: bool | None = None):
+        if kernel.n_in() < 1 or kernel.n_out() < 1:
+            raise ValueError("a kernel needs at least one input and one output")
+        for i in range(kernel.n_in()):
+            if kernel.size2_in(i) != 1:
+                raise ValueError(f"kernel input {i} must be a column vector")
+        self.kernel = kernel
+        self.jit = jit_available() if jit is None else jit
+        self._chunks = [_Chunk(_mapped_function(kernel, c, self.jit), c) for c in CHUNKS]
+        self.n_out = kernel.n_out()
+
+    def __call__(self, *inputs: np.ndarray) -> list[np.ndarray]:
+        if len(inputs) != self.kernel.n_in():
+            raise ValueError(f"{self.kernel.name()} takes {self.kernel.n_in()} inputs")
+        count = inputs[0].shape[0]
+        arrays = []
+        for i, a in enumerate(inputs):
+            a = np.ascontiguousarray(a, dtype=np.float64)
+            if a.shape != (count, self.kernel.size1_in(i)):
+                raise ValueError(
+                    f"{self.kernel.name()} input {i} must have shape "
+                    f"({count}, {self.kernel.size1_in(i)}), got {a.shape}")
+            arrays.append(a)
+        outputs = [np.empty((count, self.kernel.size1_out(j))) for j in range(self.n_out)]
+        big, small = self._chunks[0], self._chunks[-1]
+        lo = 0
+        while count - lo >= big.size:
+            big.run(arrays, outputs, lo, big.size)
+            lo += big.size
+        while lo < count:
+            n = min(small.size, count - lo)
+            small.run(arrays, outputs, lo, n)
+            lo += n
+        return outputs

@@ -1,0 +1,298 @@
+"""Keyframe objective terms; they add up with ``+``.
+
+A state term is active at one frame and is written once as a CasADi expression of that
+frame's positions and velocities (``dim x n`` matrices) and a parameter vector.  Its value
+and its derivative with respect to the state come from the same compiled function, and the
+exact gradient route embeds the same expression in the unrolled simulation.  A control term
+(:class:`Smoothness`) depends on the controls only.
+
+Weights multiply squared errors: ``0.5 * weight * ||error||^2`` (the paper's ``W_n`` is
+``sqrt(weight)``).
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .shapes import Shape
+
+
+class Objective:
+    """A sum of terms.  ``term_a + term_b`` builds one; so does ``Objective([...])``."""
+
+    def __init__(self, terms=()):
+        self.terms = []
+        for t in terms:
+            self.terms.extend(t.terms if isinstance(t, Objective) else [t])
+        for t in self.terms:
+            if not isinstance(t, (StateTerm, ControlTerm)):
+                raise TypeError(f"not an objective term: {t!r}")
+
+    def __add__(self, other):
+        return Objective([self, other])
+
+    __radd__ = __add__
+
+    @property
+    def state_terms(self):
+        return [t for t in self.terms if isinstance(t, StateTerm)]
+
+    @property
+    def control_terms(self):
+        return [t for t in self.terms if isinstance(t, ControlTerm)]
+
+
+class _Addable:
+    def __add__(self, other):
+        return Objective([self, other])
+
+    def __radd__(self, other):
+        return Objective([other, self]) if other != 0 else Objective([self])
+
+
+class StateTerm(_Addable):
+    """A term that looks at the state of one frame."""
+
+    frame: int
+
+    def bind(self, model, steps: int) -> None:
+        """Check the term against the system and compile its function."""
+        if not (isinstance(self.frame, (int, np.integer)) and 0 <= self.frame <= steps):
+            raise ValueError(f"{self.label}: keyframe frame {self.frame} is outside 0..{steps}; "
+                             "pick a frame within the horizon or raise 'steps'")
+        self._check(model)
+        X = ca.SX.sym("X", model.dim, model.n)
+        V = ca.SX.sym("V", model.dim, model.n)
+        P = ca.SX.sym("P", self._params(model).size)
+        val = self._expr(X, V, P, model)
+        self._p = self._params(model)
+        name = "term_" + "".join(c if c.isalnum() else "_" for c in self.label)
+        self._fn = ca.Function(name, [X, V, P], [val, ca.gradient(val, X), ca.gradient(val, V)])
+        self._sym = ca.Function(name + "_value", [X, V, P], [val])
+
+    def accumulate(self, traj, gx, gv) -> float:
+        """Add this term's state derivative into ``gx, gv``; return its value."""
+        n = self.frame
+        val, dx, dv = self._fn(traj.x[n].T, traj.v[n].T, self._p)
+        gx[n] += np.asarray(dx).T
+        gv[n] += np.asarray(dv).T
+        return float(val)
+
+    def value(self, traj) -> float:
+        return float(self._sym(traj.x[self.frame].T, traj.v[self.frame].T, self._p))
+
+    def symbolic(self, X, V):
+        return self._sym(X, V, self._p)
+
+    # subclasses
+    label = "term"
+
+    def _check(self, model):
+        pass
+
+    def _params(self, model) -> np.ndarray:
+        return np.zeros(0)
+
+    def _expr(self, X, V, P, model):
+        raise NotImplementedError
+
+    def miss(self, traj) -> dict:
+        """How far the trajectory is from this keyframe, in the units a user thinks in."""
+        raise NotImplementedError
+
+
+def _agents(agents, n, label):
+    if agents is None:
+        return np.arange(n)
+    idx = np.atleast_1d(np.asarray(agents))
+    if idx.dtype.kind not in "iu" or idx.size == 0:
+        raise ValueError(f"{label}: agents must be a non-empty list of particle indices")
+    if idx.min() < 0 or idx.max() >= n:
+        raise ValueError(f"{label}: particle index out of range 0..{n - 1}: {idx.tolist()}")
+    return idx.astype(np.intp)
+
+
+def _target(value, shape, label, what):
+    """A float target of ``shape`` (a single row broadcasts to every particle)."""
+    if value is None:
+        return None
+    try:
+        arr = np.array(np.broadcast_to(np.asarray(value, dtype=float), shape))
+    except ValueError:
+        raise ValueError(f"{label}: {what} target must have shape {shape}, "
+                         f"got {np.shape(value)}") from None
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{label}: {what} target contains NaN or inf")
+    return arr
+
+
+class StateKeyframe(StateTerm):
+    """Positions and/or velocities of all particles (or ``agents``) at ``frame``.
+
+    value = 0.5 * (position_weight ||x - x*||^2 + velocity_weight ||v - v*||^2)
+    """
+
+    def __init__(self, frame: int, *, x=None, v=None, position_weight: float = 1.0,
+                 velocity_weight: float | None = None, agents=None):
+        if x is None and v is None:
+            raise ValueError("a keyframe needs a position target x, a velocity target v, or both")
+        self.frame, self.x, self.v, self.agents = frame, x, v, agents
+        self.position_weight = float(position_weight) if x is not None else 0.0
+        self.velocity_weight = (float(velocity_weight) if velocity_weight is not None
+                                else (1.0 if v is not None else 0.0))
+        if self.position_weight < 0 or self.velocity_weight < 0:
+            raise ValueError("keyframe weights must be non-negative")
+
+    @property
+    def label(self):
+        return f"{type(self).__name__}@{self.frame}"
+
+    def _check(self, model):
+        self._idx = _agents(self.agents, model.n, self.label)
+        shape = (self._idx.size, model.dim)
+        self._x = _target(self.x, shape, self.label, "position")
+        self._v = _target(self.v, shape, self.label, "velocity")
+
+    def _params(self, model):
+        zeros = np.zeros((self._idx.size, model.dim))
+        xs = self._x if self._x is not None else zeros
+        vs = self._v if self._v is not None else zeros
+        return np.concatenate([xs.ravel(), vs.ravel()])
+
+    def _expr(self, X, V, P, model):
+        k = self._idx.size * model.dim
+        xs = ca.reshape(P[:k], model.dim, self._idx.size)
+        vs = ca.reshape(P[k:], model.dim, self._idx.size)
+        idx = self._idx.tolist()
+        return 0.5 * (self.position_weight * ca.sumsqr(X[:, idx] - xs)
+                      + self.velocity_weight * ca.sumsqr(V[:, idx] - vs))
+
+    def miss(self, traj):
+        out = {"term": self.label}
+        if self._x is not None:
+            err = np.linalg.norm(traj.x[self.frame][self._idx] - self._x, axis=1)
+            out.update(rms_position_error=float(np.sqrt(np.mean(err ** 2))),
+                       max_position_error=float(err.max()))
+        if self._v is not None:
+            err = np.linalg.norm(traj.v[self.frame][self._idx] - self._v, axis=1)
+            out.update(rms_velocity_error=float(np.sqrt(np.mean(err ** 2))))
+        return out
+
+
+class ParticleKeyframe(StateKeyframe):
+    """A keyframe on one particle or a subset (``agents`` is required)."""
+
+    def __init__(self, frame: int, agents, **kw):
+        if agents is None:
+            raise ValueError("ParticleKeyframe needs the agents it constrains")
+        super().__init__(frame, agents=agents, **kw)
+
+
+class CenterOfMassKeyframe(StateTerm):
+    """Mass-weighted centre of mass (and/or its velocity) of ``agents`` at ``frame``."""
+
+    def __init__(self, frame: int, *, x=None, v=None, position_weight: float = 1.0,
+                 velocity_weight: float | None = None, agents=None):
+        if x is None and v is None:
+            raise ValueError("a centre-of-mass keyframe needs x, v or both")
+        self.frame, self.x, self.v, self.agents = frame, x, v, agents
+        self.position_weight = float(position_weight) if x is not None else 0.0
+        self.velocity_weight = (float(velocity_weight) if velocity_weight is not None
+                                else (1.0 if v is not None else 0.0))
+
+    @property
+    def label(self):
+        return f"CenterOfMass@{self.frame}"
+
+    def _check(self, model):
+        self._idx = _agents(self.agents, model.n, self.label)
+        m = model.masses[self._idx]
+        self._w = m / m.sum()
+        self._x = _target(self.x, (model.dim,), self.label, "position")
+        self._v = _target(self.v, (model.dim,), self.label, "velocity")
+
+    def _params(self, model):
+        z = np.zeros(model.dim)
+        return np.concatenate([z if self._x is None else self._x, z if self._v is None else self._v])
+
+    def _expr(self, X, V, P, model):
+        idx, w = self._idx.tolist(), ca.DM(self._w)
+        cx, cv = ca.mtimes(X[:, idx], w), ca.mtimes(V[:, idx], w)
+        d = model.dim
+        return 0.5 * (self.position_weight * ca.sumsqr(cx - P[:d])
+                      + self.velocity_weight * ca.sumsqr(cv - P[d:]))
+
+    def center(self, traj, frame=None):
+        return self._w @ traj.x[self.frame if frame is None else frame][self._idx]
+
+    def miss(self, traj):
+        out = {"term": self.label}
+        if self._x is not None:
+            out["position_error"] = float(np.linalg.norm(self.center(traj) - self._x))
+        if self._v is not None:
+            cv = self._w @ traj.v[self.frame][self._idx]
+            out["velocity_error"] = float(np.linalg.norm(cv - self._v))
+        return out
+
+
+class RegionTarget(StateTerm):
+    """Agents should be inside ``shape`` at ``frame``.
+
+    value = 0.5 * weight * sum_i max(0, sd(x_i) + margin)^2: the squared distance outside
+    the shape shrunk by ``margin``, summed over the agents outside it (the paper's box term).
+    """
+
+    def __init__(self, frame: int, shape: Shape, *, weight: float = 1.0, margin: float = 0.0,
+                 agents=None):
+        if not isinstance(shape, Shape):
+            raise TypeError("RegionTarget needs a Shape (Box, Disc, Polygon, square, cross)")
+        if weight < 0 or margin < 0:
+            raise ValueError("RegionTarget weight and margin must be non-negative")
+        self.frame, self.shape, self.weight, self.margin, self.agents = (
+            frame, shape, float(weight), float(margin), agents)
+
+    @property
+    def label(self):
+        return f"Region{type(self.shape).__name__}@{self.frame}"
+
+    def _check(self, model):
+        self._idx = _agents(self.agents, model.n, self.label)
+
+    def _expr(self, X, V, P, model):
+        sd = self.shape.sd_function.map(self._idx.size)(X[:2, self._idx.tolist()])
+        return 0.5 * self.weight * ca.sumsqr(ca.fmax(sd + self.margin, 0))
+
+    def miss(self, traj):
+        sd = self.shape.signed_distance(traj.x[self.frame][self._idx])
+        return {"term": self.label, "fraction_inside": float(np.mean(sd <= 0)),
+                "max_distance_outside": float(max(sd.max(), 0.0))}
+
+
+class ControlTerm(_Addable):
+    """A term on the controls only."""
+
+
+class Smoothness(ControlTerm):
+    """The paper's ``alpha ||C_n u||^2``, plus an optional penalty on changes between steps.
+
+    For per-step forces u_n:  ``0.5 alpha dt sum_n |u_n|^2 + 0.5 temporal / dt sum_n
+    |u_{n+1} - u_n|^2`` (time integrals, so the weight means the same at any dt).  For
+    initial velocities: ``0.5 alpha |u|^2``.
+    """
+
+    label = "Smoothness"
+
+    def __init__(self, alpha: float, *, temporal: float = 0.0):
+        if alpha < 0 or temporal < 0:
+            raise ValueError("Smoothness weights must be non-negative")
+        self.alpha, self.temporal = float(alpha), float(temporal)
+
+    def symbolic(self, U, controls, dt):
+        """The term as a CasADi expression of the flat control vector ``U``."""
+        blocks = controls.step_blocks(U)  # (block, steps) matrix, or None for no steps
+        if blocks is None:
+            return 0.5 * self.alpha * ca.sumsqr(U)
+        val = 0.5 * self.alpha * dt * ca.sumsqr(blocks)
+        if self.temporal and blocks.shape[1] > 1:
+            val += 0.5 * self.temporal / dt * ca.sumsqr(blocks[:, 1:] - blocks[:, :-1])
+        return val

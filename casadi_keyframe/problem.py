@@ -1,0 +1,143 @@
+"""ControlProblem: a model, an integrator, controls and an objective over a horizon."""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from .controls import Controls
+from .objectives import Objective, StateTerm
+from .trajectory import Trajectory
+
+
+class ControlProblem:
+    """Find controls u minimising ``objective`` over ``steps`` steps of size ``dt``.
+
+    ``x0, v0`` are ``(particles, dim)``; ``external`` is an optional stored force per step
+    ``(steps, particles, dim)`` that is not optimised (the flock's wander, gravity).
+    ``scene`` carries anything a renderer may want (paths, colliders, highlighted agents).
+    """
+
+    def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
+                 controls: Controls, objective, external=None, name: str = "problem",
+                 scene: dict | None = None):
+        if not (isinstance(steps, (int, np.integer)) and steps >= 1):
+            raise ValueError(f"steps must be a positive integer, got {steps!r}")
+        if not (np.isfinite(dt) and dt > 0):
+            raise ValueError(f"dt must be positive and finite, got {dt!r}")
+        self.model, self.integrator = model, integrator
+        self.steps, self.dt, self.name = int(steps), float(dt), name
+        shape = (model.n, model.dim)
+        self.x0 = _state(x0, shape, "initial positions x0")
+        self.v0 = _state(v0, shape, "initial velocities v0")
+        if external is None:
+            external = np.zeros((self.steps,) + shape)
+        self.external = np.asarray(external, dtype=float)
+        if self.external.shape != (self.steps,) + shape:
+            raise ValueError(f"external forces must have shape {(self.steps,) + shape}, "
+                             f"got {self.external.shape}")
+        self.controls = controls
+        controls.bind(model.n, model.dim, self.steps)
+        self.objective_terms = objective if isinstance(objective, Objective) else Objective(
+            objective if isinstance(objective, (list, tuple)) else [objective])
+        if not self.objective_terms.state_terms:
+            raise ValueError("the objective has no keyframe term: nothing to aim for")
+        for term in self.objective_terms.state_terms:
+            term.bind(model, self.steps)
+        self._control_fn = self._compile_control_terms()
+        self.scene = dict(scene or {})
+        self._exact = None
+
+    # -- the simulation ------------------------------------------------------------------
+    @property
+    def size(self) -> int:
+        return self.controls.size
+
+    def initial_controls(self) -> np.ndarray:
+        """The passive simulation's controls (zeros), a flat float64 vector."""
+        return self.controls.zeros()
+
+    def bounds(self):
+        return self.controls.bounds()
+
+    def simulate(self, u=None) -> Trajectory:
+        """Simulate with controls ``u`` (default: passive); raises SimulationError on blow-up."""
+        u = self.initial_controls() if u is None else self.controls.check(u)
+        v0 = self.v0
+        offset = self.controls.velocity_offset(u)
+        if offset is not None:
+            v0 = v0 + offset
+        ext = self.controls.external(u)
+        ext = self.external if ext is None else self.external + ext
+        return self.integrator.simulate(self.model, self.x0, v0, ext, self.dt)
+
+    # -- the objective -------------------------------------------------------------------
+    def state_cost(self, traj: Trajectory):
+        """Keyframe cost of a trajectory and its derivative per frame, ``(value, gx, gv)``."""
+        gx = np.zeros_like(traj.x)
+        gv = np.zeros_like(traj.v)
+        value = sum(t.accumulate(traj, gx, gv) for t in self.objective_terms.state_terms)
+        return float(value), gx, gv
+
+    def control_cost(self, u):
+        """Value and gradient of the control terms (smoothness)."""
+        val, grad = self._control_fn(u)
+        return float(val), np.asarray(grad).ravel()
+
+    def objective(self, u) -> float:
+        traj = self.simulate(u)
+        return sum(t.value(traj) for t in self.objective_terms.state_terms) + self.control_cost(u)[0]
+
+    def objective_and_gradient(self, u, gradient="adjoint"):
+        """``(phi, dphi/du)`` by the named route: "adjoint", "exact" or "fd" (or a strategy)."""
+        from .gradients import get_gradient
+        return get_gradient(gradient)(self, self.controls.check(u))
+
+    def breakdown(self, u, traj: Trajectory | None = None) -> dict:
+        """Objective split into keyframe error and control cost, plus per-term misses."""
+        traj = self.simulate(u) if traj is None else traj
+        terms = self.objective_terms.state_terms
+        keyframe = float(sum(t.value(traj) for t in terms))
+        control = self.control_cost(u)[0]
+        return {"objective": keyframe + control, "keyframe_error": keyframe,
+                "control_cost": control, "control_norm": float(np.linalg.norm(u)),
+                "misses": [t.miss(traj) for t in terms]}
+
+    # -- symbolic forms for the exact route ------------------------------------------------
+    def _compile_control_terms(self) -> ca.Function:
+        U = ca.MX.sym("U", self.size)
+        val = 0
+        for term in self.objective_terms.control_terms:
+            val += term.symbolic(U, self.controls, self.dt)
+        val = ca.MX(val) if not isinstance(val, ca.MX) else val
+        return ca.Function("control_cost", [U], [val, ca.gradient(val, U)])
+
+    def symbolic_objective(self, U):
+        """The whole objective as an MX expression of U, through the unrolled simulation."""
+        forces, dv0 = self.controls.symbolic(U)
+        X = ca.DM(self.x0.T)
+        V = ca.DM(self.v0.T) + (dv0 if dv0 is not None else 0)
+        step = self.integrator.symbolic_step(self.model)
+        by_frame: dict[int, list[StateTerm]] = {}
+        for t in self.objective_terms.state_terms:
+            by_frame.setdefault(t.frame, []).append(t)
+        J = 0
+        for n in range(self.steps + 1):
+            for t in by_frame.get(n, []):
+                J += t.symbolic(X, V)
+            if n < self.steps:
+                E = ca.DM(self.external[n].T)
+                if forces is not None:
+                    E = E + forces[n]
+                X, V = step(X, V, E, self.dt)
+        for term in self.objective_terms.control_terms:
+            J += term.symbolic(U, self.controls, self.dt)
+        return J
+
+
+def _state(value, shape, what) -> np.ndarray:
+    arr = np.asarray(value, dtype=float)
+    if arr.shape != shape:
+        raise ValueError(f"{what} must have shape {shape} (particles, dim), got {arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ValueError(f"{what} contain NaN or inf")
+    return arr.copy()

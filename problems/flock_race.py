@@ -1,0 +1,38 @@
+"""Fig. 2: a flock runs a straight course; one agent starts at the back and must finish in front."""
+import numpy as np
+
+from casadi_keyframe.flocks import blob, flock_problem
+from casadi_keyframe.models import FlockParams
+from casadi_keyframe.objectives import CenterOfMassKeyframe, ParticleKeyframe, Smoothness
+
+SOLVE = {"method": "lbfgsb", "maxiter": 200}
+
+
+def build(agents: int = 30, steps: int = 160, dt: float = 0.05, seed: int = 0, dim: int = 2,
+          length: float = 30.0, keyframes: int = 8, lead: float = 3.0, weight: float = 10.0,
+          runner_weight: float = 10.0, alpha: float = 1e-3, wander: float = 0.3,
+          cutoff: str = "smooth"):
+    rng = np.random.default_rng(seed)
+    horizon = steps * dt
+    x0 = blob(agents, (0.0, 0.0), 1.0, dim, rng)
+    runner = int(np.argmin(x0[:, 0]))  # the agent at the very back of the pack
+    speed = length / horizon
+    v0 = np.zeros((agents, dim))
+    v0[:, 0] = speed
+    frames = np.linspace(steps / keyframes, steps, keyframes).round().astype(int)
+
+    def course(frame):
+        p = np.zeros(dim)
+        p[0] = speed * frame * dt
+        return p
+
+    finish = course(steps)
+    finish[0] += lead
+    objective = sum((CenterOfMassKeyframe(int(f), x=course(f), position_weight=weight)
+                     for f in frames), Smoothness(alpha))
+    objective = objective + ParticleKeyframe(steps, [runner], x=[finish],
+                                             position_weight=runner_weight)
+    return flock_problem(agents=agents, steps=steps, dt=dt, seed=seed, dim=dim,
+                         objective=objective, x0=x0, v0=v0, params=FlockParams(cutoff=cutoff),
+                         wander=wander, name="flock_race",
+                         scene={"highlight": [runner], "runner": runner, "lead": lead})

@@ -21,7 +21,7 @@ import warnings
 import casadi as ca
 import numpy as np
 
-CHUNKS = (2048, 64)
+CHUNKS = (2048, 128)
 _COMPILED: dict = {}
 _JIT_FAILED = False
 
@@ -98,8 +98,8 @@ class MappedKernel:
     """Evaluate ``kernel`` over P interactions given as ``(P, k_i)`` arrays.
 
     ``MappedKernel(kernel)(a, b, ...)`` returns a list of ``(P, m_j)`` arrays, one per kernel
-    output.  Large batches run in chunks of ``CHUNKS[0]``; the remainder in padded chunks of
-    ``CHUNKS[-1]``, so tiny systems do not pay for a big chunk.
+    output.  Large batches run in chunks of ``CHUNKS[0]``; the remainder in one padded chunk
+    (small when it fits), so a call costs few Python round trips and tiny systems stay cheap.
     """
 
     def __init__(self, kernel: ca.Function, *, jit: bool | None = None):
@@ -128,11 +128,8 @@ class MappedKernel:
         outputs = [np.empty((count, self.kernel.size1_out(j))) for j in range(self.n_out)]
         big, small = self._chunks[0], self._chunks[-1]
         lo = 0
-        while count - lo >= big.size:
-            big.run(arrays, outputs, lo, big.size)
-            lo += big.size
-        while lo < count:
-            n = min(small.size, count - lo)
-            small.run(arrays, outputs, lo, n)
+        while lo < count:  # full big chunks, then one padded chunk of the smallest size that fits
+            n = min(big.size, count - lo)
+            (big if n > small.size else small).run(arrays, outputs, lo, n)
             lo += n
         return outputs

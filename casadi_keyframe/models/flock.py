@@ -169,14 +169,14 @@ class FlockModel:
     def forces(self, x: np.ndarray, v: np.ndarray, tape: PairTape | None = None):
         """Internal force on every agent, ``(n, dim)``, and the pair tape used."""
         tape = self.neighbour_pairs(x) if tape is None else tape
-        (fp,) = self._force(x[tape.j] - x[tape.i], v[tape.j] - v[tape.i])
+        (fp,) = self._force(_pair_difference(x, tape), _pair_difference(v, tape))
         out = _scatter_pairs(fp, tape, self.n) - self.params.drag * v
         return out, tape
 
     def forces_vjp(self, x: np.ndarray, v: np.ndarray, tape: PairTape, mu: np.ndarray):
         """``((df/dx)^T mu, (df/dv)^T mu)`` at (x, v), each ``(n, dim)``."""
-        lam = mu[tape.i] - mu[tape.j]
-        gd, gdv = self._vjp(x[tape.j] - x[tape.i], v[tape.j] - v[tape.i], lam)
+        lam = -_pair_difference(mu, tape)
+        gd, gdv = self._vjp(_pair_difference(x, tape), _pair_difference(v, tape), lam)
         gx = _scatter_pairs(-gd, tape, self.n)
         gv = _scatter_pairs(-gdv, tape, self.n) - self.params.drag * mu
         return gx, gv
@@ -194,6 +194,11 @@ class FlockModel:
         incidence[rows, tape.i] = 1.0
         incidence[rows, tape.j] = -1.0
         return ca.mtimes(forces, ca.DM(ca.sparsify(ca.DM(incidence)))) - self.params.drag * V
+
+
+def _pair_difference(a: np.ndarray, tape: PairTape) -> np.ndarray:
+    """``a[j] - a[i]`` for every pair (``np.take`` gathers rows ~3x faster than indexing)."""
+    return np.take(a, tape.j, axis=0) - np.take(a, tape.i, axis=0)
 
 
 def _scatter_pairs(values: np.ndarray, tape: PairTape, n: int) -> np.ndarray:

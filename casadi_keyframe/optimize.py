@@ -57,6 +57,7 @@ class _Evaluator:
         self.last_u = None
         self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.seconds = 0.0
+        self.interrupted = False
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
@@ -68,6 +69,9 @@ class _Evaluator:
         except SimulationError:
             self.failures += 1
             f, g = np.inf, np.zeros_like(u)
+        except KeyboardInterrupt:  # IPOPT would swallow it: remember, then re-raise
+            self.interrupted = True
+            raise
         self.seconds += time.perf_counter() - t
         self.nfev += 1
         self.last_u, self.last = u, (f, g)
@@ -236,7 +240,7 @@ def _ipopt(problem, ev, u0, maxiter, tol, options, on_iteration):
     solver(x0=u0, lbx=lb, ubx=ub)
     stats = solver.stats()
     status = stats.get("return_status", "unknown")
-    if it.interrupted:
+    if it.interrupted or ev.interrupted:
         raise KeyboardInterrupt
     success = bool(stats.get("success", False))
     return int(stats.get("iter_count", it.count - 1)), success, status

@@ -86,7 +86,7 @@ class Polygon(Shape):
     """Any simple polygon (convex or not) from its vertices in order."""
 
     def __init__(self, vertices):
-        v = np.asarray(vertices, dtype=float)
+        v = np.array(vertices, dtype=float)
         if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] < 3:
             raise ValueError("Polygon vertices must be an (k >= 3, 2) array")
         if not np.all(np.isfinite(v)):
@@ -130,7 +130,7 @@ def cross(center, span: float, width: float) -> Polygon:
 
 
 def _vec2(value, what) -> np.ndarray:
-    arr = np.asarray(value, dtype=float).ravel()
+    arr = np.array(value, dtype=float).ravel()  # a copy: later edits of value must not move the shape
     if arr.size == 1:
         arr = np.repeat(arr, 2)
     if arr.size != 2 or not np.all(np.isfinite(arr)):

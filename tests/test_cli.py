@@ -1,0 +1,42 @@
+"""The command line: list, solve (files written) and gradcheck."""
+import json
+
+from casadi_keyframe.cli import main, parse_overrides
+
+
+def test_list(capsys):
+    assert main(["list"]) == 0
+    out = capsys.readouterr().out
+    for name in ("flock_path", "flock_race", "flock_shapes"):
+        assert name in out
+
+
+def test_overrides_parse_python_literals():
+    assert parse_overrides(["agents=5", "cutoff=hard", "dt=0.1"]) == {
+        "agents": 5, "cutoff": "hard", "dt": 0.1}
+
+
+def test_solve_writes_results_and_pictures(tmp_path, capsys):
+    out = tmp_path / "run"
+    code = main(["solve", "flock_path", "--set", "agents=10", "--set", "steps=40",
+                 "--maxiter", "15", "--out", str(out), "--quiet"])
+    assert code == 0
+    for name in ("result.npz", "summary.json", "animation.gif", "convergence.png",
+                 "keyframes.png", "checkpoint.npz"):
+        assert (out / name).stat().st_size > 0, name
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["overrides"] == {"agents": 10, "steps": 40}
+    assert summary["nit"] >= 1 and summary["breakdown"]["misses"]
+
+
+def test_solve_reports_bad_overrides(capsys):
+    assert main(["solve", "flock_path", "--set", "agentz=3"]) == 2
+    assert "unknown override" in capsys.readouterr().err
+
+
+def test_gradcheck_prints_agreement(capsys):
+    assert main(["gradcheck", "flock_race", "--set", "agents=6", "--set", "steps=15",
+                 "--directions", "1"]) == 0
+    out = capsys.readouterr().out
+    line = next(l for l in out.splitlines() if l.strip().startswith("adjoint"))
+    assert float(line.split("relative error")[1].split()[0]) < 1e-8

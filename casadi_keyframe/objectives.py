@@ -100,6 +100,16 @@ class StateTerm(_Addable):
         """How far the trajectory is from this keyframe, in the units a user thinks in."""
         raise NotImplementedError
 
+    @property
+    def particles(self) -> np.ndarray:
+        """Indices of the particles this term looks at (after ``bind``)."""
+        return self._idx
+
+    @property
+    def position_target(self):
+        """The bound position target (``None`` if the term has none)."""
+        return getattr(self, "_x", None)
+
 
 def _agents(agents, n, label):
     if agents is None:

@@ -55,9 +55,9 @@ class _Scene:
         self.xy = np.asarray(traj.x)[:, :, :2]
         terms = problem.objective_terms.state_terms
         self.coms = sorted((t for t in terms if isinstance(t, CenterOfMassKeyframe)
-                            and t._x is not None), key=lambda t: t.frame)
+                            and t.position_target is not None), key=lambda t: t.frame)
         self.regions = [t for t in terms if isinstance(t, RegionTarget)]
-        self.states = [t for t in terms if isinstance(t, StateKeyframe) and t._x is not None]
+        self.states = [t for t in terms if isinstance(t, StateKeyframe) and t.position_target is not None]
         w = np.asarray(problem.model.masses, dtype=float)
         self.com = np.einsum("i,nij->nj", w / w.sum(), self.xy)
         self.hl = np.zeros(self.xy.shape[1], bool)
@@ -68,7 +68,7 @@ class _Scene:
 
     def _limits(self):
         pts = np.vstack([self.xy.reshape(-1, 2), self.com]
-                        + [np.atleast_2d(t._x)[:, :2] for t in self.coms + self.states]
+                        + [np.atleast_2d(t.position_target)[:, :2] for t in self.coms + self.states]
                         + [t.shape.outline() for t in self.regions])
         lo, hi = pts.min(0), pts.max(0)
         pad = 0.06 * max(hi - lo) + 0.3
@@ -89,14 +89,14 @@ class _Scene:
                             va="bottom")
             self.patches.append((t, ax.add_patch(patch), label))
         if self.coms:
-            path = np.array([t._x[:2] for t in self.coms])
+            path = np.array([t.position_target[:2] for t in self.coms])
             ax.plot(path[:, 0], path[:, 1], "--", color=COM, lw=0.8, alpha=0.6, zorder=2)
             self.com_marks = ax.scatter(path[:, 0], path[:, 1], marker="x", c=COM, s=40,
                                         zorder=3)
         self.com_line = ax.plot([], [], "-", color=COM, lw=1.0, alpha=0.5, zorder=2)[0]
         self.com_dot = ax.plot([], [], "P", color=COM, ms=8, mec="white", mew=0.8,
                                zorder=6)[0]
-        self.state_marks = [ax.scatter(*t._x[:, :2].T, s=60, facecolors="none",
+        self.state_marks = [ax.scatter(*t.position_target[:, :2].T, s=60, facecolors="none",
                                        edgecolors=PARTICLE, zorder=4) for t in self.states]
         self.trails = ax.add_collection(LineCollection([], lw=0.8, zorder=2))
         self.dots = ax.scatter(*self.xy[0, ~self.hl].T, s=12, c=AGENT, zorder=5, lw=0)

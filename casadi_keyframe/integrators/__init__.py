@@ -1,4 +1,5 @@
 """Time-stepping schemes, each with its adjoint step beside it."""
+from .linearized_backward_euler import LinearizedBackwardEuler
 from .symplectic_euler import SymplecticEuler
 
-__all__ = ["SymplecticEuler"]
+__all__ = ["LinearizedBackwardEuler", "SymplecticEuler"]

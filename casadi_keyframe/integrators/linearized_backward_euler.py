@@ -1,0 +1,130 @@
+r"""Linearized backward Euler, eqs. (10)-(12), and the integrator-swapping adjoint (13)-(15).
+
+Forward step (Baraff-Witkin):  ``A dv = b`` with ``A = M - dt D - dt^2 K``,
+``b = dt (f_n + dt K v_n + e_n)``, ``K = df/dx|_n`` (at zero velocity), ``D = df/dv|_n``;
+``v_{n+1} = v_n + dv``, ``x_{n+1} = x_n + dt v_{n+1}``.  Pinned components have ``dv = 0``
+(the filter of the modified CG).  The model supplies symmetric K and D (as Baraff and
+Witkin, the position derivative of spring damping is left out of K), so A is symmetric
+positive definite for small enough dt and CG applies.
+
+Adjoint ("adjoint", APPROXIMATE): the exact adjoint of this scheme needs second derivatives
+of f (derivatives of K and D), a 3p x 3p x 3p tensor.  Following the paper we use instead
+the adjoint of FULL backward Euler, ``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the
+adjoint variables.  Its Jacobians belong to the step's end state n+1, so its matrix is the A
+the forward pass builds there (recomputed, not stored, to keep memory at O(particles x steps)):
+
+    w   = a_v(n+1) + dt a_x(n+1)
+    A^T mu = w            (free components; mu = 0 on pinned ones)
+    dphi/de_n = dt mu
+    a_v(n) = M mu  (+ w - A_fc^T mu_f on pinned components) + dphi/dv_n
+    a_x(n) = a_x(n+1) + dt K^T mu + dphi/dx_n
+
+The two schemes agree through second order in dt, so for smooth forces each step's
+adjoint carries an O(dt^3) local error.  Stiff springs (dt sqrt(k/m) not small), springs
+crossing their rest length (the Choi-Ko law has a kink there) and the damping term left out
+of K make the error larger in practice; for forces linear in x and v it is exact.
+``exact_adjoint`` is False: the "exact" gradient route (CasADi reverse mode through
+:meth:`symbolic_step`) is the reference that measures this error.
+"""
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ..trajectory import Trajectory, check_state
+from .linear_solvers import SOLVERS
+
+
+class LinearizedBackwardEuler:
+    """Linearized implicit Euler for models with ``forces`` and sparse ``jacobians``."""
+
+    name = "linearized_backward_euler"
+    exact_adjoint = False
+
+    def __init__(self, solver: str = "cg", tol: float = 1e-10):
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
+        self.solver, self.tol = solver, tol
+        self.cg_iterations = []
+
+    def _solve(self, A, b, free, x0=None):
+        if self.solver == "cg":
+            dv, it = SOLVERS["cg"](A, b, free, tol=self.tol, x0=x0)
+        else:
+            dv, it = SOLVERS["direct"](A, b, free)
+        self.cg_iterations.append(it)
+        return dv
+
+    @staticmethod
+    def system(model, x, v, dt):
+        """``(A, K, f)`` of the step from (x, v): A and K sparse ``3n x 3n``, f ``(n, 3)``."""
+        f = model.forces(x, v)
+        K, D = model.jacobians(x, v)
+        mass = np.repeat(model.masses, model.dim)
+        A = (sp.diags(mass) - dt * D - dt * dt * K).tocsr()
+        return A, K, f
+
+    def simulate(self, model, x0, v0, external, dt) -> Trajectory:
+        steps = external.shape[0]
+        x = np.empty((steps + 1,) + x0.shape)
+        v = np.empty_like(x)
+        x[0], v[0] = x0, v0
+        free = model.free_mask()
+        dv = None
+        for n in range(steps):
+            A, K, f = self.system(model, x[n], v[n], dt)
+            b = dt * ((f + external[n]).ravel() + dt * (K @ v[n].ravel()))
+            dv = self._solve(A, b, free, x0=dv)
+            v[n + 1] = v[n] + dv.reshape(v[n].shape)
+            x[n + 1] = x[n] + dt * v[n + 1]
+            check_state(x[n + 1], v[n + 1], n + 1)
+        return Trajectory(x, v, dt)
+
+    def adjoint(self, model, traj: Trajectory, gx, gv):
+        """Integrator-swapping adjoint; returns ``(g_external, g_x0, g_v0)``. Approximate."""
+        dt, steps = traj.dt, traj.steps
+        free = model.free_mask()
+        mass = np.repeat(model.masses, model.dim)
+        shape = traj.x.shape[1:]
+        g_ext = np.empty((steps,) + shape)
+        ax, av = gx[steps].ravel().copy(), gv[steps].ravel().copy()
+        mu = None
+        for n in range(steps - 1, -1, -1):
+            A, K, _ = self.system(model, traj.x[n + 1], traj.v[n + 1], dt)
+            w = av + dt * ax
+            mu = self._solve(A, w, free, x0=mu)  # A^T = A: K and D are symmetric
+            g_ext[n] = (dt * mu).reshape(shape)
+            av_new = mass * mu
+            if not free.all():
+                pinned = ~free
+                av_new[pinned] = w[pinned] - (A.T @ mu)[pinned]
+            ax = ax + dt * (K.T @ mu) + gx[n].ravel()
+            av = av_new + gv[n].ravel()
+        return g_ext, ax.reshape(shape), av.reshape(shape)
+
+    def symbolic_step(self, model) -> ca.Function:
+        """``(X, V, E, dt) -> (X+, V+)``: the linearized step in CasADi, for exact reverse mode.
+
+        Second derivatives of the forces enter through K and D; the linear solve is
+        differentiated exactly (``ldl``).  For small systems only.
+        """
+        n, d = model.n, model.dim
+        X, V, E = (ca.SX.sym(s, d, n) for s in "XVE")
+        dt = ca.SX.sym("dt")
+        f = ca.vec(model.symbolic_forces(X, V))
+        K = ca.jacobian(ca.vec(model.symbolic_forces(X, ca.SX.zeros(d, n))), ca.vec(X))
+        D = ca.jacobian(f, ca.vec(V))
+        mass = np.repeat(model.masses, d)
+        A = ca.diag(ca.DM(mass)) - dt * D - dt * dt * K
+        b = dt * (f + ca.vec(E) + dt * ca.mtimes(K, ca.vec(V)))
+        system = ca.Function("lbe_system", [X, V, E, dt], [A, b])
+        Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
+        dtm = ca.MX.sym("dt")
+        Am, bm = system(Xm, Vm, Em, dtm)
+        fi = np.flatnonzero(model.free_mask()).tolist()
+        dv = ca.MX.zeros(n * d, 1)
+        dv[fi] = ca.solve(Am[fi, fi], bm[fi], "ldl")
+        v_new = Vm + ca.reshape(dv, d, n)
+        return ca.Function("lbe_step", [Xm, Vm, Em, dtm], [Xm + dtm * v_new, v_new])
+

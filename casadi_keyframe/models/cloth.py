@@ -1,0 +1,395 @@
+r"""Mass-spring cloth with the Choi-Ko (2002) buckling response, in 3-D.
+
+For a spring (i, j) of rest length ``L`` let ``d = x_j - x_i``, ``dv = v_j - v_i``, the
+regularised length ``r = sqrt(|d|^2 + eps^2)`` and ``u = d / r``.  The force on particle i is
+
+* tension, ``r >= L``:      ``f_i = k_t (r - L) u``                 (pulls i toward j)
+* compression, ``r < L``:   ``f_i = -k_b kappa^2 u``                (pushes the ends apart)
+* damping, always:          ``f_i += c ((dv . u) u)``
+
+and j feels ``-f_i``, so internal forces sum to zero.  Under compression the spring is
+assumed to buckle into a circular arc of length L with chord r, so its curvature solves
+``r / L = sinc(kappa L / 2)`` (``sinc(y) = sin(y) / y``), i.e. ``kappa^2 = 4 y^2 / L^2``
+with ``y = sinc^{-1}(s)``, ``s = r / L``.  ``z = y^2`` is analytic in ``w = 1 - s`` on
+[0, 1] (``z ~ 6 w`` near rest), so it is fitted once as ``z(w) = w P(w)`` with P a
+degree-10 polynomial (:data:`SINC_INV_COEFFS`, |y error| < 1e-5): the force vanishes at
+``r = L`` exactly and no square root appears in the kernel.
+
+Spring kinds and their stiffnesses (:class:`ClothParams`):
+
+* stretch (grid neighbours / mesh edges):  ``k_t = stretch``, ``k_b = bend``
+* shear   (both diagonals of a grid quad): ``k_t = shear``,   ``k_b = bend``
+* bend    (skip one particle / across an interior edge): ``k_b = bend`` and
+  ``k_t = 24 bend / L^3``, the slope of the buckling force at ``r = L``, so a bend spring's
+  force is C^1 across its rest length.
+
+Each particle also feels gravity ``m_i g`` and linear air drag ``-air_drag m_i v_i`` (mass
+proportional, so the drag acceleration does not depend on the resolution).  Pinned particles
+are only recorded here; the integrator keeps them fixed.
+
+The spring law is one SX kernel ``(d, dv, L, k_t, k_b, c) -> f_i`` and its Jacobian kernel
+``-> (K, D) = (df_i/dd, df_i/d dv)`` (row-major 3x3).  Since ``d = x_j - x_i`` the spring
+adds ``-K`` to blocks (i, i), (j, j) and ``+K`` to (i, j), (j, i) of df/dx (D likewise for
+df/dv).  The sparse pattern and the COO -> CSC map are built once, so a Jacobian call fills
+one data vector with a precomputed sparse gather (a signed ``np.bincount``): O(springs).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+
+from ..kernels import MappedKernel
+
+SPRING_KINDS = ("stretch", "shear", "bend")
+STRETCH, SHEAR, BEND = range(3)
+PLANES = ("xz", "xy")
+
+
+def _fit_sinc_inverse(degree: int = 10) -> np.ndarray:
+    """Coefficients of P (highest power first) with ``sinc^{-1}(1 - w)^2 ~= w P(w)``."""
+    y = np.pi * (1 - np.cos(np.linspace(0, np.pi, 4001)[1:])) / 2  # dense at both ends
+    w = 1 - np.sin(y) / y
+    return np.polyfit(w, y ** 2 / w, degree)
+
+
+SINC_INV_COEFFS = _fit_sinc_inverse()
+
+
+def sinc_inverse_squared(s):
+    """``y^2`` with ``sinc(y) = s`` for s in [0, 1]; numpy arrays or CasADi expressions."""
+    w = 1 - s
+    acc = 0 * w + SINC_INV_COEFFS[0]
+    for c in SINC_INV_COEFFS[1:]:  # Horner
+        acc = acc * w + c
+    return w * acc
+
+
+def sinc_inverse(s: np.ndarray) -> np.ndarray:
+    """``y`` in [0, pi] with ``sin(y) / y = s``, for s in [0, 1] (numpy)."""
+    return np.sqrt(np.maximum(sinc_inverse_squared(np.asarray(s, dtype=float)), 0.0))
+
+
+@dataclass(frozen=True)
+class ClothParams:
+    """Cloth material, SI units; defaults suit a ~1 m, ~0.3 kg sheet at dt = 1/60..1/30 s.
+
+    ``stretch``, ``shear``: linear tension stiffness per spring, N/m (on a square grid the
+    sheet's membrane stiffness does not depend on the resolution).  ``bend``: buckling
+    stiffness ``k_b``, N m^2.  ``damping``: along-spring damping c, N s/m.  ``air_drag``:
+    drag per unit mass, 1/s.  ``gravity``: m/s^2.  ``eps``: length regularisation, m.
+    """
+
+    stretch: float = 500.0
+    shear: float = 50.0
+    bend: float = 2e-5
+    damping: float = 0.02
+    air_drag: float = 0.1
+    gravity: tuple = (0.0, 0.0, -9.81)
+    eps: float = 1e-6
+
+    def __post_init__(self):
+        for name in ("stretch", "shear", "bend", "damping", "air_drag"):
+            value = getattr(self, name)
+            if not (np.isfinite(value) and value >= 0):
+                raise ValueError(f"ClothParams.{name} must be non-negative and finite, got {value}")
+        if not self.eps > 0:
+            raise ValueError(f"ClothParams.eps must be positive, got {self.eps}")
+        g = tuple(float(c) for c in self.gravity)
+        if len(g) != 3 or not np.all(np.isfinite(g)):
+            raise ValueError(f"ClothParams.gravity must be 3 finite numbers, got {self.gravity}")
+        object.__setattr__(self, "gravity", g)
+
+
+def spring_force_expr(d, dv, L, k_t, k_b, c, eps: float):
+    """Force on particle i of one spring as a CasADi expression (see the module docstring)."""
+    r = ca.sqrt(ca.dot(d, d) + eps ** 2)
+    u = d / r
+    kappa2 = 4 * sinc_inverse_squared(r / L) / L ** 2
+    magnitude = ca.if_else(r >= L, k_t * (r - L), -k_b * kappa2)
+    return magnitude * u + c * ca.dot(dv, u) * u
+
+
+def spring_kernels(eps: float) -> tuple[ca.Function, ca.Function]:
+    """``force(d, dv, L, k_t, k_b, c) -> f_i`` and ``jac(...) -> (vec K, vec D)`` (row-major).
+
+    K is the position derivative at zero relative velocity: as Baraff and Witkin, the
+    damping force's position derivative (not symmetric) is left out, so df/dx is symmetric.
+    """
+    d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
+    scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
+    f = spring_force_expr(d, dv, *scalars, eps)
+    elastic = spring_force_expr(d, ca.SX.zeros(3), *scalars, eps)
+    args = [d, dv, *scalars]
+    row_major = [ca.reshape(ca.jacobian(g, a).T, 9, 1) for g, a in ((elastic, d), (f, dv))]
+    return (ca.Function("cloth_spring", args, [f]),
+            ca.Function("cloth_spring_jac", args, row_major))
+
+
+@dataclass(frozen=True)
+class Springs:
+    """Springs as parallel arrays: endpoints ``i``, ``j``, ``rest`` length (m) and ``kind``
+    (index into SPRING_KINDS)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    rest: np.ndarray
+    kind: np.ndarray
+
+    def count(self, kind: str) -> int:
+        return int(np.sum(self.kind == SPRING_KINDS.index(kind)))
+
+
+def grid_topology(rows: int, cols: int):
+    """Spring index pairs by kind and the quads of a rows x cols grid (k = r cols + c)."""
+    idx = np.arange(rows * cols).reshape(rows, cols)
+
+    def pairs(a, b):
+        return np.stack([a.ravel(), b.ravel()], axis=1)
+
+    stretch = np.vstack([pairs(idx[:, :-1], idx[:, 1:]), pairs(idx[:-1, :], idx[1:, :])])
+    shear = np.vstack([pairs(idx[:-1, :-1], idx[1:, 1:]), pairs(idx[:-1, 1:], idx[1:, :-1])])
+    bend = np.vstack([pairs(idx[:, :-2], idx[:, 2:]), pairs(idx[:-2, :], idx[2:, :])])
+    a, b, c, e = idx[:-1, :-1], idx[:-1, 1:], idx[1:, :-1], idx[1:, 1:]
+    quads = np.stack([a, c, e, b], -1).reshape(-1, 4)
+    return {STRETCH: stretch, SHEAR: shear, BEND: bend}, quads
+
+
+def mesh_topology(faces: np.ndarray):
+    """Stretch springs on the mesh edges, bend springs across each interior edge."""
+    half = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
+    edges = np.sort(half[:, :2], axis=1)  # each half-edge with its opposite vertex half[:, 2]
+    order = np.lexsort((edges[:, 1], edges[:, 0]))
+    edges, opposite = edges[order], half[order, 2]
+    first = np.ones(len(edges), bool)
+    first[1:] = np.any(edges[1:] != edges[:-1], axis=1)
+    shared = np.flatnonzero(~first)  # second half-edge of an interior edge
+    if np.any(np.bincount(np.cumsum(first) - 1) > 2):
+        raise ValueError("non-manifold mesh: an edge is shared by more than two faces")
+    bend = np.stack([opposite[shared - 1], opposite[shared]], axis=1)
+    return {STRETCH: edges[first], SHEAR: np.zeros((0, 2), int), BEND: bend}
+
+
+def lumped_masses(vertices: np.ndarray, faces: np.ndarray, total: float) -> np.ndarray:
+    """Each vertex gets an equal share of the area of its polygons (triangles, or quads for
+    a grid, which keeps a grid's masses symmetric); scaled to ``total`` kg."""
+    k = faces.shape[1]
+    a = vertices[faces[:, 0]]
+    area = sum(0.5 * np.linalg.norm(np.cross(vertices[faces[:, q]] - a,
+                                             vertices[faces[:, q + 1]] - a), axis=1)
+               for q in range(1, k - 1))  # fan triangulation (planar, convex quads)
+    share = np.bincount(faces.ravel(), np.repeat(area / k, k), minlength=len(vertices))
+    if np.any(share <= 0):
+        raise ValueError("every vertex must belong to a face of positive area "
+                         "(remove unused vertices or degenerate triangles)")
+    return total * share / share.sum()
+
+
+def _block_pattern(i: np.ndarray, j: np.ndarray, n: int):
+    """CSC pattern of the 3x3 blocks (i,i), (i,j), (j,i), (j,j) of every spring plus the diagonal.
+
+    Returns ``(indices, indptr, gather)``: the CSC data of ``-K`` at (i,i) and (j,j), ``+K``
+    at (i,j) and (j,i), plus a diagonal ``g``, is ``gather @ [vec_row_major(K); g]``.  The
+    ``(nnz, 9P + 3n)`` gather matrix holds the COO -> CSC map with the signs (duplicates add
+    up, as ``np.bincount`` would, but faster).
+    """
+    P = i.size
+    bi, bj = np.concatenate([i, i, j, j]), np.concatenate([i, j, i, j])
+    a, b = np.divmod(np.arange(9), 3)  # row-major entry e of a block is (a, b)
+    rows = np.concatenate([(3 * bi[:, None] + a).ravel(), np.arange(3 * n)])
+    cols = np.concatenate([(3 * bj[:, None] + b).ravel(), np.arange(3 * n)])
+    keys, slot = np.unique(cols.astype(np.int64) * (3 * n) + rows, return_inverse=True)
+    indices = (keys % (3 * n)).astype(np.int32)
+    indptr = np.concatenate([[0], np.cumsum(np.bincount(keys // (3 * n), minlength=3 * n))])
+    source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(3 * n)])
+    sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P), np.ones(3 * n)])
+    gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, 9 * P + 3 * n))
+    return indices, indptr.astype(np.int32), gather
+
+
+@dataclass(eq=False)
+class ClothModel:
+    """An immutable cloth of n particles with fixed springs; build with :meth:`grid` or
+    :meth:`from_mesh`.  States are ``(n, 3)`` arrays; the flat 3n ordering is ``x.ravel()``.
+    """
+
+    rest_positions: np.ndarray
+    faces: np.ndarray
+    masses: np.ndarray
+    springs: Springs
+    params: ClothParams = field(default_factory=ClothParams)
+    pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    jit: bool | None = None
+    dim: int = field(default=3, init=False)
+
+    def __post_init__(self):
+        if self.masses.shape != (len(self.rest_positions),) or np.any(self.masses <= 0):
+            raise ValueError("masses must be positive, one per particle; build the cloth with "
+                             "ClothModel.grid or ClothModel.from_mesh")
+        self.pinned = _check_pinned(self.pinned, self.n)
+        s, p = self.springs, self.params
+        k_t = np.choose(s.kind, [p.stretch, p.shear, 0.0]).astype(float)
+        k_t = np.where(s.kind == BEND, 24 * p.bend / s.rest ** 3, k_t)
+        self._spring_params = [s.rest[:, None], k_t[:, None], np.full((s.rest.size, 1), p.bend),
+                               np.full((s.rest.size, 1), p.damping)]
+        self._force_k, self._jac_k = spring_kernels(p.eps)
+        self._force = MappedKernel(self._force_k, jit=self.jit)
+        self._jac = MappedKernel(self._jac_k, jit=self.jit)
+        self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)
+        self._drag_diag = -p.air_drag * np.repeat(self.masses, 3)
+        self._gravity = self.masses[:, None] * np.asarray(p.gravity)[None, :]
+
+    # -- construction --------------------------------------------------------------------
+    @classmethod
+    def grid(cls, rows: int, cols: int, *, width: float = 1.0, height: float = 1.0,
+             mass: float = 1.0, params: ClothParams | None = None, pinned=(),
+             origin=(0.0, 0.0, 0.0), plane: str = "xz", jit: bool | None = None):
+        """A rows x cols sheet; particle ``k = r * cols + c`` starts at ``origin`` plus
+
+        * plane "xz" (hanging, z up): ``(c width/(cols-1), 0, -r height/(rows-1))``, so
+          row 0 is the top edge;
+        * plane "xy" (lying flat):    ``(c width/(cols-1), r height/(rows-1), 0)``.
+
+        ``mass`` is the total mass in kg, lumped by area (corners 1/4 of inner particles).
+        """
+        if int(rows) != rows or int(cols) != cols or rows < 2 or cols < 2:
+            raise ValueError(f"a cloth grid needs rows >= 2 and cols >= 2, got {rows} x {cols}")
+        if not (width > 0 and height > 0):
+            raise ValueError(f"grid width and height must be positive, got {width}, {height}")
+        if plane not in PLANES:
+            raise ValueError(f"plane must be one of {PLANES}, got {plane!r}")
+        rows, cols = int(rows), int(cols)
+        r, c = np.divmod(np.arange(rows * cols), cols)
+        a, b = c * width / (cols - 1), r * height / (rows - 1)
+        zero = np.zeros_like(a)
+        local = np.stack([a, zero, -b] if plane == "xz" else [a, b, zero], axis=1)
+        vertices = _check_vector(origin, "origin") + local
+        pairs, quads = grid_topology(rows, cols)
+        masses = _total_mass(mass) and lumped_masses(vertices, quads, mass)
+        faces = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])  # split along a-e
+        return cls._build(vertices, faces, pairs, masses, params, pinned, jit)
+
+    @classmethod
+    def from_mesh(cls, vertices, faces, *, mass: float = 1.0, params: ClothParams | None = None,
+                  pinned=(), jit: bool | None = None):
+        """A cloth from a triangle mesh: ``vertices`` (n, 3) in m, ``faces`` (m, 3) ints.
+
+        Stretch springs on the edges, bend springs between the two vertices opposite each
+        interior edge, no shear springs; ``mass`` (kg, total) is lumped by triangle area.
+        """
+        v = np.asarray(vertices, dtype=float)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) < 2 or not np.all(np.isfinite(v)):
+            raise ValueError(f"vertices must be a finite (n, 3) array with n >= 2, got {v.shape}")
+        f = np.asarray(faces)
+        if (f.ndim != 2 or f.shape[1] != 3 or len(f) < 1
+                or not np.issubdtype(f.dtype, np.integer)):
+            raise ValueError(
+                f"faces must be a non-empty (m, 3) integer array, got {f.shape} {f.dtype}")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"faces index vertices 0..{len(v) - 1}, found {f.min()}..{f.max()}")
+        if np.any((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])):
+            raise ValueError("a face repeats a vertex; every triangle needs 3 distinct vertices")
+        f = f.astype(np.intp)
+        masses = _total_mass(mass) and lumped_masses(v, f, mass)
+        return cls._build(v, f, mesh_topology(f), masses, params, pinned, jit)
+
+    @classmethod
+    def _build(cls, vertices, faces, pairs, masses, params, pinned, jit):
+        params = ClothParams() if params is None else params
+        kinds = sorted(pairs)
+        ij = np.vstack([pairs[k] for k in kinds]).astype(np.intp)
+        kind = np.concatenate([np.full(len(pairs[k]), k) for k in kinds])
+        d = vertices[ij[:, 1]] - vertices[ij[:, 0]]
+        rest = np.sqrt(np.einsum("pk,pk->p", d, d) + params.eps ** 2)  # regularised: f(rest)=0
+        springs = Springs(ij[:, 0].copy(), ij[:, 1].copy(), rest, kind)
+        return cls(vertices, faces, masses, springs, params, pinned, jit)
+
+    @property
+    def n(self) -> int:
+        return len(self.masses)
+
+    def free_mask(self) -> np.ndarray:
+        """Boolean mask over the 3n velocity components: False for pinned particles."""
+        free = np.ones((self.n, 3), bool)
+        free[self.pinned] = False
+        return free.ravel()
+
+    # -- numeric -------------------------------------------------------------------------
+    def _spring_inputs(self, x, v):
+        x, v = self._check_state(x, "x"), self._check_state(v, "v")
+        s = self.springs
+        return [np.take(x, s.j, 0) - np.take(x, s.i, 0),
+                np.take(v, s.j, 0) - np.take(v, s.i, 0), *self._spring_params]
+
+    def spring_forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Internal spring forces (elastic + damping) on every particle, ``(n, 3)`` N."""
+        (fs,) = self._force(*self._spring_inputs(x, v))
+        s, out = self.springs, np.empty((self.n, 3))
+        for k in range(3):
+            out[:, k] = (np.bincount(s.i, fs[:, k], minlength=self.n)
+                         - np.bincount(s.j, fs[:, k], minlength=self.n))
+        return out
+
+    def forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Total force ``(n, 3)`` N: springs + gravity ``m_i g`` + drag ``-air_drag m_i v_i``."""
+        drag = self.params.air_drag * self.masses[:, None] * np.asarray(v, dtype=float)
+        return self.spring_forces(x, v) + self._gravity - drag
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
+        """``(K, D)`` as 3n x 3n CSC matrices (fixed pattern), both symmetric.
+
+        ``K = df/dx`` at zero velocity (the stiffness; damping's position derivative is
+        omitted, as in Baraff-Witkin) and ``D = df/dv``.
+        """
+        K, D = self._jac(*self._spring_inputs(x, v))
+        size = 3 * self.n
+        out = []
+        for blocks, diag in ((K, np.zeros(size)), (D, self._drag_diag)):
+            data = self._gather @ np.concatenate([blocks.ravel(), diag])
+            out.append(sp.csc_matrix((data, self._indices.copy(), self._indptr.copy()),
+                                     shape=(size, size)))
+        return out[0], out[1]
+
+    # -- symbolic ------------------------------------------------------------------------
+    def symbolic_forces(self, X, V):
+        """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k)."""
+        s, P = self.springs, self.springs.i.size
+        params = [ca.DM(a.T) for a in self._spring_params]
+        fs = self._force_k.map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
+        incidence = sp.coo_matrix((np.r_[np.ones(P), -np.ones(P)],
+                                   (np.r_[np.arange(P), np.arange(P)], np.r_[s.i, s.j])),
+                                  shape=(P, self.n)).toarray()
+        m = ca.DM(self.masses).T
+        gravity = ca.DM(self._gravity.T)
+        drag = -self.params.air_drag * V * ca.repmat(m, 3, 1)
+        return ca.mtimes(fs, ca.sparsify(ca.DM(incidence))) + gravity + drag
+
+    def _check_state(self, a, name: str) -> np.ndarray:
+        a = np.asarray(a, dtype=float)
+        if a.shape != (self.n, 3):
+            raise ValueError(f"{name} must have shape ({self.n}, 3), got {a.shape}")
+        return a
+
+
+def _total_mass(mass) -> bool:
+    if not (np.isscalar(mass) and np.isfinite(mass) and mass > 0):
+        raise ValueError(f"the cloth's total mass must be a positive finite number, got {mass}")
+    return True
+
+
+def _check_vector(value, name: str) -> np.ndarray:
+    a = np.asarray(value, dtype=float)
+    if a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise ValueError(f"{name} must be 3 finite numbers, got {value}")
+    return a
+
+
+def _check_pinned(pinned, n: int) -> np.ndarray:
+    if not np.size(pinned):
+        return np.zeros(0, np.intp)
+    p = np.unique(np.asarray(pinned, dtype=np.intp).ravel())
+    if p.size and (p.min() < 0 or p.max() >= n):
+        raise ValueError(f"pinned particle indices must be in 0..{n - 1}, got {p.min()}..{p.max()}")
+    return p

@@ -133,3 +133,17 @@ class MappedKernel:
             (big if n > small.size else small).run(arrays, outputs, lo, n)
             lo += n
         return outputs
+
+
+def pair_difference(a: np.ndarray, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+    """``a[j] - a[i]`` row by row (``np.take`` gathers rows ~3x faster than indexing)."""
+    return np.take(a, j, axis=0) - np.take(a, i, axis=0)
+
+
+def scatter_pairs(values: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> np.ndarray:
+    """Add ``values[p]`` to row ``i[p]`` and subtract it from row ``j[p]`` of an ``(n, k)`` array."""
+    out = np.empty((n, values.shape[1]))
+    for k in range(values.shape[1]):
+        col = values[:, k]
+        out[:, k] = np.bincount(i, col, minlength=n) - np.bincount(j, col, minlength=n)
+    return out

@@ -41,7 +41,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernels import MappedKernel
+from ..kernels import MappedKernel, pair_difference, scatter_pairs
 
 SPRING_KINDS = ("stretch", "shear", "bend")
 STRETCH, SHEAR, BEND = range(3)
@@ -320,17 +320,12 @@ class ClothModel:
     def _spring_inputs(self, x, v):
         x, v = self._check_state(x, "x"), self._check_state(v, "v")
         s = self.springs
-        return [np.take(x, s.j, 0) - np.take(x, s.i, 0),
-                np.take(v, s.j, 0) - np.take(v, s.i, 0), *self._spring_params]
+        return [pair_difference(x, s.i, s.j), pair_difference(v, s.i, s.j), *self._spring_params]
 
     def spring_forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Internal spring forces (elastic + damping) on every particle, ``(n, 3)`` N."""
         (fs,) = self._force(*self._spring_inputs(x, v))
-        s, out = self.springs, np.empty((self.n, 3))
-        for k in range(3):
-            out[:, k] = (np.bincount(s.i, fs[:, k], minlength=self.n)
-                         - np.bincount(s.j, fs[:, k], minlength=self.n))
-        return out
+        return scatter_pairs(fs, self.springs.i, self.springs.j, self.n)
 
     def forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Total force ``(n, 3)`` N: springs + gravity ``m_i g`` + drag ``-air_drag m_i v_i``."""

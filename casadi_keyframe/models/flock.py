@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..kernels import MappedKernel
+from ..kernels import MappedKernel, pair_difference, scatter_pairs
 
 CUTOFFS = ("smooth", "hard")
 
@@ -169,16 +169,16 @@ class FlockModel:
     def forces(self, x: np.ndarray, v: np.ndarray, tape: PairTape | None = None):
         """Internal force on every agent, ``(n, dim)``, and the pair tape used."""
         tape = self.neighbour_pairs(x) if tape is None else tape
-        (fp,) = self._force(_pair_difference(x, tape), _pair_difference(v, tape))
-        out = _scatter_pairs(fp, tape, self.n) - self.params.drag * v
+        (fp,) = self._force(pair_difference(x, tape.i, tape.j), pair_difference(v, tape.i, tape.j))
+        out = scatter_pairs(fp, tape.i, tape.j, self.n) - self.params.drag * v
         return out, tape
 
     def forces_vjp(self, x: np.ndarray, v: np.ndarray, tape: PairTape, mu: np.ndarray):
         """``((df/dx)^T mu, (df/dv)^T mu)`` at (x, v), each ``(n, dim)``."""
-        lam = -_pair_difference(mu, tape)
-        gd, gdv = self._vjp(_pair_difference(x, tape), _pair_difference(v, tape), lam)
-        gx = _scatter_pairs(-gd, tape, self.n)
-        gv = _scatter_pairs(-gdv, tape, self.n) - self.params.drag * mu
+        lam = -pair_difference(mu, tape.i, tape.j)
+        gd, gdv = self._vjp(pair_difference(x, tape.i, tape.j), pair_difference(v, tape.i, tape.j), lam)
+        gx = scatter_pairs(-gd, tape.i, tape.j, self.n)
+        gv = scatter_pairs(-gdv, tape.i, tape.j, self.n) - self.params.drag * mu
         return gx, gv
 
     # -- symbolic ----------------------------------------------------------------------
@@ -195,16 +195,3 @@ class FlockModel:
         incidence[rows, tape.j] = -1.0
         return ca.mtimes(forces, ca.DM(ca.sparsify(ca.DM(incidence)))) - self.params.drag * V
 
-
-def _pair_difference(a: np.ndarray, tape: PairTape) -> np.ndarray:
-    """``a[j] - a[i]`` for every pair (``np.take`` gathers rows ~3x faster than indexing)."""
-    return np.take(a, tape.j, axis=0) - np.take(a, tape.i, axis=0)
-
-
-def _scatter_pairs(values: np.ndarray, tape: PairTape, n: int) -> np.ndarray:
-    """Add ``values[p]`` to agent ``i[p]`` and subtract it from agent ``j[p]``."""
-    out = np.empty((n, values.shape[1]))
-    for k in range(values.shape[1]):
-        col = values[:, k]
-        out[:, k] = np.bincount(tape.i, col, minlength=n) - np.bincount(tape.j, col, minlength=n)
-    return out

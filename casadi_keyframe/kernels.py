@@ -20,6 +20,7 @@ import warnings
 
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
 
 CHUNKS = (2048, 128)
 _COMPILED: dict = {}
@@ -147,3 +148,14 @@ def scatter_pairs(values: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> n
         col = values[:, k]
         out[:, k] = np.bincount(i, col, minlength=n) - np.bincount(j, col, minlength=n)
     return out
+
+
+def pair_incidence(i: np.ndarray, j: np.ndarray, n: int) -> ca.DM:
+    """Sparse ``(P, n)`` matrix with +1 at (p, i[p]) and -1 at (p, j[p]).
+
+    ``mtimes(per_pair_columns, pair_incidence(...))`` is :func:`scatter_pairs` symbolically.
+    """
+    P = i.size
+    rows = np.r_[np.arange(P), np.arange(P)]
+    return ca.DM(sp.csc_matrix((np.r_[np.ones(P), -np.ones(P)], (rows, np.r_[i, j])),
+                               shape=(P, n)))

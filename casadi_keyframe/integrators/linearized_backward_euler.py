@@ -46,24 +46,18 @@ class LinearizedBackwardEuler:
         if solver not in SOLVERS:
             raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
         self.solver, self.tol = solver, tol
-        self.cg_iterations = []
 
     def _solve(self, A, b, free, x0=None):
         if self.solver == "cg":
-            dv, it = SOLVERS["cg"](A, b, free, tol=self.tol, x0=x0)
-        else:
-            dv, it = SOLVERS["direct"](A, b, free)
-        self.cg_iterations.append(it)
-        return dv
+            return SOLVERS["cg"](A, b, free, tol=self.tol, x0=x0)[0]
+        return SOLVERS["direct"](A, b, free)[0]
 
     @staticmethod
-    def system(model, x, v, dt):
-        """``(A, K, f)`` of the step from (x, v): A and K sparse ``3n x 3n``, f ``(n, 3)``."""
-        f = model.forces(x, v)
+    def matrices(model, x, v, dt):
+        """``(A, K)`` of the step from (x, v), both sparse ``3n x 3n``."""
         K, D = model.jacobians(x, v)
         mass = np.repeat(model.masses, model.dim)
-        A = (sp.diags(mass) - dt * D - dt * dt * K).tocsr()
-        return A, K, f
+        return (sp.diags(mass) - dt * D - dt * dt * K).tocsr(), K
 
     def simulate(self, model, x0, v0, external, dt) -> Trajectory:
         steps = external.shape[0]
@@ -73,8 +67,8 @@ class LinearizedBackwardEuler:
         free = model.free_mask()
         dv = None
         for n in range(steps):
-            A, K, f = self.system(model, x[n], v[n], dt)
-            b = dt * ((f + external[n]).ravel() + dt * (K @ v[n].ravel()))
+            A, K = self.matrices(model, x[n], v[n], dt)
+            b = dt * ((model.forces(x[n], v[n]) + external[n]).ravel() + dt * (K @ v[n].ravel()))
             dv = self._solve(A, b, free, x0=dv)
             v[n + 1] = v[n] + dv.reshape(v[n].shape)
             x[n + 1] = x[n] + dt * v[n + 1]
@@ -91,7 +85,7 @@ class LinearizedBackwardEuler:
         ax, av = gx[steps].ravel().copy(), gv[steps].ravel().copy()
         mu = None
         for n in range(steps - 1, -1, -1):
-            A, K, _ = self.system(model, traj.x[n + 1], traj.v[n + 1], dt)
+            A, K = self.matrices(model, traj.x[n + 1], traj.v[n + 1], dt)
             w = av + dt * ax
             mu = self._solve(A, w, free, x0=mu)  # A^T = A: K and D are symmetric
             g_ext[n] = (dt * mu).reshape(shape)

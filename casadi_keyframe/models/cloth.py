@@ -31,7 +31,7 @@ The spring law is one SX kernel ``(d, dv, L, k_t, k_b, c) -> f_i`` and its Jacob
 ``-> (K, D) = (df_i/dd, df_i/d dv)`` (row-major 3x3).  Since ``d = x_j - x_i`` the spring
 adds ``-K`` to blocks (i, i), (j, j) and ``+K`` to (i, j), (j, i) of df/dx (D likewise for
 df/dv).  The sparse pattern and the COO -> CSC map are built once, so a Jacobian call fills
-one data vector with a precomputed sparse gather (a signed ``np.bincount``): O(springs).
+one data vector with a precomputed signed sparse gather matrix: O(springs).
 """
 from __future__ import annotations
 
@@ -41,7 +41,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernels import MappedKernel, pair_difference, scatter_pairs
+from ..kernels import MappedKernel, pair_difference, pair_incidence, scatter_pairs
 
 SPRING_KINDS = ("stretch", "shear", "bend")
 STRETCH, SHEAR, BEND = range(3)
@@ -353,13 +353,10 @@ class ClothModel:
         s, P = self.springs, self.springs.i.size
         params = [ca.DM(a.T) for a in self._spring_params]
         fs = self._force_k.map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
-        incidence = sp.coo_matrix((np.r_[np.ones(P), -np.ones(P)],
-                                   (np.r_[np.arange(P), np.arange(P)], np.r_[s.i, s.j])),
-                                  shape=(P, self.n)).toarray()
         m = ca.DM(self.masses).T
         gravity = ca.DM(self._gravity.T)
         drag = -self.params.air_drag * V * ca.repmat(m, 3, 1)
-        return ca.mtimes(fs, ca.sparsify(ca.DM(incidence))) + gravity + drag
+        return ca.mtimes(fs, pair_incidence(s.i, s.j, self.n)) + gravity + drag
 
     def _check_state(self, a, name: str) -> np.ndarray:
         a = np.asarray(a, dtype=float)

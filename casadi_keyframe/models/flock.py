@@ -33,7 +33,7 @@ import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..kernels import MappedKernel, pair_difference, scatter_pairs
+from ..kernels import MappedKernel, pair_difference, pair_incidence, scatter_pairs
 
 CUTOFFS = ("smooth", "hard")
 
@@ -189,9 +189,5 @@ class FlockModel:
             return -self.params.drag * V
         forces = self._force_k.map(tape.i.size)(X[:, tape.j] - X[:, tape.i],
                                                  V[:, tape.j] - V[:, tape.i])
-        incidence = np.zeros((tape.i.size, self.n))
-        rows = np.arange(tape.i.size)
-        incidence[rows, tape.i] = 1.0
-        incidence[rows, tape.j] = -1.0
-        return ca.mtimes(forces, ca.DM(ca.sparsify(ca.DM(incidence)))) - self.params.drag * V
+        return ca.mtimes(forces, pair_incidence(tape.i, tape.j, self.n)) - self.params.drag * V
 

@@ -128,7 +128,8 @@ class ControlProblem:
                 E = ca.DM(self.external[n].T)
                 if forces is not None:
                     E = E + forces[n]
-                X, V = step(X, V, E, self.dt)
+                S = self.integrator.step_parameters(self.model, n * self.dt, self.dt)
+                X, V = step(X, V, E, self.dt, S)
         for term in self.objective_terms.control_terms:
             J += term.symbolic(U, self.controls, self.dt)
         return J

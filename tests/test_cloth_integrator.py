@@ -70,13 +70,22 @@ class LinearModel:
         free[self.pinned] = False
         return free.ravel()
 
-    def forces(self, x, v):
+    def prescribed_velocity(self, x, t, dt):
+        return np.zeros((self.n, 3))
+
+    def scene_parameters(self, t):
+        return np.zeros(0)
+
+    attachment_targets = scene_parameters
+    attachments = ()
+
+    def forces(self, x, v, t=0.0):
         return (self.K @ x.ravel() + self.D @ v.ravel()).reshape(self.n, 3)
 
-    def jacobians(self, x, v):
+    def jacobians(self, x, v, t=0.0):
         return sp.csc_matrix(self.K), sp.csc_matrix(self.D)
 
-    def symbolic_forces(self, X, V):
+    def symbolic_forces(self, X, V, S=None):
         f = ca.mtimes(ca.DM(self.K), ca.vec(X)) + ca.mtimes(ca.DM(self.D), ca.vec(V))
         return ca.reshape(f, 3, self.n)
 

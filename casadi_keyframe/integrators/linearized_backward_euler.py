@@ -2,8 +2,9 @@ r"""Linearized backward Euler, eqs. (10)-(12), and the integrator-swapping adjoi
 
 Forward step (Baraff-Witkin):  ``A dv = b`` with ``A = M - dt D - dt^2 K``,
 ``b = dt (f_n + dt K v_n + e_n)``, ``K = df/dx|_n`` (at zero velocity), ``D = df/dv|_n``;
-``v_{n+1} = v_n + dv``, ``x_{n+1} = x_n + dt v_{n+1}``.  Pinned components have ``dv = 0``
-(the filter of the modified CG).  The model supplies symmetric K and D (as Baraff and
+``v_{n+1} = v_n + dv``, ``x_{n+1} = x_n + dt v_{n+1}``.  Forces, Jacobians and colliders are
+taken at ``t_n = n dt``.  Constrained components get a prescribed ``dv`` (the filter of the
+modified CG): pinned particles end the step at rest, attached ones at their path's next point.  The model supplies symmetric K and D (as Baraff and
 Witkin, the position derivative of spring damping is left out of K), so A is symmetric
 positive definite for small enough dt and CG applies.
 
@@ -14,9 +15,9 @@ adjoint variables.  Its Jacobians belong to the step's end state n+1, so its mat
 the forward pass builds there (recomputed, not stored, to keep memory at O(particles x steps)):
 
     w   = a_v(n+1) + dt a_x(n+1)
-    A^T mu = w            (free components; mu = 0 on pinned ones)
+    A^T mu = w            (free components; mu = 0 on pinned and attached ones)
     dphi/de_n = dt mu
-    a_v(n) = M mu  (+ w - A_fc^T mu_f on pinned components) + dphi/dv_n
+    a_v(n) = M mu + dphi/dv_n
     a_x(n) = a_x(n+1) + dt K^T mu + dphi/dx_n
 
 The two schemes agree through second order in dt, so for smooth forces each step's
@@ -47,15 +48,15 @@ class LinearizedBackwardEuler:
             raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
         self.solver, self.tol = solver, tol
 
-    def _solve(self, A, b, free, x0=None):
+    def _solve(self, A, b, free, z=None, x0=None):
         if self.solver == "cg":
-            return SOLVERS["cg"](A, b, free, tol=self.tol, x0=x0)[0]
-        return SOLVERS["direct"](A, b, free)[0]
+            return SOLVERS["cg"](A, b, free, z, tol=self.tol, x0=x0)[0]
+        return SOLVERS["direct"](A, b, free, z)[0]
 
     @staticmethod
-    def matrices(model, x, v, dt):
-        """``(A, K)`` of the step from (x, v), both sparse ``3n x 3n``."""
-        K, D = model.jacobians(x, v)
+    def matrices(model, x, v, dt, t=0.0):
+        """``(A, K)`` of the step from (x, v) at time t, both sparse ``3n x 3n``."""
+        K, D = model.jacobians(x, v, t)
         mass = np.repeat(model.masses, model.dim)
         return (sp.diags(mass) - dt * D - dt * dt * K).tocsr(), K
 
@@ -67,58 +68,77 @@ class LinearizedBackwardEuler:
         free = model.free_mask()
         dv = None
         for n in range(steps):
-            A, K = self.matrices(model, x[n], v[n], dt)
-            b = dt * ((model.forces(x[n], v[n]) + external[n]).ravel() + dt * (K @ v[n].ravel()))
-            dv = self._solve(A, b, free, x0=dv)
+            t = n * dt
+            A, K = self.matrices(model, x[n], v[n], dt, t)
+            b = dt * ((model.forces(x[n], v[n], t) + external[n]).ravel()
+                      + dt * (K @ v[n].ravel()))
+            z = (model.prescribed_velocity(x[n], t, dt) - v[n]).ravel()
+            dv = self._solve(A, b, free, z, x0=dv)
             v[n + 1] = v[n] + dv.reshape(v[n].shape)
             x[n + 1] = x[n] + dt * v[n + 1]
             check_state(x[n + 1], v[n + 1], n + 1)
         return Trajectory(x, v, dt)
 
     def adjoint(self, model, traj: Trajectory, gx, gv):
-        """Integrator-swapping adjoint; returns ``(g_external, g_x0, g_v0)``. Approximate."""
+        """Integrator-swapping adjoint; returns ``(g_external, g_x0, g_v0)``. Approximate.
+
+        Pinned and attached particles follow prescribed motion, which no control changes:
+        their adjoints are dropped, and their parts of ``g_x0, g_v0`` are zero.
+        """
         dt, steps = traj.dt, traj.steps
-        free = model.free_mask()
+        free = model.free_mask().astype(float)
         mass = np.repeat(model.masses, model.dim)
         shape = traj.x.shape[1:]
         g_ext = np.empty((steps,) + shape)
-        ax, av = gx[steps].ravel().copy(), gv[steps].ravel().copy()
+        ax, av = free * gx[steps].ravel(), free * gv[steps].ravel()
         mu = None
         for n in range(steps - 1, -1, -1):
-            A, K = self.matrices(model, traj.x[n + 1], traj.v[n + 1], dt)
-            w = av + dt * ax
-            mu = self._solve(A, w, free, x0=mu)  # A^T = A: K and D are symmetric
+            A, K = self.matrices(model, traj.x[n + 1], traj.v[n + 1], dt, (n + 1) * dt)
+            mu = self._solve(A, av + dt * ax, free > 0, x0=mu)  # A^T = A: K, D symmetric
             g_ext[n] = (dt * mu).reshape(shape)
-            av_new = mass * mu
-            if not free.all():
-                pinned = ~free
-                av_new[pinned] = w[pinned] - (A.T @ mu)[pinned]
-            ax = ax + dt * (K.T @ mu) + gx[n].ravel()
-            av = av_new + gv[n].ravel()
+            ax = free * (ax + dt * (K.T @ mu) + gx[n].ravel())
+            av = free * (mass * mu + gv[n].ravel())
         return g_ext, ax.reshape(shape), av.reshape(shape)
 
+    @staticmethod
+    def step_parameters(model, t: float, dt: float) -> np.ndarray:
+        """The symbolic step's S at time t: the scene then, attachment targets at t + dt."""
+        return np.concatenate([model.scene_parameters(t), model.attachment_targets(t + dt)])
+
     def symbolic_step(self, model) -> ca.Function:
-        """``(X, V, E, dt) -> (X+, V+)``: the linearized step in CasADi, for exact reverse mode.
+        """``(X, V, E, dt, S) -> (X+, V+)``: the linearized step in CasADi, for exact reverse
+        mode; S from :meth:`step_parameters`.
 
         Second derivatives of the forces enter through K and D; the linear solve is
         differentiated exactly (``ldl``).  For small systems only.
         """
         n, d = model.n, model.dim
+        n_scene = model.scene_parameters(0.0).size
+        n_s = n_scene + model.attachment_targets(0.0).size
         X, V, E = (ca.SX.sym(s, d, n) for s in "XVE")
-        dt = ca.SX.sym("dt")
-        f = ca.vec(model.symbolic_forces(X, V))
-        K = ca.jacobian(ca.vec(model.symbolic_forces(X, ca.SX.zeros(d, n))), ca.vec(X))
+        dt, S = ca.SX.sym("dt"), ca.SX.sym("S", n_s)
+        scene = S[:n_scene]
+        f = ca.vec(model.symbolic_forces(X, V, scene))
+        K = ca.jacobian(ca.vec(model.symbolic_forces(X, ca.SX.zeros(d, n), scene)), ca.vec(X))
         D = ca.jacobian(f, ca.vec(V))
         mass = np.repeat(model.masses, d)
         A = ca.diag(ca.DM(mass)) - dt * D - dt * dt * K
         b = dt * (f + ca.vec(E) + dt * ca.mtimes(K, ca.vec(V)))
-        system = ca.Function("lbe_system", [X, V, E, dt], [A, b])
+        v_new = ca.SX.zeros(d, n)  # constrained: pinned stay, attached reach their targets
+        at = n_scene
+        for a in model.attachments:
+            k = a.particles.size
+            target = ca.reshape(S[at:at + 3 * k], 3, k)
+            v_new[:, a.particles.tolist()] = (target - X[:, a.particles.tolist()]) / dt
+            at += 3 * k
+        system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, ca.vec(v_new - V)])
         Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
-        dtm = ca.MX.sym("dt")
-        Am, bm = system(Xm, Vm, Em, dtm)
-        fi = np.flatnonzero(model.free_mask()).tolist()
-        dv = ca.MX.zeros(n * d, 1)
-        dv[fi] = ca.solve(Am[fi, fi], bm[fi], "ldl")
-        v_new = Vm + ca.reshape(dv, d, n)
-        return ca.Function("lbe_step", [Xm, Vm, Em, dtm], [Xm + dtm * v_new, v_new])
-
+        dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)
+        Am, bm, dvm = system(Xm, Vm, Em, dtm, Sm)
+        free = model.free_mask()
+        fi, ci = np.flatnonzero(free).tolist(), np.flatnonzero(~free).tolist()
+        dv = dvm
+        rhs = bm[fi] - (ca.mtimes(Am[fi, ci], dvm[ci]) if ci else 0)
+        dv[fi] = ca.solve(Am[fi, fi], rhs, "ldl")
+        v_next = Vm + ca.reshape(dv, d, n)
+        return ca.Function("lbe_step", [Xm, Vm, Em, dtm, Sm], [Xm + dtm * v_next, v_next])

@@ -60,12 +60,18 @@ class SymplecticEuler:
             av = w + jv + gv[n]
         return g_ext, ax, av
 
+    @staticmethod
+    def step_parameters(model, t: float, dt: float) -> np.ndarray:
+        """Nothing in a flock depends on time beyond the stored forces: an empty S."""
+        return np.zeros(0)
+
     def symbolic_step(self, model) -> ca.Function:
-        """``(X, V, E, dt) -> (X+, V+)`` on ``dim x n`` matrices, all pairs, for exact AD."""
+        """``(X, V, E, dt, S) -> (X+, V+)`` on ``dim x n`` matrices, all pairs, for exact AD
+        (S is empty)."""
         shape = (model.dim, model.n)
         X, V, E = (ca.MX.sym(s, *shape) for s in "XVE")
-        dt = ca.MX.sym("dt")
+        dt, S = ca.MX.sym("dt"), ca.MX.sym("S", 0)
         inv_m = ca.DM(np.tile(1.0 / model.masses, (model.dim, 1)))
         v_new = V + dt * inv_m * (model.symbolic_forces(X, V) + E)
         x_new = X + dt * v_new
-        return ca.Function("symplectic_euler_step", [X, V, E, dt], [x_new, v_new]).expand()
+        return ca.Function("symplectic_euler_step", [X, V, E, dt, S], [x_new, v_new]).expand()

@@ -4,7 +4,7 @@ For a spring (i, j) of rest length ``L`` let ``d = x_j - x_i``, ``dv = v_j - v_i
 regularised length ``r = sqrt(|d|^2 + eps^2)`` and ``u = d / r``.  The force on particle i is
 
 * tension, ``r >= L``:      ``f_i = k_t (r - L) u``                 (pulls i toward j)
-* compression, ``r < L``:   ``f_i = -k_b kappa^2 u``                (pushes the ends apart)
+* compression, ``r < L``:   ``f_i = -(k_b kappa^2 + g(r)) u``       (pushes the ends apart)
 * damping, always:          ``f_i += c ((dv . u) u)``
 
 and j feels ``-f_i``, so internal forces sum to zero.  Under compression the spring is
@@ -15,6 +15,17 @@ with ``y = sinc^{-1}(s)``, ``s = r / L``.  ``z = y^2`` is analytic in ``w = 1 - 
 degree-10 polynomial (:data:`SINC_INV_COEFFS`, |y error| < 1e-5): the force vanishes at
 ``r = L`` exactly and no square root appears in the kernel.
 
+The hand-over term ``g``: the pure Choi-Ko law jumps from stiffness ``k_t`` to almost zero at
+``r = L``, which makes the linearized step (its matrix holds the stiffness) discontinuous in
+the state, so neither its exact nor its swapped gradient means much for springs near rest
+length (measured: swapped-vs-exact cosine 0.97 on a hanging 5 x 5 cloth, 0.9993 with the
+hand-over).  With compressive strain ``w = 1 - r/L`` and ``delta = buckle_strain``,
+``g = k_t L delta (1 - (1 - min(w/delta, 1))^3) / 3``: the linear resistance fades out over
+``delta`` and leaves the critical buckling load ``k_t L delta / 3`` (Euler's picture: the
+cloth resists compression until it buckles, then the arc law takes over).  ``g`` has
+stiffness ``k_t`` at rest length, is monotone, and is C^2 at ``w = delta``;
+``buckle_strain = 0`` gives the pure law.
+
 Spring kinds and their stiffnesses (:class:`ClothParams`):
 
 * stretch (grid neighbours / mesh edges):  ``k_t = stretch``, ``k_b = bend``
@@ -24,14 +35,18 @@ Spring kinds and their stiffnesses (:class:`ClothParams`):
   force is C^1 across its rest length.
 
 Each particle also feels gravity ``m_i g`` and linear air drag ``-air_drag m_i v_i`` (mass
-proportional, so the drag acceleration does not depend on the resolution).  Pinned particles
-are only recorded here; the integrator keeps them fixed.
+proportional, so the drag acceleration does not depend on the resolution), plus the contact
+forces of the model's colliders and self-contact (:mod:`.colliders`).  Pinned particles and
+:class:`Attachment` s (particles led along a path: a hand, a shoulder) are recorded here;
+the integrator imposes their velocities.
 
 The spring law is one SX kernel ``(d, dv, L, k_t, k_b, c) -> f_i`` and its Jacobian kernel
 ``-> (K, D) = (df_i/dd, df_i/d dv)`` (row-major 3x3).  Since ``d = x_j - x_i`` the spring
 adds ``-K`` to blocks (i, i), (j, j) and ``+K`` to (i, j), (j, i) of df/dx (D likewise for
-df/dv).  The sparse pattern and the COO -> CSC map are built once, so a Jacobian call fills
-one data vector with a precomputed signed sparse gather matrix: O(springs).
+df/dv); drag and the bodies' contacts add per-particle diagonal blocks.  The sparse pattern
+and the COO -> CSC map are built once, so a Jacobian call fills one data vector with a
+precomputed signed sparse gather matrix: O(springs).  Self-contact pairs change every step
+and are added as a separate sparse term.
 """
 from __future__ import annotations
 
@@ -42,6 +57,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..kernels import MappedKernel, pair_difference, pair_incidence, scatter_pairs
+from .colliders import Body, Contact, SelfContact
 
 SPRING_KINDS = ("stretch", "shear", "bend")
 STRETCH, SHEAR, BEND = range(3)
@@ -80,6 +96,8 @@ class ClothParams:
     sheet's membrane stiffness does not depend on the resolution).  ``bend``: buckling
     stiffness ``k_b``, N m^2.  ``damping``: along-spring damping c, N s/m.  ``air_drag``:
     drag per unit mass, 1/s.  ``gravity``: m/s^2.  ``eps``: length regularisation, m.
+    ``buckle_strain``: compressive strain over which linear resistance hands over to
+    buckling (0: the pure Choi-Ko law; see the module docstring).
     """
 
     stretch: float = 500.0
@@ -89,9 +107,10 @@ class ClothParams:
     air_drag: float = 0.1
     gravity: tuple = (0.0, 0.0, -9.81)
     eps: float = 1e-6
+    buckle_strain: float = 0.05
 
     def __post_init__(self):
-        for name in ("stretch", "shear", "bend", "damping", "air_drag"):
+        for name in ("stretch", "shear", "bend", "damping", "air_drag", "buckle_strain"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"ClothParams.{name} must be non-negative and finite, got {value}")
@@ -103,16 +122,20 @@ class ClothParams:
         object.__setattr__(self, "gravity", g)
 
 
-def spring_force_expr(d, dv, L, k_t, k_b, c, eps: float):
+def spring_force_expr(d, dv, L, k_t, k_b, c, eps: float, buckle_strain: float = 0.0):
     """Force on particle i of one spring as a CasADi expression (see the module docstring)."""
     r = ca.sqrt(ca.dot(d, d) + eps ** 2)
     u = d / r
     kappa2 = 4 * sinc_inverse_squared(r / L) / L ** 2
-    magnitude = ca.if_else(r >= L, k_t * (r - L), -k_b * kappa2)
+    compression = k_b * kappa2
+    if buckle_strain > 0:
+        t = ca.fmin((1 - r / L) / buckle_strain, 1)
+        compression += k_t * L * buckle_strain * (1 - (1 - t) ** 3) / 3
+    magnitude = ca.if_else(r >= L, k_t * (r - L), -compression)
     return magnitude * u + c * ca.dot(dv, u) * u
 
 
-def spring_kernels(eps: float) -> tuple[ca.Function, ca.Function]:
+def spring_kernels(eps: float, buckle_strain: float = 0.0) -> tuple[ca.Function, ca.Function]:
     """``force(d, dv, L, k_t, k_b, c) -> f_i`` and ``jac(...) -> (vec K, vec D)`` (row-major).
 
     K is the position derivative at zero relative velocity: as Baraff and Witkin, the
@@ -120,8 +143,8 @@ def spring_kernels(eps: float) -> tuple[ca.Function, ca.Function]:
     """
     d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
     scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
-    f = spring_force_expr(d, dv, *scalars, eps)
-    elastic = spring_force_expr(d, ca.SX.zeros(3), *scalars, eps)
+    f = spring_force_expr(d, dv, *scalars, eps, buckle_strain)
+    elastic = spring_force_expr(d, ca.SX.zeros(3), *scalars, eps, buckle_strain)
     args = [d, dv, *scalars]
     row_major = [ca.reshape(ca.jacobian(g, a).T, 9, 1) for g, a in ((elastic, d), (f, dv))]
     return (ca.Function("cloth_spring", args, [f]),
@@ -188,25 +211,62 @@ def lumped_masses(vertices: np.ndarray, faces: np.ndarray, total: float) -> np.n
 
 
 def _block_pattern(i: np.ndarray, j: np.ndarray, n: int):
-    """CSC pattern of the 3x3 blocks (i,i), (i,j), (j,i), (j,j) of every spring plus the diagonal.
+    """CSC pattern of the 3x3 blocks (i,i), (i,j), (j,i), (j,j) of every pair plus every
+    particle's diagonal block.
 
-    Returns ``(indices, indptr, gather)``: the CSC data of ``-K`` at (i,i) and (j,j), ``+K``
-    at (i,j) and (j,i), plus a diagonal ``g``, is ``gather @ [vec_row_major(K); g]``.  The
-    ``(nnz, 9P + 3n)`` gather matrix holds the COO -> CSC map with the signs (duplicates add
-    up, as ``np.bincount`` would, but faster).
+    Returns ``(indices, indptr, gather)``: the CSC data of ``-B_p`` at (i,i) and (j,j), ``+B_p``
+    at (i,j) and (j,i) for pair blocks ``B_p``, plus particle blocks ``C_k`` at (k,k), is
+    ``gather @ [vec_row_major(B); vec_row_major(C)]``.  The ``(nnz, 9P + 9n)`` gather matrix
+    holds the COO -> CSC map with the signs (duplicates add up).
     """
     P = i.size
-    bi, bj = np.concatenate([i, i, j, j]), np.concatenate([i, j, i, j])
+    k = np.arange(n)
+    bi, bj = np.concatenate([i, i, j, j, k]), np.concatenate([i, j, i, j, k])
     a, b = np.divmod(np.arange(9), 3)  # row-major entry e of a block is (a, b)
-    rows = np.concatenate([(3 * bi[:, None] + a).ravel(), np.arange(3 * n)])
-    cols = np.concatenate([(3 * bj[:, None] + b).ravel(), np.arange(3 * n)])
+    rows = (3 * bi[:, None] + a).ravel()
+    cols = (3 * bj[:, None] + b).ravel()
     keys, slot = np.unique(cols.astype(np.int64) * (3 * n) + rows, return_inverse=True)
     indices = (keys % (3 * n)).astype(np.int32)
     indptr = np.concatenate([[0], np.cumsum(np.bincount(keys // (3 * n), minlength=3 * n))])
-    source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(3 * n)])
-    sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P), np.ones(3 * n)])
-    gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, 9 * P + 3 * n))
+    source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(9 * n)])
+    sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P), np.ones(9 * n)])
+    gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, 9 * P + 9 * n))
     return indices, indptr.astype(np.int32), gather
+
+
+def pair_block_matrix(blocks: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> sp.csc_matrix:
+    """``3n x 3n`` matrix with ``-B`` at (i,i), (j,j) and ``+B`` at (i,j), (j,i) for row-major
+    ``(P, 9)`` blocks ``B`` (pairs that change every step, like self-contacts)."""
+    indices, indptr, gather = _block_pattern(i, j, n)
+    data = gather @ np.concatenate([blocks.ravel(), np.zeros(9 * n)])
+    return sp.csc_matrix((data, indices, indptr), shape=(3 * n, 3 * n))
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """Particles led along a path: ``path(t)`` gives their ``(k, 3)`` positions at time t (s).
+
+    The integrator sets their velocity each step so they reach ``path(t + dt)`` exactly.
+    """
+
+    particles: np.ndarray
+    path: object
+
+    def __post_init__(self):
+        idx = np.atleast_1d(np.asarray(self.particles))
+        if idx.dtype.kind not in "iu" or idx.size == 0:
+            raise ValueError("Attachment particles must be a non-empty list of indices")
+        object.__setattr__(self, "particles", idx.astype(np.intp))
+        if not callable(self.path):
+            raise ValueError("Attachment path must be a function of time t -> (k, 3) positions")
+        self.positions(0.0)
+
+    def positions(self, t: float) -> np.ndarray:
+        p = np.asarray(self.path(t), dtype=float)
+        if p.shape != (self.particles.size, 3) or not np.all(np.isfinite(p)):
+            raise ValueError(f"Attachment path(t) must return finite ({self.particles.size}, 3) "
+                             f"positions, got shape {p.shape}")
+        return p
 
 
 @dataclass(eq=False)
@@ -222,6 +282,9 @@ class ClothModel:
     params: ClothParams = field(default_factory=ClothParams)
     pinned: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     jit: bool | None = None
+    colliders: tuple = ()
+    self_contact: Contact | None = None
+    attachments: tuple = ()
     dim: int = field(default=3, init=False)
 
     def __post_init__(self):
@@ -234,18 +297,31 @@ class ClothModel:
         k_t = np.where(s.kind == BEND, 24 * p.bend / s.rest ** 3, k_t)
         self._spring_params = [s.rest[:, None], k_t[:, None], np.full((s.rest.size, 1), p.bend),
                                np.full((s.rest.size, 1), p.damping)]
-        self._force_k, self._jac_k = spring_kernels(p.eps)
+        self._force_k, self._jac_k = spring_kernels(p.eps, p.buckle_strain)
         self._force = MappedKernel(self._force_k, jit=self.jit)
         self._jac = MappedKernel(self._jac_k, jit=self.jit)
         self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)
-        self._drag_diag = -p.air_drag * np.repeat(self.masses, 3)
+        self._drag_blocks = np.outer(-p.air_drag * self.masses, np.eye(3).ravel())
         self._gravity = self.masses[:, None] * np.asarray(p.gravity)[None, :]
+        self.colliders = tuple(self.colliders)
+        for body in self.colliders:
+            if not isinstance(body, Body):
+                raise ValueError(f"colliders must be Plane, Sphere or Capsule bodies, got {body!r}")
+        self._self = (None if self.self_contact is None else
+                      SelfContact(self.self_contact, np.stack([s.i, s.j], 1), self.n))
+        self.attachments = tuple(self.attachments)
+        constrained = np.concatenate([self.pinned] + [a.particles for a in self.attachments])
+        if np.unique(constrained).size != constrained.size:
+            raise ValueError("a particle is pinned or attached twice; give each one constraint")
+        if constrained.size and constrained.max() >= self.n:
+            raise ValueError(f"attached particle index out of range 0..{self.n - 1}")
 
     # -- construction --------------------------------------------------------------------
     @classmethod
     def grid(cls, rows: int, cols: int, *, width: float = 1.0, height: float = 1.0,
              mass: float = 1.0, params: ClothParams | None = None, pinned=(),
-             origin=(0.0, 0.0, 0.0), plane: str = "xz", jit: bool | None = None):
+             origin=(0.0, 0.0, 0.0), plane: str = "xz", jit: bool | None = None,
+             **scene):
         """A rows x cols sheet; particle ``k = r * cols + c`` starts at ``origin`` plus
 
         * plane "xz" (hanging, z up): ``(c width/(cols-1), 0, -r height/(rows-1))``, so
@@ -253,6 +329,7 @@ class ClothModel:
         * plane "xy" (lying flat):    ``(c width/(cols-1), r height/(rows-1), 0)``.
 
         ``mass`` is the total mass in kg, lumped by area (corners 1/4 of inner particles).
+        ``scene`` takes ``colliders``, ``self_contact`` and ``attachments`` (see the class).
         """
         if int(rows) != rows or int(cols) != cols or rows < 2 or cols < 2:
             raise ValueError(f"a cloth grid needs rows >= 2 and cols >= 2, got {rows} x {cols}")
@@ -269,11 +346,11 @@ class ClothModel:
         pairs, quads = grid_topology(rows, cols)
         masses = _total_mass(mass) and lumped_masses(vertices, quads, mass)
         faces = np.vstack([quads[:, [0, 1, 2]], quads[:, [0, 2, 3]]])  # split along a-e
-        return cls._build(vertices, faces, pairs, masses, params, pinned, jit)
+        return cls._build(vertices, faces, pairs, masses, params, pinned, jit, scene)
 
     @classmethod
     def from_mesh(cls, vertices, faces, *, mass: float = 1.0, params: ClothParams | None = None,
-                  pinned=(), jit: bool | None = None):
+                  pinned=(), jit: bool | None = None, **scene):
         """A cloth from a triangle mesh: ``vertices`` (n, 3) in m, ``faces`` (m, 3) ints.
 
         Stretch springs on the edges, bend springs between the two vertices opposite each
@@ -293,10 +370,10 @@ class ClothModel:
             raise ValueError("a face repeats a vertex; every triangle needs 3 distinct vertices")
         f = f.astype(np.intp)
         masses = _total_mass(mass) and lumped_masses(v, f, mass)
-        return cls._build(v, f, mesh_topology(f), masses, params, pinned, jit)
+        return cls._build(v, f, mesh_topology(f), masses, params, pinned, jit, scene)
 
     @classmethod
-    def _build(cls, vertices, faces, pairs, masses, params, pinned, jit):
+    def _build(cls, vertices, faces, pairs, masses, params, pinned, jit, scene):
         params = ClothParams() if params is None else params
         kinds = sorted(pairs)
         ij = np.vstack([pairs[k] for k in kinds]).astype(np.intp)
@@ -304,17 +381,39 @@ class ClothModel:
         d = vertices[ij[:, 1]] - vertices[ij[:, 0]]
         rest = np.sqrt(np.einsum("pk,pk->p", d, d) + params.eps ** 2)  # regularised: f(rest)=0
         springs = Springs(ij[:, 0].copy(), ij[:, 1].copy(), rest, kind)
-        return cls(vertices, faces, masses, springs, params, pinned, jit)
+        unknown = set(scene) - {"colliders", "self_contact", "attachments"}
+        if unknown:
+            raise TypeError(f"unknown cloth option(s) {sorted(unknown)}; scene options are "
+                            "colliders, self_contact and attachments")
+        return cls(vertices, faces, masses, springs, params, pinned, jit, **scene)
 
     @property
     def n(self) -> int:
         return len(self.masses)
 
     def free_mask(self) -> np.ndarray:
-        """Boolean mask over the 3n velocity components: False for pinned particles."""
+        """Boolean mask over the 3n velocity components: False for pinned and attached ones."""
         free = np.ones((self.n, 3), bool)
         free[self.pinned] = False
+        for a in self.attachments:
+            free[a.particles] = False
         return free.ravel()
+
+    def prescribed_velocity(self, x: np.ndarray, t: float, dt: float) -> np.ndarray:
+        """``(n, 3)`` velocities at the end of the step from time t: zero for pinned particles,
+        ``(path(t + dt) - x) / dt`` for attached ones (zero for free particles, unused)."""
+        out = np.zeros((self.n, 3))
+        for a in self.attachments:
+            out[a.particles] = (a.positions(t + dt) - x[a.particles]) / dt
+        return out
+
+    def attachment_targets(self, t: float) -> np.ndarray:
+        """Positions of every attached particle at time t, flat (attachment order)."""
+        return np.concatenate([a.positions(t).ravel() for a in self.attachments] or [np.zeros(0)])
+
+    def scene_parameters(self, t: float) -> np.ndarray:
+        """The colliders' geometry at time t as one flat vector (``S`` of the symbolic forces)."""
+        return np.concatenate([b.parameters(t) for b in self.colliders] or [np.zeros(0)])
 
     # -- numeric -------------------------------------------------------------------------
     def _spring_inputs(self, x, v):
@@ -327,36 +426,76 @@ class ClothModel:
         (fs,) = self._force(*self._spring_inputs(x, v))
         return scatter_pairs(fs, self.springs.i, self.springs.j, self.n)
 
-    def forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Total force ``(n, 3)`` N: springs + gravity ``m_i g`` + drag ``-air_drag m_i v_i``."""
-        drag = self.params.air_drag * self.masses[:, None] * np.asarray(v, dtype=float)
-        return self.spring_forces(x, v) + self._gravity - drag
+    def contact_forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Forces of the colliders at time t and of self-contact, ``(n, 3)`` N."""
+        out = np.zeros((self.n, 3))
+        for body in self.colliders:
+            out += body.evaluate(x, v, t, self.jit)[0]
+        if self._self is not None:
+            i, j = self._self.pairs(x)
+            if i.size:
+                out += scatter_pairs(self._self.evaluate(x, v, i, j, self.jit)[0], i, j, self.n)
+        return out
 
-    def jacobians(self, x: np.ndarray, v: np.ndarray) -> tuple[sp.csc_matrix, sp.csc_matrix]:
-        """``(K, D)`` as 3n x 3n CSC matrices (fixed pattern), both symmetric.
+    def forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
+        """Total force ``(n, 3)`` N at time t: springs + gravity ``m_i g`` + drag
+        ``-air_drag m_i v_i`` + contacts."""
+        drag = self.params.air_drag * self.masses[:, None] * np.asarray(v, dtype=float)
+        out = self.spring_forces(x, v) + self._gravity - drag
+        if self.colliders or self._self is not None:
+            out += self.contact_forces(x, v, t)
+        return out
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0):
+        """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric.
 
         ``K = df/dx`` at zero velocity (the stiffness; damping's position derivative is
         omitted, as in Baraff-Witkin) and ``D = df/dv``.
         """
         K, D = self._jac(*self._spring_inputs(x, v))
+        k_blocks, d_blocks = np.zeros((self.n, 9)), self._drag_blocks.copy()
+        for body in self.colliders:
+            _, kb, db = body.evaluate(x, v, t, self.jit)
+            k_blocks += kb
+            d_blocks += db
         size = 3 * self.n
         out = []
-        for blocks, diag in ((K, np.zeros(size)), (D, self._drag_diag)):
-            data = self._gather @ np.concatenate([blocks.ravel(), diag])
+        for pairs, particles in ((K, k_blocks), (D, d_blocks)):
+            data = self._gather @ np.concatenate([pairs.ravel(), particles.ravel()])
             out.append(sp.csc_matrix((data, self._indices.copy(), self._indptr.copy()),
                                      shape=(size, size)))
+        if self._self is not None:
+            i, j = self._self.pairs(x)
+            if i.size:
+                _, kp, dp = self._self.evaluate(x, v, i, j, self.jit)
+                out = [out[0] + pair_block_matrix(kp, i, j, self.n),
+                       out[1] + pair_block_matrix(dp, i, j, self.n)]
         return out[0], out[1]
 
     # -- symbolic ------------------------------------------------------------------------
-    def symbolic_forces(self, X, V):
-        """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k)."""
+    def symbolic_forces(self, X, V, S=None):
+        """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k)
+        and S the :meth:`scene_parameters` (default: those at t = 0).  Self-contact is
+        evaluated over all unjoined pairs: for small systems."""
         s, P = self.springs, self.springs.i.size
         params = [ca.DM(a.T) for a in self._spring_params]
         fs = self._force_k.map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
         m = ca.DM(self.masses).T
         gravity = ca.DM(self._gravity.T)
         drag = -self.params.air_drag * V * ca.repmat(m, 3, 1)
-        return ca.mtimes(fs, pair_incidence(s.i, s.j, self.n)) + gravity + drag
+        out = ca.mtimes(fs, pair_incidence(s.i, s.j, self.n)) + gravity + drag
+        S = ca.DM(self.scene_parameters(0.0)) if S is None else S
+        at = 0
+        for body in self.colliders:
+            size = body.parameters(0.0).size
+            out += body.symbolic_forces(X, V, S[at:at + size])
+            at += size
+        if self._self is not None:
+            i, j = self._self.all_pairs()
+            gains = ca.repmat(ca.DM(self._self.contact.gains), 1, i.size)
+            fp = self._self.kernel.map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i], gains)[0]
+            out += ca.mtimes(fp, pair_incidence(i, j, self.n))
+        return out
 
     def _check_state(self, a, name: str) -> np.ndarray:
         a = np.asarray(a, dtype=float)

@@ -2,7 +2,8 @@
 
 ``animate`` writes a GIF, ``snapshot`` a PNG of small multiples at the keyframes and
 ``convergence`` a PNG of the optimizer's history.  All use the Agg backend and close their
-figures.
+figures.  For a cloth (a model with ``faces``) ``animate`` and ``snapshot`` hand over to
+:mod:`.render_cloth`, which draws in 3-D.
 """
 from __future__ import annotations
 
@@ -44,6 +45,39 @@ def select_frames(steps: int, required=(), max_frames: int = 150) -> list[int]:
             grid.remove(min(free, key=lambda g: abs(g - f)))
         grid.add(f)
     return sorted(grid)
+
+
+def snapshot_frames(problem, trajectory, frames=None, most: int = 6) -> list[int]:
+    """Frames of a snapshot: by default the first, each keyframe and the last.
+
+    At most ``most``: longer lists keep their first and last frame and are thinned evenly.
+    """
+    frames = sorted({0, trajectory.steps, *keyframes(problem)} if frames is None
+                    else {int(f) for f in frames})
+    if not frames or frames[0] < 0 or frames[-1] > trajectory.steps:
+        raise ValueError(f"snapshot frames must be in 0..{trajectory.steps}, got {frames}")
+    if len(frames) > most:
+        frames = [frames[i] for i in np.round(np.linspace(0, len(frames) - 1, most)).astype(int)]
+    return frames
+
+
+def frame_title(name: str, n: int, traj, full: bool = True) -> str:
+    """``"name - frame n / steps  t = ...s"`` (without the name if not ``full``)."""
+    txt = f"frame {n} / {traj.steps}  t = {n * traj.dt:.2f}s"
+    return f"{name} \u2014 {txt}" if full else txt
+
+
+def write_gif(fig, draw, frames, path: Path, fps: int, dpi: int = 80) -> None:
+    """Grab ``fig`` after ``draw(n)`` for each of ``frames`` into a GIF at ``path``."""
+    writer = PillowWriter(fps=fps)
+    with writer.saving(fig, str(path), dpi=dpi):
+        for n in frames:
+            draw(n)
+            writer.grab_frame()
+
+
+def _is_cloth(problem) -> bool:
+    return hasattr(problem.model, "faces")
 
 
 class _Scene:
@@ -104,8 +138,7 @@ class _Scene:
                                 lw=0.6, zorder=7)
 
     def title(self, n: int, full: bool = True) -> str:
-        txt = f"frame {n} / {self.traj.steps}  t = {n * self.traj.dt:.2f}s"
-        return f"{self.name} \u2014 {txt}" if full else txt
+        return frame_title(self.name, n, self.traj, full)
 
     def draw(self, n: int, full_title: bool = True):
         """Move every artist to frame ``n``."""
@@ -161,13 +194,19 @@ def _figsize(scene: _Scene, width: float) -> tuple[float, float]:
     return width, width * ratio + 0.6
 
 
-def animate(problem, trajectory, path, *, fps: int = 20, max_frames: int = 150,
-            title=None) -> Path:
+def animate(problem, trajectory, path, *, fps: int | None = None,
+            max_frames: int | None = None, title=None) -> Path:
     """Write an animated GIF of ``trajectory`` seen from above; returns the path.
 
-    Long trajectories are subsampled to about ``max_frames + 1`` frames, keeping every
-    keyframe and the last frame.  ``title`` overrides the problem name in the title.
+    Long trajectories are subsampled to about ``max_frames + 1`` frames (default 150, at
+    ``fps`` 20), keeping every keyframe and the last frame.  ``title`` overrides the problem
+    name in the title.  A cloth goes to :func:`.render_cloth.animate` (its own defaults).
     """
+    if _is_cloth(problem):
+        from . import render_cloth
+        given = {k: v for k, v in (("fps", fps), ("max_frames", max_frames)) if v is not None}
+        return render_cloth.animate(problem, trajectory, path, title=title, **given)
+    fps, max_frames = fps or 20, 150 if max_frames is None else max_frames
     path = Path(path)
     fig, ax = plt.subplots()
     try:
@@ -176,11 +215,7 @@ def animate(problem, trajectory, path, *, fps: int = 20, max_frames: int = 150,
         _legend(fig, scene)
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
-        writer = PillowWriter(fps=fps)
-        with writer.saving(fig, str(path), dpi=80):
-            for n in frames:
-                scene.draw(n)
-                writer.grab_frame()
+        write_gif(fig, scene.draw, frames, path, fps)
     finally:
         plt.close(fig)
     return path
@@ -190,14 +225,13 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
     """Write a PNG of small multiples: by default the first frame, each keyframe and the last.
 
     At most 6 panels: longer lists keep their first and last frame and are thinned evenly.
+    A cloth goes to :func:`.render_cloth.snapshot`.
     """
+    if _is_cloth(problem):
+        from . import render_cloth
+        return render_cloth.snapshot(problem, trajectory, path, frames)
     path = Path(path)
-    frames = sorted({0, trajectory.steps, *keyframes(problem)} if frames is None
-                    else {int(f) for f in frames})
-    if not frames or frames[0] < 0 or frames[-1] > trajectory.steps:
-        raise ValueError(f"snapshot frames must be in 0..{trajectory.steps}, got {frames}")
-    if len(frames) > 6:
-        frames = [frames[i] for i in np.round(np.linspace(0, len(frames) - 1, 6)).astype(int)]
+    frames = snapshot_frames(problem, trajectory, frames)
     cols = {1: 1, 2: 2, 3: 3, 4: 2}.get(len(frames), 3)
     rows = -(-len(frames) // cols)
     fig, axes = plt.subplots(rows, cols, squeeze=False)

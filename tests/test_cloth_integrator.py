@@ -85,8 +85,8 @@ class LinearModel:
     def jacobians(self, x, v, t=0.0):
         return sp.csc_matrix(self.K), sp.csc_matrix(self.D)
 
-    def symbolic_forces(self, X, V, S=None):
-        f = ca.mtimes(ca.DM(self.K), ca.vec(X)) + ca.mtimes(ca.DM(self.D), ca.vec(V))
+    def symbolic_forces(self, X, V, S=None, elastic=False):
+        f = ca.mtimes(ca.DM(self.K), ca.vec(X)) + (0 if elastic else ca.mtimes(ca.DM(self.D), ca.vec(V)))
         return ca.reshape(f, 3, self.n)
 
 
@@ -103,3 +103,78 @@ def test_swapped_adjoint_is_exact_for_linear_forces(pinned):
     ga = prob.objective_and_gradient(u, "adjoint")[1]
     ge = prob.objective_and_gradient(u, "exact")[1]
     assert np.linalg.norm(ga - ge) < 1e-8 * np.linalg.norm(ge)
+
+
+def contact_problem(dt=1 / 60, horizon=1 / 3, adjoint="swapped", controls=None, solver="cg"):
+    """5 x 5 sheet hanging from two corners, its lower edge resting on the ground (the issue's
+    accuracy case), default dt 1/60."""
+    from casadi_keyframe.models.colliders import Plane
+    steps = int(round(horizon / dt))
+    model = ClothModel.grid(5, 5, pinned=[0, 4], colliders=[Plane((0, 0, -1.007))])
+    x0 = model.rest_positions
+    obj = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05])
+           + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0]) + Smoothness(1e-4))
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
+                          x0=x0, v0=np.zeros_like(x0), steps=steps, dt=dt,
+                          controls=controls or StepForces(), objective=obj)
+
+
+def swapped_and_exact(dt, seed=0, amp=0.05, **kw):
+    grads = []
+    for adjoint in ("swapped", "exact"):
+        prob = contact_problem(dt, adjoint=adjoint, **kw)
+        u = amp * np.random.default_rng(seed).standard_normal(prob.size)
+        grads.append(prob.objective_and_gradient(u, "adjoint")[1])
+    return grads, prob, u
+
+
+def test_hand_exact_adjoint_equals_casadi_with_moving_contacts_and_attachments():
+    from casadi_keyframe.models.cloth import Attachment
+    from casadi_keyframe.models.colliders import Capsule, Contact, Sphere
+    bodies = [Sphere(lambda t: np.array([0.5, 0.5, -0.33 + 0.2 * t]), 0.3),
+              Capsule((0.0, 0.1, -0.1), lambda t: np.array([1.0, 0.2 + t, -0.06]), 0.05)]
+    model = ClothModel.grid(4, 4, plane="xy", colliders=bodies, pinned=[3],
+                            self_contact=Contact(200.0, 0.5, 0.3, 0.1),
+                            attachments=[Attachment([0], lambda t: np.array([[0, 0.3 * t, 0]]))])
+    x0 = model.rest_positions
+    obj = StateKeyframe(12, x=x0 + [0.1, 0, -0.2], v=0 * x0) + CenterOfMassKeyframe(6, x=x0.mean(0))
+    prob = ControlProblem(model=model, integrator=LinearizedBackwardEuler("direct", adjoint="exact"),
+                          x0=x0, v0=np.zeros_like(x0), steps=12, dt=1 / 30, controls=StepForces(),
+                          objective=obj + Smoothness(1e-4))
+    u = 0.1 * np.random.default_rng(0).standard_normal(prob.size)
+    traj = prob.simulate(u)
+    assert np.abs(model.contact_forces(traj.x[6], traj.v[6], 0.2)).max() > 0.1  # in contact
+    f_hand, g_hand = prob.objective_and_gradient(u, "adjoint")
+    f_ad, g_ad = prob.objective_and_gradient(u, "exact")
+    assert abs(f_hand - f_ad) < 1e-9 * abs(f_ad)
+    assert np.linalg.norm(g_hand - g_ad) < 1e-10 * np.linalg.norm(g_ad)
+
+
+def test_swapped_adjoint_with_contact_at_default_dt_and_its_order():
+    """Swapped vs exact on a fixed horizon: cosine >= 0.99 at dt = 1/60 and the error shrinks
+    with dt at a fitted order (measured: 0.094, 0.029, 0.0097 for dt = 1/60, 1/120, 1/240;
+    order 1.6)."""
+    dts = [1 / 60, 1 / 120, 1 / 240]
+    errors = []
+    for dt in dts:
+        (ga, ge), prob, u = swapped_and_exact(dt)
+        errors.append(np.linalg.norm(ga - ge) / np.linalg.norm(ge))
+        if dt == dts[0]:
+            traj = prob.simulate(u)
+            touching = [np.abs(prob.model.contact_forces(x, v)).max() > 0 for x, v in
+                        zip(traj.x, traj.v)]
+            assert np.mean(touching) > 0.5  # the collider is in contact most of the time
+            assert ga @ ge / (np.linalg.norm(ga) * np.linalg.norm(ge)) >= 0.99
+            f0 = prob.objective(u)
+            assert prob.objective(u - 1e-3 * ga / np.linalg.norm(ga)) < f0  # descent
+    order = np.polyfit(np.log(dts), np.log(errors), 1)[0]
+    assert errors[0] > errors[1] > errors[2] and order > 0.8, (errors, order)
+
+
+def test_initial_velocity_control_gradients_for_cloth():
+    from casadi_keyframe import InitialVelocity
+    controls = InitialVelocity(agents=np.arange(2, 25))
+    (ga, ge), prob, u = swapped_and_exact(1 / 60, amp=0.3, controls=controls)
+    _, g_ad = prob.objective_and_gradient(u, "exact")
+    assert np.linalg.norm(ge - g_ad) < 1e-8 * np.linalg.norm(g_ad)
+    assert ga @ ge / (np.linalg.norm(ga) * np.linalg.norm(ge)) >= 0.99

@@ -56,7 +56,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernels import MappedKernel, pair_difference, pair_incidence, scatter_pairs
+from ..kernels import (MappedKernel, interaction_kernels, pair_difference, pair_incidence,
+                       scatter_pairs)
 from .colliders import Body, Contact, SelfContact
 
 SPRING_KINDS = ("stretch", "shear", "bend")
@@ -135,8 +136,9 @@ def spring_force_expr(d, dv, L, k_t, k_b, c, eps: float, buckle_strain: float = 
     return magnitude * u + c * ca.dot(dv, u) * u
 
 
-def spring_kernels(eps: float, buckle_strain: float = 0.0) -> tuple[ca.Function, ca.Function]:
-    """``force(d, dv, L, k_t, k_b, c) -> f_i`` and ``jac(...) -> (vec K, vec D)`` (row-major).
+def spring_kernels(eps: float, buckle_strain: float = 0.0) -> dict[str, ca.Function]:
+    """``force(d, dv, L, k_t, k_b, c) -> f_i``, ``jac(...) -> (vec K, vec D)`` (row-major) and
+    ``vjp`` (see :func:`interaction_kernels`).
 
     K is the position derivative at zero relative velocity: as Baraff and Witkin, the
     damping force's position derivative (not symmetric) is left out, so df/dx is symmetric.
@@ -144,11 +146,7 @@ def spring_kernels(eps: float, buckle_strain: float = 0.0) -> tuple[ca.Function,
     d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
     scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
     f = spring_force_expr(d, dv, *scalars, eps, buckle_strain)
-    elastic = spring_force_expr(d, ca.SX.zeros(3), *scalars, eps, buckle_strain)
-    args = [d, dv, *scalars]
-    row_major = [ca.reshape(ca.jacobian(g, a).T, 9, 1) for g, a in ((elastic, d), (f, dv))]
-    return (ca.Function("cloth_spring", args, [f]),
-            ca.Function("cloth_spring_jac", args, row_major))
+    return interaction_kernels("cloth_spring", d, dv, scalars, f)
 
 
 @dataclass(frozen=True)
@@ -297,9 +295,9 @@ class ClothModel:
         k_t = np.where(s.kind == BEND, 24 * p.bend / s.rest ** 3, k_t)
         self._spring_params = [s.rest[:, None], k_t[:, None], np.full((s.rest.size, 1), p.bend),
                                np.full((s.rest.size, 1), p.damping)]
-        self._force_k, self._jac_k = spring_kernels(p.eps, p.buckle_strain)
-        self._force = MappedKernel(self._force_k, jit=self.jit)
-        self._jac = MappedKernel(self._jac_k, jit=self.jit)
+        self._kernels = spring_kernels(p.eps, p.buckle_strain)
+        self._force, self._jac, self._vjp = (MappedKernel(self._kernels[k], jit=self.jit)
+                                             for k in ("force", "jac", "vjp"))
         self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)
         self._drag_blocks = np.outer(-p.air_drag * self.masses, np.eye(3).ravel())
         self._gravity = self.masses[:, None] * np.asarray(p.gravity)[None, :]
@@ -430,11 +428,12 @@ class ClothModel:
         """Forces of the colliders at time t and of self-contact, ``(n, 3)`` N."""
         out = np.zeros((self.n, 3))
         for body in self.colliders:
-            out += body.evaluate(x, v, t, self.jit)[0]
+            out += body.evaluate("force", x, v, t, jit=self.jit)[0]
         if self._self is not None:
             i, j = self._self.pairs(x)
             if i.size:
-                out += scatter_pairs(self._self.evaluate(x, v, i, j, self.jit)[0], i, j, self.n)
+                (fp,) = self._self.evaluate("force", x, v, i, j, jit=self.jit)
+                out += scatter_pairs(fp, i, j, self.n)
         return out
 
     def forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
@@ -455,7 +454,7 @@ class ClothModel:
         K, D = self._jac(*self._spring_inputs(x, v))
         k_blocks, d_blocks = np.zeros((self.n, 9)), self._drag_blocks.copy()
         for body in self.colliders:
-            _, kb, db = body.evaluate(x, v, t, self.jit)
+            kb, db = body.evaluate("jac", x, v, t, jit=self.jit)
             k_blocks += kb
             d_blocks += db
         size = 3 * self.n
@@ -467,33 +466,61 @@ class ClothModel:
         if self._self is not None:
             i, j = self._self.pairs(x)
             if i.size:
-                _, kp, dp = self._self.evaluate(x, v, i, j, self.jit)
+                kp, dp = self._self.evaluate("jac", x, v, i, j, jit=self.jit)
                 out = [out[0] + pair_block_matrix(kp, i, j, self.n),
                        out[1] + pair_block_matrix(dp, i, j, self.n)]
         return out[0], out[1]
 
+    def linearization_vjp(self, x, v, t: float, lam, w, q, dt: float):
+        """Gradients ``(gx, gv)``, each ``(n, 3)``, of ``lam . (dt f + dt^2 K w + dt D q)`` in
+        x and v at time t: what the exact adjoint of a linearized implicit step needs,
+        second derivatives of every force law contracted per interaction (``lam, w, q``
+        are ``(n, 3)``).  Drag is linear in v and its part is added here too."""
+        s = self.springs
+        inputs = self._spring_inputs(x, v)
+        pair_vectors = [pair_difference(a, s.i, s.j) for a in (-lam, w, q)]
+        dts = np.full((s.i.size, 1), dt)
+        gd, gdv = self._vjp(*inputs, *pair_vectors, dts)
+        gx = -scatter_pairs(gd, s.i, s.j, self.n)  # d = x_j - x_i
+        gv = -scatter_pairs(gdv, s.i, s.j, self.n) - dt * self.params.air_drag * (
+            self.masses[:, None] * lam)
+        dts = np.full((self.n, 1), dt)
+        for body in self.colliders:
+            bx, bv = body.evaluate("vjp", x, v, t, lam, w, q, dts, jit=self.jit)
+            gx, gv = gx + bx, gv + bv
+        if self._self is not None:
+            i, j = self._self.pairs(x)
+            if i.size:
+                vectors = [pair_difference(a, i, j) for a in (-lam, w, q)]
+                px, pv = self._self.evaluate("vjp", x, v, i, j, *vectors,
+                                             np.full((i.size, 1), dt), jit=self.jit)
+                gx, gv = gx - scatter_pairs(px, i, j, self.n), gv - scatter_pairs(pv, i, j, self.n)
+        return gx, gv
+
     # -- symbolic ------------------------------------------------------------------------
-    def symbolic_forces(self, X, V, S=None):
+    def symbolic_forces(self, X, V, S=None, elastic: bool = False):
         """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k)
-        and S the :meth:`scene_parameters` (default: those at t = 0).  Self-contact is
-        evaluated over all unjoined pairs: for small systems."""
+        and S the :meth:`scene_parameters` (default: those at t = 0).  ``elastic`` leaves out
+        every damping and drag term (its x-Jacobian is K).  Self-contact is evaluated over
+        all unjoined pairs: for small systems."""
+        kind = "elastic" if elastic else "force"
         s, P = self.springs, self.springs.i.size
         params = [ca.DM(a.T) for a in self._spring_params]
-        fs = self._force_k.map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
-        m = ca.DM(self.masses).T
-        gravity = ca.DM(self._gravity.T)
-        drag = -self.params.air_drag * V * ca.repmat(m, 3, 1)
-        out = ca.mtimes(fs, pair_incidence(s.i, s.j, self.n)) + gravity + drag
+        fs = self._kernels[kind].map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
+        out = ca.mtimes(fs, pair_incidence(s.i, s.j, self.n)) + ca.DM(self._gravity.T)
+        if not elastic:
+            out -= self.params.air_drag * V * ca.repmat(ca.DM(self.masses).T, 3, 1)
         S = ca.DM(self.scene_parameters(0.0)) if S is None else S
         at = 0
         for body in self.colliders:
             size = body.parameters(0.0).size
-            out += body.symbolic_forces(X, V, S[at:at + size])
+            out += body.symbolic_forces(X, V, S[at:at + size], elastic)
             at += size
         if self._self is not None:
             i, j = self._self.all_pairs()
             gains = ca.repmat(ca.DM(self._self.contact.gains), 1, i.size)
-            fp = self._self.kernel.map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i], gains)[0]
+            fp = self._self.kernels[kind].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i],
+                                                      gains)
             out += ca.mtimes(fp, pair_incidence(i, j, self.n))
         return out
 

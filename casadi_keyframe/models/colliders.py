@@ -16,8 +16,9 @@ Any point given may be a function of time ``t -> (3,)`` so the body moves along 
 velocity is the central difference of that path.  :class:`SelfContact` pushes apart cloth
 particles nearer than ``thickness`` that no spring joins (found with a k-d tree each step).
 
-Each body is one SX kernel ``(x, v, geometry..., gains) -> (f, vec K, vec D)`` per
-particle, mapped over the particles; its Jacobian blocks are 3x3 and diagonal per particle.
+Each body's law is one SX expression per particle ``(x, v, geometry..., gains) -> f``, lifted
+to force, Jacobian-block and adjoint kernels by :func:`interaction_kernels` and mapped over
+the particles; its Jacobian blocks are 3x3 and diagonal per particle.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..kernels import MappedKernel, pair_difference
+from ..kernels import MappedKernel, interaction_kernels, pair_difference
 
 
 @dataclass(frozen=True)
@@ -62,17 +63,15 @@ def penalty_force(phi, normal, rel_v, gains):
     return k * ramp * normal - c * active * ca.dot(rel_v, normal) * normal
 
 
-def _kernel(name: str, geometry: dict, distance):
-    """Per-particle kernel of a body; ``distance(x, **geometry) -> (phi, normal, v_body)``."""
+def _body_kernels(name: str, geometry: dict, distance) -> dict[str, ca.Function]:
+    """Kernels of a body; ``distance(x, **geometry) -> (phi, normal, v_body)``."""
     x, v = ca.SX.sym("x", 3), ca.SX.sym("v", 3)
     geo = {key: ca.SX.sym(key, size) for key, size in geometry.items()}
     gains = ca.SX.sym("gains", 4)
     phi, normal, v_body = distance(x, **geo)
-    f = penalty_force(phi, normal, v - v_body, gains)
-    f_elastic = penalty_force(phi, normal, ca.SX.zeros(3), gains)
-    row_major = [ca.reshape(ca.jacobian(g, a).T, 9, 1) for g, a in ((f_elastic, x), (f, v))]
-    args = [x, v, *geo.values(), gains]
-    return ca.Function(name, args, [f, *row_major])
+    return interaction_kernels(name, x, v, [*geo.values(), gains],
+                               penalty_force(phi, normal, v - v_body, gains),
+                               penalty_force(phi, normal, ca.SX.zeros(3), gains))
 
 
 def _point(value, name: str):
@@ -99,35 +98,36 @@ def _at(point, t: float, h: float = 1e-5):
 class Body:
     """A rigid analytic collider; subclasses give the geometry and its signed distance."""
 
-    kernel: ca.Function
+    kernels: dict
 
     def __init__(self, contact: Contact | None):
         self.contact = Contact() if contact is None else contact
         self._mapped = {}
 
     def geometry(self, t: float) -> list[np.ndarray]:
-        """The kernel's geometry inputs at time t (positions, sizes, velocities)."""
+        """The kernels' geometry inputs at time t (positions, sizes, velocities)."""
         raise NotImplementedError
 
-    def evaluate(self, x, v, t: float, jit=None):
-        """``(f (n,3), K blocks (n,9), D blocks (n,9))`` on every particle at time t."""
-        if jit not in self._mapped:
-            self._mapped[jit] = MappedKernel(self.kernel, jit=jit)
+    def evaluate(self, kind: str, x, v, t: float, *extra, jit=None):
+        """Kernel ``kind`` ("force", "jac" or "vjp") on every particle at time t."""
+        if (kind, jit) not in self._mapped:
+            self._mapped[kind, jit] = MappedKernel(self.kernels[kind], jit=jit)
         n = len(x)
         columns = [np.broadcast_to(g, (n, np.size(g))) for g in self.geometry(t)]
         gains = np.broadcast_to(self.contact.gains, (n, 4))
-        return self._mapped[jit](x, v, *columns, gains)
+        return self._mapped[kind, jit](x, v, *columns, gains, *extra)
 
-    def symbolic_forces(self, X, V, S):
-        """Forces on the ``3 x n`` particles X, V given this body's parameters S (a column)."""
-        n = X.shape[1]
+    def symbolic_forces(self, X, V, S, elastic: bool = False):
+        """Forces on the ``3 x n`` particles X, V given this body's parameters S (a column);
+        without damping if ``elastic``."""
+        kernel, n = self.kernels["elastic" if elastic else "force"], X.shape[1]
         parts, at = [], 0
-        for i in range(2, self.kernel.n_in() - 1):
-            size = self.kernel.size1_in(i)
+        for i in range(2, kernel.n_in() - 1):
+            size = kernel.size1_in(i)
             parts.append(ca.repmat(S[at:at + size], 1, n))
             at += size
         gains = ca.repmat(ca.DM(self.contact.gains), 1, n)
-        return self.kernel.map(n)(X, V, *parts, gains)[0]
+        return kernel.map(n)(X, V, *parts, gains)
 
     def parameters(self, t: float) -> np.ndarray:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
@@ -142,7 +142,8 @@ def _plane_distance(x, point, normal, velocity):
 class Plane(Body):
     """The half-space above a plane through ``point`` with upward ``normal`` (e.g. the ground)."""
 
-    kernel = _kernel("plane_contact", {"point": 3, "normal": 3, "velocity": 3}, _plane_distance)
+    kernels = _body_kernels("plane_contact", {"point": 3, "normal": 3, "velocity": 3},
+                            _plane_distance)
 
     def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), contact=None):
         super().__init__(contact)
@@ -165,8 +166,8 @@ def _sphere_distance(x, center, radius, velocity):
 class Sphere(Body):
     """A ball of ``radius`` about ``center`` (fixed, or a function of time)."""
 
-    kernel = _kernel("sphere_contact", {"center": 3, "radius": 1, "velocity": 3},
-                     _sphere_distance)
+    kernels = _body_kernels("sphere_contact", {"center": 3, "radius": 1, "velocity": 3},
+                            _sphere_distance)
 
     def __init__(self, center, radius: float, contact=None):
         super().__init__(contact)
@@ -191,8 +192,8 @@ def _capsule_distance(x, a, b, radius, va, vb):
 class Capsule(Body):
     """The points within ``radius`` of segment ``a``-``b`` (ends fixed or functions of time)."""
 
-    kernel = _kernel("capsule_contact", {"a": 3, "b": 3, "radius": 1, "va": 3, "vb": 3},
-                     _capsule_distance)
+    kernels = _body_kernels("capsule_contact", {"a": 3, "b": 3, "radius": 1, "va": 3, "vb": 3},
+                            _capsule_distance)
 
     def __init__(self, a, b, radius: float, contact=None):
         super().__init__(contact)
@@ -209,22 +210,20 @@ class Capsule(Body):
         return _at(self.a, t)[0], _at(self.b, t)[0]
 
 
-def _pair_kernel() -> ca.Function:
-    """Self-contact between particles i and j: ``(d = x_j - x_i, dv, gains) -> f_i, K, D``."""
+def _pair_kernels() -> dict[str, ca.Function]:
+    """Self-contact of particles i and j, ``(d = x_j - x_i, dv = v_j - v_i, gains) -> f_i``."""
     d, dv, gains = ca.SX.sym("d", 3), ca.SX.sym("dv", 3), ca.SX.sym("gains", 4)
     r = ca.sqrt(ca.dot(d, d) + 1e-12)
-    # i is pushed along -d/r, away from j; the relative velocity of i seen from j is -dv
-    f = penalty_force(r, -d / r, -dv, gains)
-    f_elastic = penalty_force(r, -d / r, ca.SX.zeros(3), gains)
-    row_major = [ca.reshape(ca.jacobian(g, a).T, 9, 1) for g, a in ((f_elastic, d), (f, dv))]
-    return ca.Function("self_contact", [d, dv, gains], [f, *row_major])
+    # i is pushed along -d/r, away from j; the velocity of i relative to j is -dv
+    return interaction_kernels("self_contact", d, dv, [gains],
+                               penalty_force(r, -d / r, -dv, gains))
 
 
 class SelfContact:
     """Repulsion between cloth particles nearer than ``contact.thickness`` and not joined by
     a spring; ``excluded`` is the (P, 2) array of joined pairs."""
 
-    kernel = _pair_kernel()
+    kernels = _pair_kernels()
 
     def __init__(self, contact: Contact, excluded: np.ndarray, n: int):
         self.contact = contact
@@ -242,12 +241,13 @@ class SelfContact:
         keep = ~np.isin(found[:, 0].astype(np.int64) * self._n + found[:, 1], self._excluded)
         return found[keep, 0].astype(np.intp), found[keep, 1].astype(np.intp)
 
-    def evaluate(self, x, v, i, j, jit=None):
-        """``(f_i (P,3), K (P,9), D (P,9))`` for the pairs ``(i, j)``."""
-        if jit not in self._mapped:
-            self._mapped[jit] = MappedKernel(self.kernel, jit=jit)
+    def evaluate(self, kind: str, x, v, i, j, *extra, jit=None):
+        """Kernel ``kind`` ("force", "jac" or "vjp") on the pairs ``(i, j)``."""
+        if (kind, jit) not in self._mapped:
+            self._mapped[kind, jit] = MappedKernel(self.kernels[kind], jit=jit)
         gains = np.broadcast_to(self.contact.gains, (i.size, 4))
-        return self._mapped[jit](pair_difference(x, i, j), pair_difference(v, i, j), gains)
+        return self._mapped[kind, jit](pair_difference(x, i, j), pair_difference(v, i, j),
+                                       gains, *extra)
 
     def all_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every unjoined pair (for the symbolic, small-system route)."""

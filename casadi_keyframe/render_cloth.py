@@ -1,0 +1,246 @@
+"""Matplotlib 3-D figures and animations of cloth trajectories.
+
+``animate`` writes a GIF and ``snapshot`` a PNG of small multiples at the keyframes;
+:func:`.render.animate` and :func:`.render.snapshot` hand over to them when the model has
+``faces``.  The cloth is a Lambert-shaded triangle surface, pinned and attached particles
+dark dots, colliders translucent grey, keyframe targets red (a wireframe for a whole-cloth
+target), the centre-of-mass path a thin line and ``scene["ring"]`` (``center``, ``normal``,
+``radius``) a thick circle.  Axis limits (equal aspect) and the camera (``scene["view"] =
+(elev, azim)``) are fixed for the whole animation.  Agg backend; figures are closed.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
+
+from .models.colliders import Plane, Sphere  # noqa: E402
+from .objectives import StateKeyframe  # noqa: E402
+from .render import frame_title, keyframes, select_frames, snapshot_frames, write_gif  # noqa: E402
+
+CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
+LIGHT = np.array([0.5, -0.6, 0.65]) / np.linalg.norm([0.5, -0.6, 0.65])  # the camera's side
+VIEW = (20.0, -60.0)
+
+
+def face_colors(vertices, faces, color=CLOTH, light=LIGHT) -> np.ndarray:
+    """RGBA per triangle: ``color`` times ``0.3 + 0.7 |cos|`` of its normal to ``light``.
+
+    Both sides are lit alike; a degenerate triangle gets the ambient part only.
+    """
+    tri = np.asarray(vertices, dtype=float)[np.asarray(faces)]
+    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    length = np.linalg.norm(normal, axis=1)
+    cos = np.abs(normal @ np.asarray(light, float)) / np.where(length > 0, length, 1.0)
+    shade = 0.3 + 0.7 * np.clip(np.nan_to_num(cos), 0.0, 1.0)
+    return np.c_[shade[:, None] * matplotlib.colors.to_rgb(color), np.ones(len(shade))]
+
+
+def _basis(normal):
+    """Unit ``normal`` and two unit vectors spanning the plane orthogonal to it."""
+    n = np.asarray(normal, dtype=float)
+    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-12 else np.array([0.0, 0.0, 1.0])
+    e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    return n, e1, np.cross(n, e1)
+
+
+def _circle(center, normal, radius, k: int = 64) -> np.ndarray:
+    _, e1, e2 = _basis(normal)
+    phi = np.linspace(0, 2 * np.pi, k)
+    return np.asarray(center, float) + radius * (np.outer(np.cos(phi), e1)
+                                                 + np.outer(np.sin(phi), e2))
+
+
+def _capsule_mesh(a, b, radius, k: int = 12) -> np.ndarray:
+    """``(2k, 2k, 3)`` grid over a capsule's surface (a sphere when ``a == b``)."""
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    n, e1, e2 = _basis(b - a)
+    theta = np.r_[np.linspace(-np.pi / 2, 0, k), np.linspace(0, np.pi / 2, k)]
+    ends = np.r_[np.tile(a, (k, 1)), np.tile(b, (k, 1))]
+    phi = np.linspace(0, 2 * np.pi, 2 * k)
+    ring = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
+    return (ends[:, None] + radius * (np.cos(theta)[:, None, None] * ring[None]
+                                      + np.sin(theta)[:, None, None] * n))
+
+
+def _body(body, t: float):
+    """``("plane", point, normal)`` or ``("round", a, b, radius)`` from ``body.geometry(t)``."""
+    g = [np.asarray(p, dtype=float) for p in body.geometry(t)]
+    if isinstance(body, Plane):
+        return "plane", g[0], g[1]
+    if isinstance(body, Sphere):  # center, radius, velocity
+        return "round", g[0], g[0], float(g[1][0])
+    return "round", g[0], g[1], float(g[2][0])  # Capsule: a, b, radius, va, vb
+
+
+def _plane_patch(point, normal, mid, half: float) -> np.ndarray:
+    """The 4 corners of a square of half-side ``half`` on the plane, centred below ``mid``."""
+    n, e1, e2 = _basis(normal)
+    c = mid - np.dot(mid - point, n) * n
+    return np.array([c + half * (s * e1 + r * e2) for s, r in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+
+
+class _Box:
+    """Fixed limits over all frames, targets, ring and colliders (planes sized to the rest)."""
+
+    def __init__(self, problem, traj):
+        pts = [traj.x.reshape(-1, 3)]
+        pts += [np.atleast_2d(t.position_target)[:, :3] for t in problem.objective_terms.state_terms
+                if t.position_target is not None]
+        ring = problem.scene.get("ring")
+        if ring:
+            pts.append(_circle(ring["center"], ring["normal"], ring["radius"]))
+        bodies = [[_body(b, n * traj.dt) for b in problem.model.colliders]
+                  for n in range(traj.steps + 1)]
+        for kind, a, b, *r in (g for frame in bodies for g in frame):
+            if kind == "round":
+                pts.append(np.array([a - r[0], a + r[0], b - r[0], b + r[0]]))
+        lo, hi = np.min([p.min(0) for p in pts], 0), np.max([p.max(0) for p in pts], 0)
+        self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1e-3)
+        for kind, a, b, *_ in (g for frame in bodies for g in frame):
+            if kind == "plane":
+                pts.append(_plane_patch(a, b, self.mid, self.half))
+        lo, hi = np.min([p.min(0) for p in pts], 0), np.max([p.max(0) for p in pts], 0)
+        span = max((hi - lo).max(), 1e-3)
+        half = np.maximum(hi - lo, 0.3 * span) / 2 + 0.03 * span
+        self.lo, self.hi = (lo + hi) / 2 - half, (lo + hi) / 2 + half
+
+
+class _ClothView:
+    """The artists of one 3-D view; ``draw(n)`` shows frame ``n``."""
+
+    def __init__(self, ax, problem, traj, *, name=None, box=None):
+        self.ax, self.problem, self.traj, self.model = ax, problem, traj, problem.model
+        self.name = problem.name if name is None else name
+        self.box = _Box(problem, traj) if box is None else box
+        self.terms = [t for t in problem.objective_terms.state_terms
+                      if t.position_target is not None]  # RegionTarget (2-D) has none
+        self.marked = np.concatenate([np.asarray(self.model.pinned, int)]
+                                     + [a.particles for a in self.model.attachments]).astype(int)
+        self.dynamic = []
+        self._static()
+
+    def _static(self):
+        ax, box = self.ax, self.box
+        ax.set(xlim=(box.lo[0], box.hi[0]), ylim=(box.lo[1], box.hi[1]),
+               zlim=(box.lo[2], box.hi[2]))
+        ax.set_box_aspect(box.hi - box.lo)
+        ax.view_init(*self.problem.scene.get("view", VIEW))
+        ax.tick_params(labelsize=6, pad=0)
+        w = np.asarray(self.model.masses, dtype=float)
+        com = np.einsum("i,nij->nj", w / w.sum(), np.asarray(self.traj.x))
+        ax.plot(*com.T, color=COM, lw=0.8, alpha=0.8)
+        ring = self.problem.scene.get("ring")
+        if ring:
+            ax.plot(*_circle(ring["center"], ring["normal"], ring["radius"]).T, color=RING, lw=3)
+
+    def draw(self, n: int, full_title: bool = True):
+        """Replace the frame-dependent artists with those of frame ``n``."""
+        for artist in self.dynamic:
+            artist.remove()
+        ax, x, faces = self.ax, self.traj.x[n], self.model.faces
+        self.dynamic = [ax.add_collection3d(Poly3DCollection(
+            x[faces], facecolors=face_colors(x, faces), edgecolors=(0, 0, 0, 0.12), lw=0.2))]
+        if self.marked.size:
+            self.dynamic.append(ax.scatter(*x[self.marked].T, s=10, c=MARK, depthshade=False))
+        self._colliders(n * self.traj.dt)
+        self._targets(n)
+        ax.set_title(frame_title(self.name, n, self.traj, full_title),
+                     fontsize=9 if full_title else 8)
+
+    def _colliders(self, t: float):
+        for kind, a, b, *r in (_body(body, t) for body in self.model.colliders):
+            if kind == "plane":
+                patch = _plane_patch(a, b, self.box.mid, self.box.half)
+                self.dynamic.append(self.ax.add_collection3d(Poly3DCollection(
+                    [patch], facecolors=(0.5, 0.5, 0.5, 0.12), edgecolors=(0.4, 0.4, 0.4, 0.4))))
+            else:
+                mesh = _capsule_mesh(a, b, r[0])
+                self.dynamic += [
+                    self.ax.plot_surface(*mesh.T, color=BODY, alpha=0.15, lw=0, shade=False),
+                    self.ax.plot_wireframe(*mesh.T, color=BODY, lw=0.3, alpha=0.5)]
+
+    def _targets(self, n: int):
+        """Targets of the terms at the current or next keyframe (faded before it)."""
+        if not self.terms:
+            return
+        ahead = [t.frame for t in self.terms if t.frame >= n]
+        frame = min(ahead) if ahead else max(t.frame for t in self.terms)
+        alpha = 1.0 if frame == n else 0.35
+        for term in (t for t in self.terms if t.frame == frame):
+            target = np.atleast_2d(term.position_target)
+            if isinstance(term, StateKeyframe) and term.particles.size == self.model.n:
+                shape = np.empty((self.model.n, 3))
+                shape[term.particles] = target
+                self.dynamic.append(self.ax.add_collection3d(Poly3DCollection(
+                    shape[self.model.faces], facecolors="none", lw=0.4,
+                    edgecolors=matplotlib.colors.to_rgba(TARGET, alpha))))
+            else:
+                self.dynamic.append(self.ax.scatter(*target.T, marker="x", s=40, c=TARGET,
+                                                    alpha=alpha, depthshade=False))
+
+
+def _legend(fig, view: _ClothView):
+    """A figure legend listing only what the view draws."""
+    line = plt.Line2D
+    h = [Patch(fc=CLOTH, label="cloth"), line([], [], color=COM, lw=0.8, label="centre of mass")]
+    if view.marked.size:
+        h.append(line([], [], ls="", marker="o", ms=3, color=MARK, label="pinned / attached"))
+    if view.terms:
+        h.append(line([], [], ls="", marker="x", color=TARGET, label="keyframe target"))
+    if view.model.colliders:
+        h.append(Patch(fc=(0.5, 0.5, 0.5, 0.3), ec=BODY, label="colliders"))
+    if view.problem.scene.get("ring"):
+        h.append(line([], [], color=RING, lw=3, label="ring"))
+    fig.legend(handles=h, loc="lower center", ncol=len(h), fontsize=7, frameon=False)
+
+
+def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
+            title=None) -> Path:
+    """Write an animated 3-D GIF of a cloth ``trajectory``; returns the path.
+
+    About ``max_frames + 1`` frames, always with every keyframe and the last frame;
+    ``title`` overrides the problem name in the title.
+    """
+    path = Path(path)
+    fig = plt.figure(figsize=(6.0, 5.4))
+    try:
+        view = _ClothView(fig.add_subplot(projection="3d"), problem, trajectory, name=title)
+        _legend(fig, view)
+        fig.subplots_adjust(left=0, right=1, bottom=0.06, top=0.95)
+        frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
+        write_gif(fig, view.draw, frames, path, fps)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def snapshot(problem, trajectory, path, frames=None) -> Path:
+    """Write a PNG of 3-D small multiples: by default the first frame, each keyframe and
+    the last, at most 8 panels (thinned evenly, keeping the first and last)."""
+    path = Path(path)
+    frames = snapshot_frames(problem, trajectory, frames, most=8)
+    cols = {4: 2, 5: 3, 6: 3}.get(len(frames), min(len(frames), 4))
+    rows = -(-len(frames) // cols)
+    fig = plt.figure(figsize=(3.4 * cols, 3.2 * rows + 0.6))
+    try:
+        box = _Box(problem, trajectory)
+        for i, n in enumerate(frames):
+            ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
+            view = _ClothView(ax, problem, trajectory, box=box)
+            view.draw(n, full_title=False)
+        fig.suptitle(problem.name, fontsize=11)
+        _legend(fig, view)
+        fig.subplots_adjust(left=0.02, right=0.98, bottom=0.08, top=1 - 0.55 / (3.2 * rows + 0.6),
+                            wspace=0.05, hspace=0.1)
+        fig.savefig(path, dpi=110)
+    finally:
+        plt.close(fig)
+    return path

@@ -1,0 +1,97 @@
+"""Colliders, self-contact and attachments: forces against CasADi, symmetric stiffness, a sheet
+that rests on a sphere without passing through, a moving attachment that is followed."""
+import casadi as ca
+import numpy as np
+import pytest
+
+from casadi_keyframe.integrators import LinearizedBackwardEuler
+from casadi_keyframe.models import ClothModel
+from casadi_keyframe.models.cloth import Attachment
+from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
+
+
+def moving_scene():
+    bodies = [Sphere(lambda t: np.array([0.5, 0.5, -0.3 + 0.1 * t]), 0.3),
+              Plane((0, 0, -0.05), (0.1, 0, 1)),
+              Capsule((0, 0.2, -0.04), lambda t: np.array([1.0, 0.3 + t, -0.02]), 0.03)]
+    return ClothModel.grid(4, 4, plane="xy", colliders=bodies,
+                           self_contact=Contact(500.0, 0.5, 0.4, 0.1))
+
+
+def jammed_state(model, seed=0):
+    rng = np.random.default_rng(seed)
+    x = model.rest_positions * [0.6, 0.6, 1] + 0.03 * rng.standard_normal((model.n, 3))
+    return x, rng.standard_normal((model.n, 3))
+
+
+def test_contact_forces_and_jacobians_match_casadi():
+    model = moving_scene()
+    x, v = jammed_state(model)
+    t = 0.3
+    X, V = ca.SX.sym("X", 3, model.n), ca.SX.sym("V", 3, model.n)
+    S = ca.DM(model.scene_parameters(t))
+    f = model.symbolic_forces(X, V, S)
+    f0 = model.symbolic_forces(X, V, S, elastic=True)
+    fn = ca.Function("f", [X, V], [f, ca.jacobian(ca.vec(f0), ca.vec(X)),
+                                   ca.jacobian(ca.vec(f), ca.vec(V))])
+    f_sym, K_sym, D_sym = (np.array(a) for a in fn(x.T, v.T))
+    contact = model.contact_forces(x, v, t)
+    assert np.abs(contact).max() > 1.0  # the state really is in contact
+    np.testing.assert_allclose(model.forces(x, v, t), f_sym.T, atol=1e-9)
+    K, D = model.jacobians(x, v, t)
+    np.testing.assert_allclose(K.toarray(), K_sym, atol=1e-8)
+    np.testing.assert_allclose(D.toarray(), D_sym, atol=1e-8)
+    assert abs(K - K.T).max() < 1e-9 and abs(D - D.T).max() < 1e-9
+
+
+def test_self_contact_forces_sum_to_zero_and_skip_springs():
+    model = ClothModel.grid(4, 4, plane="xy", params=None, self_contact=Contact(thickness=0.5),
+                            colliders=[])
+    x, v = jammed_state(model, 1)
+    fc = model.contact_forces(x, v)
+    np.testing.assert_allclose(fc.sum(0), 0, atol=1e-10)
+    i, j = model._self.pairs(x)
+    joined = set(zip(model.springs.i.tolist(), model.springs.j.tolist()))
+    assert i.size and not {(a, b) for a, b in zip(i, j)} & (joined | {(b, a) for a, b in joined})
+
+
+def test_sheet_resting_on_a_sphere_does_not_pass_through():
+    sphere = Sphere((0.5, 0.5, -0.32), 0.3)
+    model = ClothModel.grid(7, 7, plane="xy", colliders=[sphere, Plane((0, 0, -0.7))])
+    x0 = model.rest_positions
+    traj = LinearizedBackwardEuler().simulate(model, x0, np.zeros_like(x0),
+                                             np.zeros((90, model.n, 3)), 1 / 60)
+    gap = np.linalg.norm(traj.x - sphere.center, axis=2) - sphere.radius
+    assert gap.min() > -0.01  # never deeper than the thickness into the sphere
+    assert traj.x[:, :, 2].min() > -0.7 - 0.01  # nor through the ground
+    assert gap[-1].min() < sphere.contact.thickness  # and it does rest on it
+
+
+def test_attached_particles_follow_their_path_and_pins_stay():
+    path = lambda t: np.array([[0.0, 0.5 * t, np.sin(2 * t)]])  # noqa: E731
+    model = ClothModel.grid(3, 3, pinned=[2], attachments=[Attachment([0], path)])
+    x0 = model.rest_positions
+    traj = LinearizedBackwardEuler().simulate(model, x0, np.zeros_like(x0),
+                                             np.zeros((20, model.n, 3)), 0.05)
+    for n in range(1, 21):
+        np.testing.assert_allclose(traj.x[n, 0], path(n * 0.05)[0], atol=1e-12)
+    assert np.all(traj.x[:, 2] == x0[2])
+
+
+@pytest.mark.parametrize("bad, message", [
+    (dict(colliders=["ball"]), "colliders must be"),
+    (dict(attachments=[Attachment([0], lambda t: np.zeros((1, 3)))], pinned=[0]), "twice"),
+    (dict(friction=1.0), "unknown cloth option"),
+])
+def test_bad_scene_is_refused_clearly(bad, message):
+    with pytest.raises((ValueError, TypeError), match=message):
+        ClothModel.grid(3, 3, **bad)
+
+
+def test_bad_colliders_are_refused_clearly():
+    with pytest.raises(ValueError, match="radius must be positive"):
+        Sphere((0, 0, 0), -1.0)
+    with pytest.raises(ValueError, match="3 finite numbers"):
+        Capsule((0, 0), (1, 0, 0), 0.1)
+    with pytest.raises(ValueError, match="must return"):
+        Attachment([0, 1], lambda t: np.zeros((1, 3)))

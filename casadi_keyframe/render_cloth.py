@@ -87,11 +87,15 @@ def _plane_patch(point, normal, mid, half: float) -> np.ndarray:
     return np.array([c + half * (s * e1 + r * e2) for s, r in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
 
 
+def _extent(points) -> tuple[np.ndarray, np.ndarray]:
+    return np.min([p.min(0) for p in points], 0), np.max([p.max(0) for p in points], 0)
+
+
 class _Box:
     """Fixed limits over all frames, targets, ring and colliders (planes sized to the rest)."""
 
     def __init__(self, problem, traj):
-        pts = [traj.x.reshape(-1, 3)]
+        pts = [np.asarray(traj.x).reshape(-1, 3)]
         pts += [np.atleast_2d(t.position_target)[:, :3] for t in problem.objective_terms.state_terms
                 if t.position_target is not None]
         ring = problem.scene.get("ring")
@@ -102,12 +106,12 @@ class _Box:
         for kind, a, b, *r in (g for frame in bodies for g in frame):
             if kind == "round":
                 pts.append(np.array([a - r[0], a + r[0], b - r[0], b + r[0]]))
-        lo, hi = np.min([p.min(0) for p in pts], 0), np.max([p.max(0) for p in pts], 0)
+        lo, hi = _extent(pts)
         self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1e-3)
         for kind, a, b, *_ in (g for frame in bodies for g in frame):
             if kind == "plane":
                 pts.append(_plane_patch(a, b, self.mid, self.half))
-        lo, hi = np.min([p.min(0) for p in pts], 0), np.max([p.max(0) for p in pts], 0)
+        lo, hi = _extent(pts)
         span = max((hi - lo).max(), 1e-3)
         half = np.maximum(hi - lo, 0.3 * span) / 2 + 0.03 * span
         self.lo, self.hi = (lo + hi) / 2 - half, (lo + hi) / 2 + half
@@ -141,13 +145,18 @@ class _ClothView:
         if ring:
             ax.plot(*_circle(ring["center"], ring["normal"], ring["radius"]).T, color=RING, lw=3)
 
+    def _add(self, collection):
+        self.ax.add_collection3d(collection)
+        self.dynamic.append(collection)
+
     def draw(self, n: int, full_title: bool = True):
         """Replace the frame-dependent artists with those of frame ``n``."""
         for artist in self.dynamic:
             artist.remove()
-        ax, x, faces = self.ax, self.traj.x[n], self.model.faces
-        self.dynamic = [ax.add_collection3d(Poly3DCollection(
-            x[faces], facecolors=face_colors(x, faces), edgecolors=(0, 0, 0, 0.12), lw=0.2))]
+        ax, x, faces = self.ax, np.asarray(self.traj.x[n]), self.model.faces
+        self.dynamic = []
+        self._add(Poly3DCollection(x[faces], facecolors=face_colors(x, faces),
+                                   edgecolors=(0, 0, 0, 0.12), lw=0.2))
         if self.marked.size:
             self.dynamic.append(ax.scatter(*x[self.marked].T, s=10, c=MARK, depthshade=False))
         self._colliders(n * self.traj.dt)
@@ -159,8 +168,8 @@ class _ClothView:
         for kind, a, b, *r in (_body(body, t) for body in self.model.colliders):
             if kind == "plane":
                 patch = _plane_patch(a, b, self.box.mid, self.box.half)
-                self.dynamic.append(self.ax.add_collection3d(Poly3DCollection(
-                    [patch], facecolors=(0.5, 0.5, 0.5, 0.12), edgecolors=(0.4, 0.4, 0.4, 0.4))))
+                self._add(Poly3DCollection([patch], facecolors=(0.5, 0.5, 0.5, 0.12),
+                                           edgecolors=(0.4, 0.4, 0.4, 0.4)))
             else:
                 mesh = _capsule_mesh(a, b, r[0])
                 self.dynamic += [
@@ -176,12 +185,12 @@ class _ClothView:
         alpha = 1.0 if frame == n else 0.35
         for term in (t for t in self.terms if t.frame == frame):
             target = np.atleast_2d(term.position_target)
-            if isinstance(term, StateKeyframe) and term.particles.size == self.model.n:
+            if (isinstance(term, StateKeyframe)
+                    and np.unique(term.particles).size == self.model.n):
                 shape = np.empty((self.model.n, 3))
                 shape[term.particles] = target
-                self.dynamic.append(self.ax.add_collection3d(Poly3DCollection(
-                    shape[self.model.faces], facecolors="none", lw=0.4,
-                    edgecolors=matplotlib.colors.to_rgba(TARGET, alpha))))
+                self._add(Poly3DCollection(shape[self.model.faces], facecolors="none", lw=0.4,
+                                           edgecolors=matplotlib.colors.to_rgba(TARGET, alpha)))
             else:
                 self.dynamic.append(self.ax.scatter(*target.T, marker="x", s=40, c=TARGET,
                                                     alpha=alpha, depthshade=False))
@@ -199,7 +208,8 @@ def _legend(fig, view: _ClothView):
         h.append(Patch(fc=(0.5, 0.5, 0.5, 0.3), ec=BODY, label="colliders"))
     if view.problem.scene.get("ring"):
         h.append(line([], [], color=RING, lw=3, label="ring"))
-    fig.legend(handles=h, loc="lower center", ncol=len(h), fontsize=7, frameon=False)
+    ncol = min(len(h), max(3, int(fig.get_figwidth() / 1.6)))
+    fig.legend(handles=h, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
 
 
 def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
@@ -214,7 +224,7 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     try:
         view = _ClothView(fig.add_subplot(projection="3d"), problem, trajectory, name=title)
         _legend(fig, view)
-        fig.subplots_adjust(left=0, right=1, bottom=0.06, top=0.95)
+        fig.subplots_adjust(left=0, right=1, bottom=0.08, top=0.95)
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
         write_gif(fig, view.draw, frames, path, fps)
     finally:

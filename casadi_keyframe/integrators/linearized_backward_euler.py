@@ -38,7 +38,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..trajectory import Trajectory, check_state
+from ..trajectory import SimulationError, Trajectory, check_state
 from .linear_solvers import SOLVERS
 
 ADJOINTS = ("swapped", "exact")
@@ -89,7 +89,18 @@ class LinearizedBackwardEuler:
             v[n + 1] = v[n] + dv.reshape(v[n].shape)
             x[n + 1] = x[n] + dt * v[n + 1]
             check_state(x[n + 1], v[n + 1], n + 1)
+            self._check_stretch(model, x[n + 1], n + 1)
         return Trajectory(x, v, dt)
+
+    @staticmethod
+    def _check_stretch(model, x, step: int, limit: float = 5.0) -> None:
+        """A spring stretched ``limit`` times its rest length means the step has blown up."""
+        stretch = model.max_stretch(x) if hasattr(model, "max_stretch") else 0.0
+        if stretch > limit:
+            raise SimulationError(
+                f"cloth blew up at step {step}: a spring is {stretch:.3g} times its rest length; "
+                "reduce dt, the contact stiffness or the speed of moving colliders, or bound "
+                "the controls", step)
 
     def adjoint(self, model, traj: Trajectory, gx, gv):
         """The adjoint chosen at construction; returns ``(g_external, g_x0, g_v0)``.

@@ -413,6 +413,11 @@ class ClothModel:
         """The colliders' geometry at time t as one flat vector (``S`` of the symbolic forces)."""
         return np.concatenate([b.parameters(t) for b in self.colliders] or [np.zeros(0)])
 
+    def max_stretch(self, x: np.ndarray) -> float:
+        """The largest spring length over rest length (1 at rest); a blow-up shows here first."""
+        s = self.springs
+        return float((np.linalg.norm(pair_difference(x, s.i, s.j), axis=1) / s.rest).max())
+
     # -- numeric -------------------------------------------------------------------------
     def _spring_inputs(self, x, v):
         x, v = self._check_state(x, "x"), self._check_state(v, "v")

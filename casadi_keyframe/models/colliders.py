@@ -148,9 +148,10 @@ class Plane(Body):
     def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), contact=None):
         super().__init__(contact)
         self.point = _point(point, "Plane point")
-        self.normal = _point(normal, "Plane normal")
-        if np.linalg.norm(self.normal) == 0:
-            raise ValueError("Plane normal must be non-zero")
+        self.normal = np.asarray(normal, dtype=float)
+        if self.normal.shape != (3,) or not np.isfinite(self.normal).all() or not self.normal.any():
+            raise ValueError(f"Plane normal must be 3 finite numbers, not all zero, got {normal!r}"
+                             " (a plane may move through its point, not turn)")
 
     def geometry(self, t):
         p, vp = _at(self.point, t)

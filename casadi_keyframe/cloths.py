@@ -1,0 +1,49 @@
+"""Helpers that cloth problem files share: the problem itself and target shapes of a sheet."""
+from __future__ import annotations
+
+import numpy as np
+
+from .controls import StepForces
+from .integrators import LinearizedBackwardEuler
+from .problem import ControlProblem
+
+
+def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
+                  controls=None, scene=None, solver: str = "cg",
+                  adjoint: str = "swapped") -> ControlProblem:
+    """A cloth control problem integrated by linearized backward Euler (rest shape and rest
+    velocities by default, per-step force controls on the free particles by default)."""
+    x0 = model.rest_positions if x0 is None else x0
+    v0 = np.zeros_like(x0) if v0 is None else v0
+    if controls is None:
+        controls = StepForces(agents=np.flatnonzero(model.free_mask()[::3]))
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
+                          x0=x0, v0=v0, steps=steps, dt=dt, controls=controls,
+                          objective=objective, name=name, scene=scene)
+
+
+def rotation(axis, angle: float) -> np.ndarray:
+    """3x3 rotation by ``angle`` radians about ``axis`` (Rodrigues)."""
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def rotate_about(points, pivot, axis, angle: float) -> np.ndarray:
+    """``points`` (n, 3) rotated about the line through ``pivot`` along ``axis``."""
+    pivot = np.asarray(pivot, float)
+    return (np.asarray(points) - pivot) @ rotation(axis, angle).T + pivot
+
+
+def bend_into_arch(points, axis: int = 0, up: int = 2, lift: float = 0.0) -> np.ndarray:
+    """A flat sheet (``points`` spread along coordinate ``axis``, flat in ``up``) rolled into a
+    half cylinder of the same arc length, ends kept on the original level, raised ``lift``."""
+    p = np.array(points, dtype=float)
+    s = p[:, axis] - p[:, axis].min()
+    length = s.max()
+    radius = length / np.pi
+    theta = np.pi * s / length
+    center = p[:, axis].min() + length / 2
+    p[:, axis] = center - radius * np.cos(theta)
+    p[:, up] = p[:, up] + radius * np.sin(theta) + lift
+    return p

@@ -10,7 +10,7 @@ from .problem import ControlProblem
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
                   controls=None, scene=None, solver: str = "cg",
-                  adjoint: str = "swapped") -> ControlProblem:
+                  adjoint: str = "swapped", guess=None) -> ControlProblem:
     """A cloth control problem integrated by linearized backward Euler (rest shape and rest
     velocities by default, per-step force controls on the free particles by default)."""
     x0 = model.rest_positions if x0 is None else x0
@@ -19,7 +19,14 @@ def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None
         controls = StepForces(agents=np.flatnonzero(model.free_mask()[::3]))
     return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
                           x0=x0, v0=v0, steps=steps, dt=dt, controls=controls,
-                          objective=objective, name=name, scene=scene)
+                          objective=objective, name=name, scene=scene, guess=guess)
+
+
+def weight_support(model, controls, steps: int) -> np.ndarray:
+    """Per-step forces that cancel gravity on the controlled particles: a starting guess that
+    lifts a sheet off the ground, where resting contact leaves almost no gradient."""
+    support = -model.masses[controls.idx, None] * np.asarray(model.params.gravity)
+    return np.tile(support, (steps, 1, 1)).ravel()
 
 
 def rotation(axis, angle: float) -> np.ndarray:

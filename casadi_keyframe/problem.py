@@ -15,11 +15,12 @@ class ControlProblem:
     ``x0, v0`` are ``(particles, dim)``; ``external`` is an optional stored force per step
     ``(steps, particles, dim)`` that is not optimised (the flock's wander, gravity).
     ``scene`` carries anything a renderer may want (paths, colliders, highlighted agents).
+    ``guess`` is an optional starting point for the optimizer (flat controls).
     """
 
     def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
                  controls: Controls, objective, external=None, name: str = "problem",
-                 scene: dict | None = None):
+                 scene: dict | None = None, guess=None):
         if not (isinstance(steps, (int, np.integer)) and steps >= 1):
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -45,6 +46,7 @@ class ControlProblem:
             term.bind(model, self.steps)
         self._control_fn = self._compile_control_terms()
         self.scene = dict(scene or {})
+        self._guess = None if guess is None else controls.check(guess).copy()
         self._exact = None
 
     # -- the simulation ------------------------------------------------------------------
@@ -53,15 +55,16 @@ class ControlProblem:
         return self.controls.size
 
     def initial_controls(self) -> np.ndarray:
-        """The passive simulation's controls (zeros), a flat float64 vector."""
-        return self.controls.zeros()
+        """Where the optimizer starts: the problem's ``guess`` if it has one, else the passive
+        simulation's controls (zeros); a flat float64 vector."""
+        return self.controls.zeros() if self._guess is None else self._guess.copy()
 
     def bounds(self):
         return self.controls.bounds()
 
     def simulate(self, u=None) -> Trajectory:
         """Simulate with controls ``u`` (default: passive); raises SimulationError on blow-up."""
-        u = self.initial_controls() if u is None else self.controls.check(u)
+        u = self.controls.zeros() if u is None else self.controls.check(u)
         v0 = self.v0
         offset = self.controls.velocity_offset(u)
         if offset is not None:

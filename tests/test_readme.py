@@ -13,3 +13,14 @@ def test_readme_problem_file(tmp_path):
     result = solve(load_problem(path, agents=12), maxiter=100, quiet=True)
     region, com = result.breakdown["misses"]
     assert region["fraction_inside"] >= 0.95 and com["position_error"] < 0.05
+
+
+def test_readme_cloth_example_runs():
+    text = (Path(__file__).parent.parent / "README.md").read_text()
+    code = next(c for c in re.findall(r"```python\n(.*?)```", text, re.S) if "ClothModel" in c)
+    code = code.replace("maxiter=20)", "maxiter=5, quiet=True)")
+    scope = {}
+    exec(compile(code, "README cloth example", "exec"), scope)
+    result, prob = scope["result"], scope["prob"]
+    assert result.fun < prob.objective(prob.initial_controls())
+    assert abs(result.trajectory.x[-1, 0] - prob.x0[0]).max() == 0  # the pin held

@@ -25,6 +25,7 @@ test-slow: $(STAMP)
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/flock_gradient.py
+	$(BIN)/python benchmarks/cloth_gradient.py
 
 clean:
 	rm -rf $(VENV) results .pytest_cache

@@ -31,3 +31,11 @@ def test_cg_reports_failure_to_converge():
     A = spd(200)
     with pytest.raises(SolveError, match="did not converge"):
         modified_pcg(A, np.ones(200), np.ones(200, bool), tol=1e-14, maxiter=2)
+
+
+def test_cg_refuses_an_indefinite_matrix():
+    import pytest
+    from casadi_keyframe.integrators.linear_solvers import SolveError, modified_pcg
+    A = sp.diags([1.0, -2.0, 3.0]).tocsr()
+    with pytest.raises(SolveError, match="not positive definite"):
+        modified_pcg(A, np.ones(3), np.ones(3, bool))

@@ -28,7 +28,11 @@ def modified_pcg(A, b, free: np.ndarray, z=None, *, tol: float = 1e-10, maxiter:
     if x0 is not None:
         dv = np.where(free, x0, dv)
     diag = A.diagonal()
-    inv_p = np.where(free, 1.0 / np.where(diag != 0, diag, 1.0), 0.0)
+    if np.any(diag[free] <= 0):
+        raise SolveError("the step matrix has a non-positive diagonal entry, so it is not "
+                         "positive definite (stiff compression or contact at this dt); reduce "
+                         "dt or use solver='direct'")
+    inv_p = np.where(free, 1.0 / diag, 0.0)
     fb = filt * b
     delta0 = fb @ (inv_p * fb)
     r = filt * (b - A @ dv)
@@ -42,7 +46,12 @@ def modified_pcg(A, b, free: np.ndarray, z=None, *, tol: float = 1e-10, maxiter:
                              f"(relative residual {np.sqrt(delta / delta0):.2e}); reduce dt "
                              "or the stiffness, or use solver='direct'")
         q = filt * (A @ c)
-        alpha = delta / (c @ q)
+        curvature = c @ q
+        if curvature <= 0:
+            raise SolveError("modified PCG met a direction of non-positive curvature: the step "
+                             "matrix is not positive definite (stiff compression or contact "
+                             "at this dt); reduce dt or use solver='direct'")
+        alpha = delta / curvature
         dv += alpha * c
         r -= alpha * q
         s = inv_p * r

@@ -39,7 +39,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..trajectory import SimulationError, Trajectory, check_state
-from .linear_solvers import SOLVERS
+from .linear_solvers import SOLVERS, SolveError
 
 ADJOINTS = ("swapped", "exact")
 
@@ -85,7 +85,10 @@ class LinearizedBackwardEuler:
             b = dt * ((model.forces(x[n], v[n], t) + external[n]).ravel()
                       + dt * (K @ v[n].ravel()))
             z = (model.prescribed_velocity(x[n], t, dt) - v[n]).ravel()
-            dv = self._solve(A, b, free, z, x0=dv)
+            try:
+                dv = self._solve(A, b, free, z, x0=dv)
+            except SolveError as err:
+                raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
             v[n + 1] = v[n] + dv.reshape(v[n].shape)
             x[n + 1] = x[n] + dt * v[n + 1]
             check_state(x[n + 1], v[n + 1], n + 1)

@@ -1,0 +1,134 @@
+"""Forward pass versus swapped-adjoint gradient for hanging cloth of 10x10..50x50 particles.
+
+Per size: forward seconds, gradient seconds (forward + the integrator-swapping adjoint), their
+ratio (target: at most 2) and the peak memory traced during the gradient; where the unrolled
+graph fits, the exact CasADi gradient too (build + first call, later calls, peak RSS growth)
+and how far the swapped gradient is from it (cosine, relative error).
+
+The sheet hangs from its two top corners; by default a sphere of radius 0.2 m starts 2 cm
+clear of its contact layer and presses into it at 6 cm/s.  (A sphere already cutting the
+sheet at t = 0 blows the 20x20 and 50x50 sheets up.)  The controls are random forces giving
+each particle 1 m/s^2 rms acceleration (0.01 N at 10x10): fixed 0.01 N forces blow up the
+50x50 sheet, whose particles weigh 0.4 g.  The default solver is the sparse direct one: with
+dt = 1/60 the 50x50 step matrix is indefinite and CG returns wrong steps without an error.
+
+    .venv/bin/python benchmarks/cloth_gradient.py [--sizes 10 20 50] [--steps 100] [--repeat 3]
+        [--collider sphere|none] [--solver direct|cg] [--exact-max-particles 100]
+"""
+import argparse
+import os
+import resource
+import sys
+import time
+import tracemalloc
+
+import numpy as np
+
+from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, Smoothness, StateKeyframe,
+                             StepForces)
+from casadi_keyframe.integrators import LinearizedBackwardEuler
+from casadi_keyframe.models import ClothModel
+from casadi_keyframe.models.colliders import Sphere
+
+RSS_UNIT = 2 ** 20 if sys.platform == "darwin" else 2 ** 10  # ru_maxrss: bytes or KiB
+
+
+def sphere_center(t):
+    """The sphere's path: 3 cm from the sheet's plane at t = 0, moving into it at 6 cm/s."""
+    return np.array([0.5, 0.23 - 0.06 * t, -0.8])
+
+
+def build(k: int, steps: int, collider: str, solver: str) -> ControlProblem:
+    """A k x k sheet (1 m, 1 kg) pinned at its top corners, aimed forward and up."""
+    colliders = [Sphere(sphere_center, 0.2)] if collider == "sphere" else []
+    model = ClothModel.grid(k, k, pinned=[0, k - 1], colliders=colliders)
+    x0 = model.rest_positions
+    objective = (StateKeyframe(steps, x=x0 + [0.0, 0.3, 0.1])
+                 + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.2, 0])
+                 + Smoothness(1e-4))
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver=solver), x0=x0,
+                          v0=np.zeros_like(x0), steps=steps, dt=1 / 60, controls=StepForces(),
+                          objective=objective, name=f"cloth{k}")
+
+
+def random_controls(prob) -> np.ndarray:
+    """Per-step forces of 1 m/s^2 rms acceleration on every particle."""
+    noise = np.random.default_rng(0).standard_normal((prob.steps, prob.model.n, 3))
+    return (noise * prob.model.masses[:, None]).ravel()
+
+
+def best_of(fn, repeats: int) -> float:
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return min(times)
+
+
+def traced_peak_mb(fn) -> float:
+    tracemalloc.start()
+    fn()
+    peak = tracemalloc.get_traced_memory()[1]
+    tracemalloc.stop()
+    return peak / 2 ** 20
+
+
+def exact_columns(prob, u, g_swapped, repeats: int) -> str:
+    """Exact CasADi gradient: build + first call s, later call s, RSS growth MB, cos, rel err."""
+    rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    t = time.perf_counter()
+    _, g = prob.objective_and_gradient(u, "exact")
+    build_s = time.perf_counter() - t
+    rss_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss) * RSS_UNIT / 2 ** 20
+    call_s = best_of(lambda: prob.objective_and_gradient(u, "exact"), repeats)
+    cos = g_swapped @ g / (np.linalg.norm(g_swapped) * np.linalg.norm(g))
+    rel = np.linalg.norm(g_swapped - g) / np.linalg.norm(g)
+    return f"{build_s:9.2f} {call_s:7.3f} {rss_mb:7.0f} {cos:7.4f} {rel:7.3f}"
+
+
+def measure(k: int, args) -> tuple[float, str]:
+    """One table row for a k x k sheet; returns (gradient / forward, row)."""
+    prob = build(k, args.steps, args.collider, args.solver)
+    u = random_controls(prob)
+    prob.simulate()  # passive run: compiles the kernels; a SimulationError propagates
+    _, g_swapped = prob.objective_and_gradient(u, "adjoint")
+    exact = f"{'-':>9} {'-':>7} {'-':>7} {'-':>7} {'-':>7}"
+    if k * k * args.steps <= args.exact_max_particles * 100:
+        exact = exact_columns(prob, u, g_swapped, args.repeat)  # first: before RSS grows
+    fwd = best_of(lambda: prob.simulate(u), args.repeat)
+    grad = best_of(lambda: prob.objective_and_gradient(u, "adjoint"), args.repeat)
+    peak = traced_peak_mb(lambda: prob.objective_and_gradient(u, "adjoint"))
+    row = (f"{k:>2d}x{k:<3d} {k * k:9d} {fwd:9.3f} {grad:10.3f} {grad / fwd:6.2f} {peak:8.1f} "
+           + exact)
+    return grad / fwd, row
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[10, 20, 50])
+    ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--collider", choices=["sphere", "none"], default="sphere")
+    ap.add_argument("--solver", choices=["direct", "cg"], default="direct")
+    ap.add_argument("--exact-max-particles", type=int, default=100,
+                    help="exact gradient when particles x steps <= this x 100")
+    args = ap.parse_args()
+    print(f"Cloth, {args.steps} steps of 1/60 s, collider: {args.collider}, solver: "
+          f"{args.solver}; best of {args.repeat} on {os.cpu_count()} cores; gradient = forward "
+          "+ swapped adjoint; adjoint MB = tracemalloc peak; exact MB = peak RSS growth "
+          "(ru_maxrss; tracemalloc misses CasADi's C++ memory); cos, rel err: swapped vs exact")
+    print(f"{'size':6} {'particles':>9} {'forward s':>9} {'gradient s':>10} {'ratio':>6} "
+          f"{'adj MB':>8} {'exact 1st':>9} {'exact s':>7} {'ex MB':>7} {'cos':>7} {'rel err':>7}")
+    ratios = {}
+    for k in sorted(args.sizes):
+        ratios[k], row = measure(k, args)
+        print(row, flush=True)
+    worst = max(ratios, key=ratios.get)
+    verdict = "met" if ratios[worst] <= 2 else "MISSED"
+    print(f"ratio target (gradient <= 2x forward): {verdict}; worst {ratios[worst]:.2f} at "
+          f"{worst}x{worst}")
+
+
+if __name__ == "__main__":
+    main()

@@ -20,7 +20,6 @@ import os
 import resource
 import sys
 import time
-import tracemalloc
 
 import numpy as np
 
@@ -29,6 +28,7 @@ from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, Smoothness, S
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Sphere
+from timing import best_of, traced_peak_mb
 
 RSS_UNIT = 2 ** 20 if sys.platform == "darwin" else 2 ** 10  # ru_maxrss: bytes or KiB
 
@@ -55,23 +55,6 @@ def random_controls(prob) -> np.ndarray:
     """Per-step forces of 1 m/s^2 rms acceleration on every particle."""
     noise = np.random.default_rng(0).standard_normal((prob.steps, prob.model.n, 3))
     return (noise * prob.model.masses[:, None]).ravel()
-
-
-def best_of(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
-
-
-def traced_peak_mb(fn) -> float:
-    tracemalloc.start()
-    fn()
-    peak = tracemalloc.get_traced_memory()[1]
-    tracemalloc.stop()
-    return peak / 2 ** 20
 
 
 def exact_columns(prob, u, g_swapped, repeats: int) -> str:

@@ -7,21 +7,11 @@ agents x steps, not agents^2).  Ratios are measured in one run on one machine.
     .venv/bin/python benchmarks/flock_gradient.py [--agents 100 200 1000 5000] [--steps 200]
 """
 import argparse
-import time
-import tracemalloc
 
 import numpy as np
 
 from casadi_keyframe import load_problem
-
-
-def best_of(fn, repeats):
-    times = []
-    for _ in range(repeats):
-        t = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - t)
-    return min(times)
+from timing import best_of, traced_peak_mb
 
 
 def main():
@@ -39,10 +29,7 @@ def main():
         pairs = np.mean([t.i.size for t in traj.tape])
         fwd = best_of(lambda: prob.simulate(u), args.repeats)
         grad = best_of(lambda: prob.objective_and_gradient(u, "adjoint"), args.repeats)
-        tracemalloc.start()
-        prob.objective_and_gradient(u, "adjoint")
-        peak = tracemalloc.get_traced_memory()[1]
-        tracemalloc.stop()
+        peak = traced_peak_mb(lambda: prob.objective_and_gradient(u, "adjoint")) * 2**20
         print(f"{n:7d} {args.steps:6d} {pairs:10.0f} {fwd:10.3f} {grad:11.3f} {grad / fwd:6.2f} "
               f"{peak / 2**20:8.1f} {peak / (n * args.steps):19.0f}", flush=True)
 

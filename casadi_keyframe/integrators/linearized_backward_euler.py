@@ -4,9 +4,10 @@ Forward step (Baraff-Witkin):  ``A dv = b`` with ``A = M - dt D - dt^2 K``,
 ``b = dt (f_n + dt K v_n + e_n)``, ``K = df/dx|_n`` (at zero velocity), ``D = df/dv|_n``;
 ``v_{n+1} = v_n + dv``, ``x_{n+1} = x_n + dt v_{n+1}``.  Forces, Jacobians and colliders are
 taken at ``t_n = n dt``.  Constrained components get a prescribed ``dv`` (the filter of the
-modified CG): pinned particles end the step at rest, attached ones at their path's next point.  The model supplies symmetric K and D (as Baraff and
-Witkin, the position derivative of spring damping is left out of K), so A is symmetric
-positive definite for small enough dt and CG applies.
+modified CG): pinned particles end the step at rest, attached ones at their path's next
+point.  The model supplies symmetric K and D (as Baraff and Witkin, the position derivative
+of spring damping is left out of K), so A is symmetric; it is positive definite only for
+small enough dt (compressed springs and curved contacts can break that, and CG says so).
 
 Adjoint ("adjoint", APPROXIMATE): the exact adjoint of this scheme needs second derivatives
 of f (derivatives of K and D), a 3p x 3p x 3p tensor.  Following the paper we use instead
@@ -21,9 +22,9 @@ the forward pass builds there (recomputed, not stored, to keep memory at O(parti
     a_x(n) = a_x(n+1) + dt K^T mu + dphi/dx_n
 
 The two schemes agree through second order in dt, so for smooth forces each step's
-adjoint carries an O(dt^3) local error.  Stiff springs (dt sqrt(k/m) not small), springs
-crossing their rest length (the Choi-Ko law has a kink there) and the damping term left out
-of K make the error larger in practice; for forces linear in x and v it is exact.
+adjoint carries an O(dt^3) local error.  Stiff springs (dt sqrt(k/m) not small), fast
+changes of stiffness (springs entering buckling or contact within a step) and the damping
+term left out of K make the error larger in practice; for forces linear in x and v it is exact.
 The "exact" gradient route (CasADi reverse mode through :meth:`symbolic_step`) is the
 reference that measures this error.
 

@@ -208,17 +208,18 @@ def lumped_masses(vertices: np.ndarray, faces: np.ndarray, total: float) -> np.n
     return total * share / share.sum()
 
 
-def _block_pattern(i: np.ndarray, j: np.ndarray, n: int):
-    """CSC pattern of the 3x3 blocks (i,i), (i,j), (j,i), (j,j) of every pair plus every
-    particle's diagonal block.
+def _block_pattern(i: np.ndarray, j: np.ndarray, n: int, particle_blocks: bool = True):
+    """CSC pattern of the 3x3 blocks (i,i), (i,j), (j,i), (j,j) of every pair plus (unless
+    ``particle_blocks`` is False) every particle's diagonal block.
 
     Returns ``(indices, indptr, gather)``: the CSC data of ``-B_p`` at (i,i) and (j,j), ``+B_p``
     at (i,j) and (j,i) for pair blocks ``B_p``, plus particle blocks ``C_k`` at (k,k), is
     ``gather @ [vec_row_major(B); vec_row_major(C)]``.  The ``(nnz, 9P + 9n)`` gather matrix
-    holds the COO -> CSC map with the signs (duplicates add up).
+    holds the COO -> CSC map with the signs (duplicates add up); without particle blocks it is
+    ``(nnz, 9P)``.
     """
     P = i.size
-    k = np.arange(n)
+    k = np.arange(n if particle_blocks else 0)
     bi, bj = np.concatenate([i, i, j, j, k]), np.concatenate([i, j, i, j, k])
     a, b = np.divmod(np.arange(9), 3)  # row-major entry e of a block is (a, b)
     rows = (3 * bi[:, None] + a).ravel()
@@ -226,18 +227,19 @@ def _block_pattern(i: np.ndarray, j: np.ndarray, n: int):
     keys, slot = np.unique(cols.astype(np.int64) * (3 * n) + rows, return_inverse=True)
     indices = (keys % (3 * n)).astype(np.int32)
     indptr = np.concatenate([[0], np.cumsum(np.bincount(keys // (3 * n), minlength=3 * n))])
-    source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(9 * n)])
-    sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P), np.ones(9 * n)])
-    gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, 9 * P + 9 * n))
+    source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(9 * k.size)])
+    sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P), np.ones(9 * k.size)])
+    gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, 9 * P + 9 * k.size))
     return indices, indptr.astype(np.int32), gather
 
 
-def pair_block_matrix(blocks: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> sp.csc_matrix:
-    """``3n x 3n`` matrix with ``-B`` at (i,i), (j,j) and ``+B`` at (i,j), (j,i) for row-major
-    ``(P, 9)`` blocks ``B`` (pairs that change every step, like self-contacts)."""
-    indices, indptr, gather = _block_pattern(i, j, n)
-    data = gather @ np.concatenate([blocks.ravel(), np.zeros(9 * n)])
-    return sp.csc_matrix((data, indices, indptr), shape=(3 * n, 3 * n))
+def pair_block_matrices(i: np.ndarray, j: np.ndarray, n: int, *blocks: np.ndarray) -> list:
+    """One ``3n x 3n`` CSC matrix per ``(P, 9)`` row-major block array ``B``: ``-B`` at (i,i),
+    (j,j) and ``+B`` at (i,j), (j,i), for pairs that change every step (self-contacts); the
+    pattern is built once for all of them."""
+    indices, indptr, gather = _block_pattern(i, j, n, particle_blocks=False)
+    return [sp.csc_matrix((gather @ b.ravel(), indices.copy(), indptr.copy()),
+                          shape=(3 * n, 3 * n)) for b in blocks]
 
 
 @dataclass(frozen=True)
@@ -472,8 +474,7 @@ class ClothModel:
             i, j = self._self.pairs(x)
             if i.size:
                 kp, dp = self._self.evaluate("jac", x, v, i, j, jit=self.jit)
-                out = [out[0] + pair_block_matrix(kp, i, j, self.n),
-                       out[1] + pair_block_matrix(dp, i, j, self.n)]
+                out = [a + b for a, b in zip(out, pair_block_matrices(i, j, self.n, kp, dp))]
         return out[0], out[1]
 
     def linearization_vjp(self, x, v, t: float, lam, w, q, dt: float):

@@ -232,9 +232,19 @@ class SelfContact:
         self._excluded = np.unique(e[:, 0] * n + e[:, 1])
         self._n = n
         self._mapped = {}
+        self._last = (None, None)
 
     def pairs(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Index arrays ``(i, j)``, i < j, of unjoined particles within the thickness."""
+        """Index arrays ``(i, j)``, i < j, of unjoined particles within the thickness.
+
+        The last answer is kept: a step asks for the forces and the Jacobians at one x."""
+        if self._last[0] is not None and np.array_equal(self._last[0], x):
+            return self._last[1]
+        found = self._search(x)
+        self._last = (np.array(x, dtype=float), found)
+        return found
+
+    def _search(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         found = cKDTree(x).query_pairs(self.contact.thickness, output_type="ndarray")
         if found.size == 0:
             return np.zeros(0, np.intp), np.zeros(0, np.intp)

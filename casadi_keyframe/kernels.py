@@ -161,30 +161,33 @@ def pair_incidence(i: np.ndarray, j: np.ndarray, n: int) -> ca.DM:
                                shape=(P, n)))
 
 
-def interaction_kernels(name: str, x, v, params: list, force, elastic=None) -> dict[str, ca.Function]:
+def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) -> dict[str, ca.Function]:
     """The kernels of one interaction whose force is the SX expression ``force`` in the
-    symbols ``x``, ``v``, ``params``, as ``{"force", "elastic", "jac", "vjp"}``:
+    symbols ``x``, ``v``, ``params``, as ``{"force", "jac", "df_dx", "vjp"}``:
 
-    * ``force(x, v, *params) -> f`` and ``elastic(...)``, the same without damping;
-    * ``jac(...) -> (vec K, vec D)``, row-major 3x3 blocks, ``K = d(elastic)/dx`` and
-      ``D = df/dv``.  ``elastic`` (default: ``force`` at ``v = 0``) is the force without
-      damping, so the damping's position derivative is left out and K stays symmetric;
+    * ``force(x, v, *params) -> f``;
+    * ``jac(...) -> (vec K, vec D)``, row-major 3x3 blocks, ``D = df/dv`` and K the stiffness
+      the implicit step uses: ``stiffness`` when given (a 3x3 expression, e.g. the force
+      Jacobian with its destabilising parts clamped away so the step matrix stays positive
+      definite), else ``d/dx`` of the force at ``v = 0`` (the damping's position derivative
+      is left out, so K stays symmetric);
+    * ``df_dx(...) -> vec J``, ``d/dx`` of the force at ``v = 0`` (equal to K when no
+      ``stiffness`` is given);
     * ``vjp(x, v, *params, lam, w, q, dt) -> (gx, gv)``: the gradients in x and v of
       ``lam . (dt f + dt^2 K w + dt D q)``, the exact adjoint of a linearized implicit step
-      contracted per interaction (second derivatives included, no tensor formed).
+      with this K, contracted per interaction (second derivatives included, no tensor formed).
     """
-    if elastic is None:
-        elastic = ca.substitute(force, v, ca.SX.zeros(v.shape))
-    K, D = ca.jacobian(elastic, x), ca.jacobian(force, v)
+    df_dx = ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x)
+    K, D = (df_dx if stiffness is None else stiffness), ca.jacobian(force, v)
     args = [x, v, *params]
     lam, w, q = (ca.SX.sym(s, force.shape[0]) for s in ("lam", "w", "q"))
     dt = ca.SX.sym("dt")
     phi = ca.dot(lam, dt * force + dt ** 2 * ca.mtimes(K, w) + dt * ca.mtimes(D, q))
     return {
         "force": ca.Function(f"{name}", args, [force]),
-        "elastic": ca.Function(f"{name}_elastic", args, [elastic]),
         "jac": ca.Function(f"{name}_jac", args,
                            [ca.reshape(K.T, -1, 1), ca.reshape(D.T, -1, 1)]),
+        "df_dx": ca.Function(f"{name}_df_dx", args, [ca.reshape(df_dx.T, -1, 1)]),
         "vjp": ca.Function(f"{name}_vjp", args + [lam, w, q, dt],
                            [ca.gradient(phi, x), ca.gradient(phi, v)]),
     }

@@ -5,6 +5,13 @@ rolled into a half cylinder of the same arc length, its two ends on the ground, 
 optimizer starts from forces that carry the sheet's weight: from zero forces a sheet resting
 on the ground must first outweigh the contact before it moves at all, so its gradient there
 is almost zero (measured: L-BFGS-B stalls with the sheet flat).
+
+The default gradient is the exact hand adjoint of the linearized step.  The sheet lies in
+stiff contact with the ground and bends through compressed springs, where the paper's
+swapped adjoint is poor (6 x 6 sheet, 40 steps: cosine to the exact gradient 0.68 at random
+0.01 N perturbations of the start, 0.46 at 0.03 N; L-BFGS-B stops with the line search
+failing at an 8.0 cm root-mean-square miss, against 1.3 cm with the exact adjoint).
+``adjoint="swapped"`` runs the paper's method.
 """
 import numpy as np
 
@@ -19,7 +26,7 @@ SOLVE = {"method": "lbfgsb", "maxiter": 150}
 
 def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,
           size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4,
-          adjoint: str = "swapped"):
+          adjoint: str = "exact"):
     ground = Plane((0.0, 0.0, 0.0))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
                             origin=(0.0, 0.0, ground.contact.thickness), colliders=[ground])

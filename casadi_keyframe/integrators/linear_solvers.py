@@ -62,11 +62,11 @@ def modified_pcg(A, b, free: np.ndarray, z=None, *, tol: float = 1e-10, maxiter:
     return dv, it
 
 
-def direct_solve(A, b, free: np.ndarray, z=None):
+def direct_solve(A, b, free: np.ndarray, z=None, *, symmetric: bool = True):
     """Sparse LU solve of the reduced system; returns ``(dv, 0)``.
 
-    SuperLU in symmetric mode with a minimum-degree ordering of ``A + A^T`` (the step matrix
-    is symmetric): about half the time of the default column ordering on a 50 x 50 cloth.
+    For a symmetric A, SuperLU in symmetric mode with a minimum-degree ordering of
+    ``A + A^T``: about half the time of the default column ordering on a 50 x 50 cloth.
     """
     A = sp.csr_matrix(A)
     dv = np.zeros_like(b) if z is None else np.where(free, 0.0, z)
@@ -75,8 +75,9 @@ def direct_solve(A, b, free: np.ndarray, z=None):
     rows = A[fi]
     rhs = b[fi] - (rows[:, ci] @ dv[ci] if ci.size else 0.0)
     try:
-        lu = spla.splu(rows[:, fi].tocsc(), permc_spec="MMD_AT_PLUS_A",
-                       options={"SymmetricMode": True})
+        lu = (spla.splu(rows[:, fi].tocsc(), permc_spec="MMD_AT_PLUS_A",
+                        options={"SymmetricMode": True}) if symmetric
+              else spla.splu(rows[:, fi].tocsc()))
     except RuntimeError as err:  # SuperLU: "Factor is exactly singular"
         raise SolveError(f"the step matrix is singular ({err})") from err
     dv[fi] = lu.solve(rhs)
@@ -84,3 +85,11 @@ def direct_solve(A, b, free: np.ndarray, z=None):
 
 
 SOLVERS = {"cg": modified_pcg, "direct": direct_solve}
+
+
+def solve_step(solver: str, A, b, free: np.ndarray, z=None, *, tol: float = 1e-10, x0=None):
+    """``dv`` of a symmetric positive definite step system by ``solver`` ("cg" or "direct");
+    ``x0`` warm-starts CG."""
+    if solver == "cg":
+        return modified_pcg(A, b, free, z, tol=tol, x0=x0)[0]
+    return direct_solve(A, b, free, z)[0]

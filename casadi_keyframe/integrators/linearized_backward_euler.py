@@ -20,7 +20,7 @@ the forward pass builds there (recomputed, not stored, to keep memory at O(parti
     A^T mu = w            (free components; mu = 0 on pinned and attached ones)
     dphi/de_n = dt mu
     a_v(n) = M mu + dphi/dv_n
-    a_x(n) = a_x(n+1) + dt J^T mu + dphi/dx_n,    J = df/dx at n+1
+    a_x(n) = a_x(n+1) + dt J^T mu + dphi/dx_n,    J = df/dx at n+1 (all of it)
 
 A holds the model's clamped stiffness K (so it stays positive definite), but the position
 adjoint needs the true force Jacobian J: with K there the gradient misses the compressed
@@ -46,9 +46,28 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..trajectory import SimulationError, Trajectory, check_state
-from .linear_solvers import SOLVERS, SolveError
+from .linear_solvers import SOLVERS, SolveError, solve_step
 
 ADJOINTS = ("swapped", "exact")
+
+
+def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False):
+    """``(A, K)`` of an implicit step linearized at (x, v) at time t, both sparse ``3n x 3n``,
+    ``A = M - dt D - dt^2 K``; with ``with_df_dx`` also the full force Jacobian ``df/dx``
+    (unclamped, damping included)."""
+    K, D, *df_dx = model.jacobians(x, v, t, with_df_dx=with_df_dx)
+    mass = np.repeat(model.masses, model.dim)
+    return ((sp.diags(mass) - dt * D - dt * dt * K).tocsr(), K, *df_dx)
+
+
+def check_stretch(model, x, step: int, limit: float = 5.0) -> None:
+    """A spring stretched ``limit`` times its rest length means the step has blown up."""
+    stretch = model.max_stretch(x) if hasattr(model, "max_stretch") else 0.0
+    if stretch > limit:
+        raise SimulationError(
+            f"cloth blew up at step {step}: a spring is {stretch:.3g} times its rest length; "
+            "reduce dt, the contact stiffness or the speed of moving colliders, or bound "
+            "the controls", step)
 
 
 class LinearizedBackwardEuler:
@@ -68,17 +87,7 @@ class LinearizedBackwardEuler:
         return self.adjoint_kind == "exact"
 
     def _solve(self, A, b, free, z=None, x0=None):
-        if self.solver == "cg":
-            return SOLVERS["cg"](A, b, free, z, tol=self.tol, x0=x0)[0]
-        return SOLVERS["direct"](A, b, free, z)[0]
-
-    @staticmethod
-    def matrices(model, x, v, dt, t=0.0, with_df_dx=False):
-        """``(A, K)`` of the step from (x, v) at time t, both sparse ``3n x 3n``; with
-        ``with_df_dx`` also the force Jacobian ``df/dx`` (K without the model's clamping)."""
-        K, D, *df_dx = model.jacobians(x, v, t, with_df_dx=with_df_dx)
-        mass = np.repeat(model.masses, model.dim)
-        return ((sp.diags(mass) - dt * D - dt * dt * K).tocsr(), K, *df_dx)
+        return solve_step(self.solver, A, b, free, z, tol=self.tol, x0=x0)
 
     def simulate(self, model, x0, v0, external, dt) -> Trajectory:
         steps = external.shape[0]
@@ -89,7 +98,7 @@ class LinearizedBackwardEuler:
         dv = None
         for n in range(steps):
             t = n * dt
-            A, K = self.matrices(model, x[n], v[n], dt, t)
+            A, K = step_matrices(model, x[n], v[n], dt, t)
             b = dt * ((model.forces(x[n], v[n], t) + external[n]).ravel()
                       + dt * (K @ v[n].ravel()))
             z = (model.prescribed_velocity(x[n], t, dt) - v[n]).ravel()
@@ -100,18 +109,8 @@ class LinearizedBackwardEuler:
             v[n + 1] = v[n] + dv.reshape(v[n].shape)
             x[n + 1] = x[n] + dt * v[n + 1]
             check_state(x[n + 1], v[n + 1], n + 1)
-            self._check_stretch(model, x[n + 1], n + 1)
+            check_stretch(model, x[n + 1], n + 1)
         return Trajectory(x, v, dt)
-
-    @staticmethod
-    def _check_stretch(model, x, step: int, limit: float = 5.0) -> None:
-        """A spring stretched ``limit`` times its rest length means the step has blown up."""
-        stretch = model.max_stretch(x) if hasattr(model, "max_stretch") else 0.0
-        if stretch > limit:
-            raise SimulationError(
-                f"cloth blew up at step {step}: a spring is {stretch:.3g} times its rest length; "
-                "reduce dt, the contact stiffness or the speed of moving colliders, or bound "
-                "the controls", step)
 
     def adjoint(self, model, traj: Trajectory, gx, gv):
         """The adjoint chosen at construction; returns ``(g_external, g_x0, g_v0)``.
@@ -133,7 +132,7 @@ class LinearizedBackwardEuler:
         ax, av = free * gx[steps].ravel(), free * gv[steps].ravel()
         mu = None
         for n in range(steps - 1, -1, -1):
-            A, _, df_dx = self.matrices(model, traj.x[n + 1], traj.v[n + 1], dt, (n + 1) * dt,
+            A, _, df_dx = step_matrices(model, traj.x[n + 1], traj.v[n + 1], dt, (n + 1) * dt,
                                         with_df_dx=True)
             mu = self._solve(A, av + dt * ax, free > 0, x0=mu)  # A^T = A: K, D symmetric
             g_ext[n] = (dt * mu).reshape(shape)
@@ -159,7 +158,7 @@ class LinearizedBackwardEuler:
         lam = None
         for n in range(steps - 1, -1, -1):
             t = n * dt
-            A, K = self.matrices(model, traj.x[n], traj.v[n], dt, t)
+            A, K = step_matrices(model, traj.x[n], traj.v[n], dt, t)
             w = av + dt * ax
             lam = self._solve(A, w, free > 0, x0=lam)  # A^T = A
             g_ext[n] = (dt * lam).reshape(shape)

@@ -475,13 +475,13 @@ class ClothModel:
 
     def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0, with_df_dx: bool = False):
         """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric, ``-K`` and ``-D``
-        positive semi-definite; with ``with_df_dx`` also ``df/dx`` at zero velocity.
+        positive semi-definite; with ``with_df_dx`` also the full ``df/dx`` (not symmetric).
 
         ``D = df/dv``.  K is the stiffness the implicit step uses: ``df/dx`` at zero velocity
         (damping's position derivative omitted, as in Baraff-Witkin) without the transverse
         term of compressed springs and the curvature of contact surfaces
-        (:func:`spring_law`, :func:`.colliders.penalty_law`).  The swapped adjoint needs the
-        true ``df/dx`` for its position adjoint, hence the option.
+        (:func:`spring_law`, :func:`.colliders.penalty_law`).  The adjoints of full backward
+        Euler (exact and swapped) need the true ``df/dx``, damping's part included.
         """
         inputs = self._spring_inputs(x, v)
         pairs = self._jac(*inputs) + (self._df_dx(*inputs) if with_df_dx else [])

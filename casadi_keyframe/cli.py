@@ -1,4 +1,4 @@
-"""The ``casadi-keyframe`` command line: list, solve and gradcheck problems."""
+"""The ``casadi-keyframe`` command line: list, solve and gradcheck problems; print studies."""
 from __future__ import annotations
 
 import argparse
@@ -89,6 +89,16 @@ def cmd_gradcheck(args) -> int:
     return 0
 
 
+def cmd_study(args) -> int:
+    from . import studies
+
+    if args.study == "gradient-accuracy":
+        print(studies.format_gradient_accuracy(studies.gradient_accuracy(quick=args.quick)))
+    else:
+        print(studies.format_one_step_gap(studies.one_step_gap(quick=args.quick)))
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -114,6 +124,11 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--scale", type=float, default=0.5, help="size of the random controls")
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(func=cmd_gradcheck)
+
+    st = sub.add_parser("study", help="print an accuracy study (the notebooks' tables)")
+    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy"))
+    st.add_argument("--quick", action="store_true", help="small sizes (as CASADI_KEYFRAME_QUICK=1)")
+    st.set_defaults(func=cmd_study)
     return p
 
 

@@ -5,6 +5,7 @@ import argparse
 import ast
 import sys
 import time
+from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
@@ -26,6 +27,17 @@ def parse_overrides(items) -> dict:
     return out
 
 
+def parse_time_steps(text: str | None) -> list[float] | None:
+    """``"1/15,1/30,1/60"`` (fractions or decimals, seconds) -> ``[0.0667, 0.0333, 0.0167]``."""
+    if not text:
+        return None
+    try:
+        return [float(Fraction(item.strip())) for item in text.split(",")]
+    except (ValueError, ZeroDivisionError):
+        raise SystemExit(f"--continuation expects time steps in seconds separated by commas, "
+                         f"coarse to fine, e.g. 1/15,1/30,1/60; got {text!r}") from None
+
+
 def cmd_list(args) -> int:
     for name, doc in list_problems():
         print(f"{name:20s} {doc}")
@@ -45,7 +57,8 @@ def cmd_solve(args) -> int:
     out = Path(args.out or Path("results") / prob.name)
     out.mkdir(parents=True, exist_ok=True)
     result = solve(prob, method, gradient=args.gradient, maxiter=maxiter, quiet=args.quiet,
-                   checkpoint=out / "checkpoint.npz")
+                   checkpoint=out / "checkpoint.npz",
+                   continuation=parse_time_steps(args.continuation))
     summary = save_result(result, out, problem_name=prob.name, overrides=overrides)
     render.convergence(result, out / "convergence.png")
     render.snapshot(prob, result.trajectory, out / "keyframes.png")
@@ -54,6 +67,10 @@ def cmd_solve(args) -> int:
     print(f"{prob.name}: {result.message}")
     print(f"  objective {summary['fun']:.6g}  iterations {result.nit}  evaluations "
           f"{result.nfev}  wall {result.timings['wall_seconds']:.1f} s")
+    if len(result.stages) > 1:
+        for st in result.stages:
+            print(f"  stage {st['stage']}: dt {st['dt']:.6g} s, {st['steps']} steps, "
+                  f"{st['nit']} iterations, objective {st['fun']:.6g}, {st['seconds']:.1f} s")
     for miss in summary["breakdown"]["misses"]:
         rest = ", ".join(f"{k} {v:.4g}" for k, v in miss.items() if k != "term")
         print(f"  {miss['term']:24s} {rest}")
@@ -109,7 +126,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
     s.add_argument("--method", choices=("lbfgsb", "ipopt"))
     s.add_argument("--gradient", default="adjoint", choices=("adjoint", "exact", "fd"))
-    s.add_argument("--maxiter", type=int)
+    s.add_argument("--maxiter", type=int, help="iteration limit (per stage with --continuation)")
+    s.add_argument("--continuation", metavar="DT,DT,...",
+                   help="solve at these time steps first, coarse to fine (e.g. 1/15,1/30,1/60); "
+                        "the problem's dt ends the list")
     s.add_argument("--out", help="output folder (default results/PROBLEM)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.add_argument("--no-animation", action="store_true", help="skip the GIF")

@@ -7,8 +7,39 @@ exact CasADi route.
 """
 from __future__ import annotations
 
+import copy
+
 import casadi as ca
 import numpy as np
+import scipy.sparse as sp
+
+
+def resample_steps(values, steps: int) -> np.ndarray:
+    """Per-step values ``(old_steps, ...)`` carried to ``steps`` equal steps of the same horizon.
+
+    The values are read as a piecewise-constant function of time (value n held over step n)
+    and each new step gets that function's mean over its interval.  So the integral over any
+    interval the two grids share (the impulse of a force) is kept exactly; refining by a whole
+    factor repeats each value, coarsening by one averages each group.  Entries whose weight is
+    zero never touch the result, so infinite bounds stay infinite.
+    """
+    values = np.asarray(values, dtype=float)
+    old = values.shape[0]
+    if not (isinstance(steps, (int, np.integer)) and steps >= 1):
+        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    if steps == old:
+        return values.copy()
+    # In units of 1 / (old * steps) of the horizon, old step i is [i*steps, (i+1)*steps) and
+    # new step j is [j*old, (j+1)*old): the overlaps are whole numbers, the weights exact.
+    rows, cols, weights = [], [], []
+    for j in range(steps):
+        lo, hi = j * old, (j + 1) * old
+        for i in range(lo // steps, min(-(-hi // steps), old)):
+            overlap = min(hi, (i + 1) * steps) - max(lo, i * steps)
+            if overlap > 0:
+                rows.append(j), cols.append(i), weights.append(overlap / old)
+    remap = sp.csr_matrix((weights, (rows, cols)), shape=(steps, old))
+    return (remap @ values.reshape(old, -1)).reshape((steps,) + values.shape[1:])
 
 
 class Controls:
@@ -39,6 +70,18 @@ class Controls:
 
     def zeros(self) -> np.ndarray:
         return np.zeros(self.size)
+
+    def for_steps(self, steps: int) -> "Controls":
+        """An unbound copy of these controls for the same system over ``steps`` steps (for a
+        problem resampled in time); bounds given per control entry are carried like ``u``."""
+        return copy.copy(self)
+
+    def resample(self, u, steps: int) -> np.ndarray:
+        """The controls ``u`` (bound to ``self.steps``) carried to ``steps`` steps of the same
+        horizon, so that they act the same way in time."""
+        raise NotImplementedError(
+            f"{type(self).__name__} does not say how to carry its controls to another time "
+            "step: define resample(u, steps) (and for_steps if its bounds are per step)")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """Lower and upper bounds on u (``-inf``/``inf`` where unbounded)."""
@@ -90,7 +133,13 @@ class Controls:
 
 
 class StepForces(Controls):
-    """One force per controlled particle per step (the paper's flocking and cloth controls)."""
+    """One force per controlled particle per step (the paper's flocking and cloth controls).
+
+    ``u`` holds forces in newtons, not impulses: ``u[n]`` is held over step n, from ``n dt``
+    to ``(n + 1) dt``, and so gives the impulse ``u[n] dt``.  The same force-versus-time on
+    another grid therefore needs no rescaling: :meth:`resample` maps it piecewise constant
+    in time (see :func:`resample_steps`), keeping the impulse over every shared interval.
+    """
 
     label = "per-step forces"
 
@@ -98,7 +147,21 @@ class StepForces(Controls):
     def block_shape(self):
         return (self.steps, self.idx.size, self.dim)
 
+    def for_steps(self, steps):
+        out = copy.copy(self)
+        for name in ("lower", "upper"):
+            bound = getattr(self, name)
+            if bound is not None and np.size(bound) == self.size and self.size > 1:
+                setattr(out, name, self.resample(np.ravel(bound), steps))
+        return out
+
+    def resample(self, u, steps):
+        blocks = np.asarray(u, dtype=float).reshape(self.block_shape)
+        return resample_steps(blocks, steps).ravel()
+
     def external(self, u):
+        """The control forces ``(steps, n, dim)`` in newtons, one per step (zero where not
+        controlled); the integrator applies ``external[n]`` over step n."""
         out = np.zeros((self.steps, self.n, self.dim))
         out[:, self.idx] = u.reshape(self.block_shape)
         return out
@@ -125,6 +188,10 @@ class InitialVelocity(Controls):
     @property
     def block_shape(self):
         return (self.idx.size, self.dim)
+
+    def resample(self, u, steps):
+        """Initial velocities do not depend on the time step: ``u`` unchanged (a copy)."""
+        return np.array(u, dtype=float)
 
     def velocity_offset(self, u):
         out = np.zeros((self.n, self.dim))

@@ -11,6 +11,8 @@ Weights multiply squared errors: ``0.5 * weight * ||error||^2`` (the paper's ``W
 """
 from __future__ import annotations
 
+import copy
+
 import casadi as ca
 import numpy as np
 
@@ -41,6 +43,13 @@ class Objective:
     def control_terms(self):
         return [t for t in self.terms if isinstance(t, ControlTerm)]
 
+    def retimed(self, frame_of) -> "Objective":
+        """The same objective with every state term moved to frame ``frame_of(term)`` (for a
+        problem resampled in time).  Control terms are shared: they are time integrals
+        written with the problem's dt (see :class:`Smoothness`), so they need no re-timing."""
+        return Objective([t.at_frame(frame_of(t)) if isinstance(t, StateTerm) else t
+                          for t in self.terms])
+
 
 class _Addable:
     def __add__(self, other):
@@ -54,6 +63,14 @@ class StateTerm(_Addable):
     """A term that looks at the state of one frame."""
 
     frame: int
+
+    def at_frame(self, frame: int) -> "StateTerm":
+        """An unbound copy of this term, with the same targets and weights, at ``frame``."""
+        out = copy.copy(self)
+        for name in [k for k in vars(out) if k.startswith("_")]:  # what bind() made
+            del out.__dict__[name]
+        out.frame = frame
+        return out
 
     def bind(self, model, steps: int) -> None:
         """Check the term against the system and compile its function."""
@@ -286,8 +303,10 @@ class Smoothness(ControlTerm):
     """The paper's ``alpha ||C_n u||^2``, plus an optional penalty on changes between steps.
 
     For per-step forces u_n:  ``0.5 alpha dt sum_n |u_n|^2 + 0.5 temporal / dt sum_n
-    |u_{n+1} - u_n|^2`` (time integrals, so the weight means the same at any dt).  For
-    initial velocities: ``0.5 alpha |u|^2``.
+    |u_{n+1} - u_n|^2``: Riemann sums of ``0.5 alpha int |u|^2 dt`` and ``0.5 temporal int
+    |du/dt|^2 dt``, so a weight means the same physical cost at any dt (a force held constant
+    has the same alpha-cost on a grid twice as fine; a jump between steps costs more on it).
+    For initial velocities: ``0.5 alpha |u|^2``.
     """
 
     label = "Smoothness"

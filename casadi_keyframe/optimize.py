@@ -2,7 +2,8 @@
 
 Both return a :class:`Result` in scipy's vocabulary plus the trajectory, a per-iteration
 history and timings.  Ctrl-C stops the solve and returns the best controls seen so far; with
-``checkpoint=`` that best is also written to disk at every iteration.
+``checkpoint=`` that best is also written to disk at every iteration.  ``continuation=``
+solves at coarse time steps first, then refines (see :func:`solve`).
 """
 from __future__ import annotations
 
@@ -37,21 +38,27 @@ class Result:
     history: list = field(default_factory=list)
     timings: dict = field(default_factory=dict)
     breakdown: dict = field(default_factory=dict)
+    stages: list = field(default_factory=list)
 
     def summary(self) -> dict:
-        """JSON-ready summary (no arrays)."""
+        """JSON-ready summary (no arrays); ``stages`` has one entry per continuation stage
+        (time step, iterations, evaluations, best objective at that step, seconds)."""
         return {"fun": self.fun, "nit": self.nit, "nfev": self.nfev, "success": self.success,
                 "message": self.message, "method": self.method, "gradient": self.gradient,
-                "timings": self.timings, "breakdown": self.breakdown,
+                "timings": self.timings, "breakdown": self.breakdown, "stages": self.stages,
                 "gradient_norm": float(np.linalg.norm(self.jac))}
 
 
 class _Evaluator:
-    """Memoised objective and gradient that tracks the best point and failed simulations."""
+    """Memoised objective and gradient that tracks the best point and failed simulations.
 
-    def __init__(self, problem, gradient, checkpoint):
+    ``stage`` is the continuation stage it serves; ``export`` maps its controls to the final
+    problem's grid for the checkpoint."""
+
+    def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None):
         self.problem, self.gradient = problem, get_gradient(gradient)
-        self.checkpoint = checkpoint
+        self.checkpoint, self.stage = checkpoint, stage
+        self.export = export or (lambda u: u)
         self.nfev = 0
         self.failures = 0
         self.last_u = None
@@ -80,57 +87,153 @@ class _Evaluator:
         return f, g
 
     def record(self, history, start, bar):
-        """Append one iteration (at the last evaluated point) to ``history``."""
+        """Append one iteration (at the last evaluated point) to ``history``; the checkpoint
+        gets the best controls on the final grid (``u``), their objective at this stage's
+        time step (``fun``), the ``stage`` and its ``stage_dt``."""
         u, (f, _) = self.last_u, self.last
         control = self.problem.control_cost(u)[0]
-        history.append({"iteration": len(history) + 1, "objective": float(f),
-                        "keyframe_error": float(f - control), "control_norm": float(np.linalg.norm(u)),
+        history.append({"iteration": len(history) + 1, "stage": self.stage,
+                        "dt": self.problem.dt, "objective": float(f),
+                        "keyframe_error": float(f - control),
+                        "control_norm": float(np.linalg.norm(u)),
                         "seconds": time.perf_counter() - start, "nfev": self.nfev})
         if self.checkpoint is not None and self.best_u is not None:
-            np.savez(self.checkpoint, u=self.best_u, fun=self.best_f, nit=len(history))
+            np.savez(self.checkpoint, u=self.export(self.best_u), fun=self.best_f,
+                     nit=len(history), stage=self.stage, stage_dt=self.problem.dt)
         bar.update(1)
         bar.set_postfix(f=f"{f:.4g}")
 
 
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
-          options: dict | None = None) -> Result:
+          options: dict | None = None, continuation=None) -> Result:
     """Optimise the problem's controls.
 
     ``method`` is "lbfgsb" or "ipopt"; ``gradient`` a route name or strategy; ``u0`` the
-    starting controls (default: passive); ``checkpoint`` a ``.npz`` path that always holds
-    the best controls so far; ``options`` go to the underlying solver.
+    starting controls at ``problem.dt`` (default: the problem's guess, else passive);
+    ``checkpoint`` a ``.npz`` path that always holds the best controls so far (at
+    ``problem.dt``, also during a coarse stage); ``options`` go to the underlying solver.
+
+    ``continuation`` (the paper's section 6: optimise at a large time step, then refine) is a
+    list of time steps from coarse to fine, e.g. ``[4 * prob.dt, 2 * prob.dt]``; the
+    problem's own dt is appended if the list does not end with it.  ``u0``, if given, is
+    carried to the first stage's grid.  Each stage solves
+    ``problem.resampled(dt)`` from the previous stage's best controls carried to its grid
+    (``controls.resample``: the force in newtons stays the same function of time).
+    ``maxiter`` applies to each stage.  The result is the last stage's, at ``problem.dt``;
+    ``nit``, ``nfev`` and ``timings`` are totals over the stages, every ``history`` record
+    names its ``stage`` and ``dt``, and ``stages`` lists per stage its dt, iterations,
+    evaluations, best objective (at that dt) and seconds.  Ctrl-C during an earlier stage
+    ends the continuation there: the result is that stage's best controls resampled to
+    ``problem.dt`` and evaluated there, and its message names the stage.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
     if maxiter < 1:
         raise ValueError("maxiter must be at least 1")
-    u0 = problem.initial_controls() if u0 is None else problem.controls.check(u0)
-    ev = _Evaluator(problem, gradient, checkpoint)
+    problems = stage_problems(problem, continuation)
+    strategy = get_gradient(gradient)
+    u = None if u0 is None else _carry(problem, problem.controls.check(u0), problems[0])
+    history, stages = [], []
+    start = time.perf_counter()
+    for k, p in enumerate(problems):
+        ev = _Evaluator(p, strategy, checkpoint, stage=k,
+                        export=lambda v, p=p: _carry(p, v, problem))
+        t = time.perf_counter()
+        nit, success, message, interrupted = _run(
+            p, method, ev, p.initial_controls() if u is None else u, maxiter, tol,
+            options or {}, history, start, quiet, stage=(k, len(problems)))
+        stages.append({"stage": k, "dt": p.dt, "steps": p.steps, "nit": nit,
+                       "nfev": ev.nfev, "fun": float(ev.best_f), "success": bool(success),
+                       "message": message, "seconds": time.perf_counter() - t,
+                       "evaluation_seconds": ev.seconds, "failed_simulations": ev.failures})
+        if interrupted or p is problem:
+            break
+        u = _carry(p, ev.best_u, problems[k + 1])
+    if p is problem:
+        u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
+    else:
+        u = _carry(p, ev.best_u, problem)
+        fun, jac = _evaluate_final(problem, strategy, u)
+        message = (f"interrupted by user in stage {k} of 0..{len(problems) - 1} (dt = "
+                   f"{p.dt:.6g} s): its best controls, resampled to dt = {problem.dt:.6g} s, kept")
+    traj = problem.simulate(u)
+    return Result(x=u, fun=fun, jac=jac, nit=sum(s["nit"] for s in stages),
+                  nfev=sum(s["nfev"] for s in stages), success=bool(success), message=message,
+                  method=method, gradient=getattr(strategy, "name", type(strategy).__name__),
+                  trajectory=traj, history=history,
+                  timings={"wall_seconds": time.perf_counter() - start,
+                           "evaluation_seconds": sum(s["evaluation_seconds"] for s in stages),
+                           "failed_simulations": sum(s["failed_simulations"] for s in stages),
+                           "stage_seconds": [s["seconds"] for s in stages]},
+                  breakdown=problem.breakdown(u, traj), stages=stages)
+
+
+def stage_problems(problem, continuation) -> list:
+    """The problems a continuation solves in turn, coarse to fine; the last is ``problem``.
+
+    ``continuation`` None means ``[problem]``.  Otherwise its time steps must decrease
+    strictly and end at ``problem.dt`` (appended if missing), each dividing the horizon into
+    whole steps with every keyframe on its grid (else ValueError, from ``resampled``).
+    """
+    if continuation is None:
+        return [problem]
+    try:
+        dts = [float(dt) for dt in continuation]
+    except (TypeError, ValueError):
+        raise ValueError(f"continuation must be a list of time steps in seconds, coarse to "
+                         f"fine, got {continuation!r}") from None
+    if not dts:
+        raise ValueError("continuation is empty: give time steps coarse to fine, e.g. "
+                         f"[{4 * problem.dt:.6g}, {2 * problem.dt:.6g}], or leave it out")
+    if abs(dts[-1] - problem.dt) <= 1e-9 * problem.dt:
+        dts[-1] = problem.dt
+    else:
+        dts.append(problem.dt)
+    if any(fine >= coarse for coarse, fine in zip(dts, dts[1:])):
+        raise ValueError(
+            f"{problem.name}: continuation time steps must decrease strictly, coarse to fine, "
+            f"and end at the problem's dt = {problem.dt:.6g} s (appended if missing); got "
+            f"{[float(f'{d:.6g}') for d in continuation]}.  To solve at a finer step, build the "
+            "problem with that dt")
+    return [problem.resampled(dt) for dt in dts[:-1]] + [problem]
+
+
+def _run(problem, method, ev, u0, maxiter, tol, options, history, start, quiet, stage):
+    """One optimizer run from ``u0``: ``(nit, success, message, interrupted)``."""
+    k, count = stage
+    where = "" if count == 1 else f" of stage {k} (dt = {problem.dt:.6g} s)"
     f0, _ = ev(u0)
     if not np.isfinite(f0):
-        raise SimulationError("the simulation fails at the starting controls", 0)
-    start = time.perf_counter()
-    history: list = []
-    bar = tqdm(total=maxiter, disable=quiet, desc=f"{problem.name} [{method}]", leave=False)
+        raise SimulationError(f"the simulation fails at the starting controls{where}"
+                              + ("; start the continuation at a finer dt" if where else ""), 0)
+    desc = f"{problem.name} [{method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
+    bar = tqdm(total=maxiter, disable=quiet, desc=desc, leave=False)
     run = _lbfgsb if method == "lbfgsb" else _ipopt
+    first = len(history)
     try:
-        nit, success, message = run(problem, ev, u0, maxiter, tol, options or {},
+        nit, success, message = run(problem, ev, u0, maxiter, tol, options,
                                     lambda: ev.record(history, start, bar))
+        return nit, success, message, False
     except KeyboardInterrupt:
-        nit, success, message = len(history), False, "interrupted by user; best result kept"
+        return len(history) - first, False, "interrupted by user; best result kept", True
     finally:
         bar.close()
-    wall = time.perf_counter() - start
-    u = ev.best_u
-    traj = problem.simulate(u)
-    return Result(x=u, fun=float(ev.best_f), jac=ev.best_g, nit=nit, nfev=ev.nfev,
-                  success=bool(success), message=message, method=method,
-                  gradient=getattr(ev.gradient, "name", type(ev.gradient).__name__),
-                  trajectory=traj, history=history,
-                  timings={"wall_seconds": wall, "evaluation_seconds": ev.seconds,
-                           "failed_simulations": ev.failures},
-                  breakdown=problem.breakdown(u, traj))
+
+
+def _carry(source, u, target):
+    """Controls ``u`` of problem ``source`` on the grid of problem ``target``."""
+    return u if source is target else source.controls.resample(u, target.steps)
+
+
+def _evaluate_final(problem, strategy, u):
+    """Objective and gradient of the final problem at ``u`` after an interrupted stage; if
+    that is interrupted too, the objective alone (gradient NaN)."""
+    try:
+        f, g = strategy(problem, u)
+        return float(f), g
+    except KeyboardInterrupt:
+        return float(problem.objective(u)), np.full(u.size, np.nan)
 
 
 def _lbfgsb(problem, ev, u0, maxiter, tol, options, on_iteration):

@@ -4,7 +4,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from .controls import Controls
+from .controls import Controls, resample_steps
 from .objectives import Objective, StateTerm
 from .trajectory import Trajectory
 
@@ -53,6 +53,59 @@ class ControlProblem:
     @property
     def size(self) -> int:
         return self.controls.size
+
+    @property
+    def horizon(self) -> float:
+        """Simulated time in seconds, ``steps * dt``."""
+        return self.steps * self.dt
+
+    def resampled(self, dt: float) -> "ControlProblem":
+        """The same problem at time step ``dt``: the same horizon in ``horizon / dt`` steps,
+        every keyframe at the same time, the stored external forces and the guess carried as
+        force-versus-time (:func:`~casadi_keyframe.controls.resample_steps`), the controls
+        rebound to the new step count.  Model, integrator, x0, v0 and scene are shared; at
+        the problem's own dt the problem itself is returned.
+
+        Raises ValueError if ``dt`` does not divide the horizon into whole steps or a keyframe
+        time falls between two steps of the new grid.
+        """
+        steps = self._steps_for(dt)
+        if steps == self.steps:
+            return self
+
+        frames = sorted({t.frame for t in self.objective_terms.state_terms})
+
+        def frame_of(term):
+            if (term.frame * steps) % self.steps:
+                raise ValueError(
+                    f"{self.name}: keyframe {term.label} at t = {term.frame * self.dt:.6g} s "
+                    f"falls between steps of dt = {self.horizon / steps:.6g} s (frame "
+                    f"{term.frame * steps / self.steps:.6g}); choose a dt whose steps land on "
+                    f"every keyframe (frames {frames} of {self.steps} at dt = {self.dt:.6g} s)")
+            return term.frame * steps // self.steps
+
+        objective = self.objective_terms.retimed(frame_of)
+        guess = None if self._guess is None else self.controls.resample(self._guess, steps)
+        return ControlProblem(
+            model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0, steps=steps,
+            dt=self.horizon / steps, controls=self.controls.for_steps(steps),
+            objective=objective, external=resample_steps(self.external, steps), name=self.name,
+            scene=self.scene, guess=guess)
+
+    def _steps_for(self, dt: float) -> int:
+        """The whole number of steps of size ``dt`` in the horizon, or a ValueError."""
+        if not (isinstance(dt, (int, float, np.floating, np.integer)) and np.isfinite(dt)
+                and dt > 0):
+            raise ValueError(f"{self.name}: a time step must be a positive number, got {dt!r}")
+        n = self.horizon / dt
+        steps = int(round(n))
+        if steps < 1 or abs(n - steps) > 1e-6 * max(n, 1.0):
+            raise ValueError(
+                f"{self.name}: dt = {dt:.6g} s does not divide the horizon of {self.horizon:.6g} s "
+                f"({self.steps} steps of {self.dt:.6g} s) into whole steps ({n:.6g}); choose "
+                f"dt = horizon / k for a whole k, e.g. {self.dt:.6g} s times a divisor of "
+                f"{self.steps}")
+        return steps
 
     def initial_controls(self) -> np.ndarray:
         """Where the optimizer starts: the problem's ``guess`` if it has one, else the passive

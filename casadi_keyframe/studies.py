@@ -173,3 +173,38 @@ def format_gradient_accuracy(study: dict) -> str:
         format_rows(study["horizon"], "by horizon, dt 1/60:"),
         format_rows(study["control"], "control case, flock hand adjoint vs CasADi reverse mode:"),
     ])
+
+
+def convergence_runs(runs, maxiter: int) -> dict:
+    """Solve each ``(label, problem, method, gradient)`` from the problem's start and keep
+    its convergence: objective per iteration and seconds, final objective, iterations, wall
+    seconds (a failed run keeps its message instead of stopping the study)."""
+    from .optimize import solve
+    out = {}
+    for label, problem, method, gradient in runs:
+        start = problem.objective(problem.initial_controls())
+        try:
+            result = solve(problem, method, gradient=gradient, maxiter=maxiter, quiet=True)
+        except Exception as err:  # noqa: BLE001 - a study reports failures, it does not stop
+            out[label] = {"error": f"{type(err).__name__}: {err}"}
+            continue
+        h = result.history
+        out[label] = {"iteration": [0] + [r["iteration"] for r in h],
+                      "objective": [start] + [r["objective"] for r in h],
+                      "seconds": [0.0] + [r["seconds"] for r in h],
+                      "final": result.fun, "nit": result.nit, "nfev": result.nfev,
+                      "wall": result.timings["wall_seconds"], "message": result.message}
+    return out
+
+
+def format_convergence(runs: dict, title: str) -> str:
+    """A plain-text table of :func:`convergence_runs`."""
+    lines = [title, f"  {'run':34s} {'final objective':>15s} {'iterations':>10s} "
+                    f"{'evaluations':>11s} {'seconds':>8s}"]
+    for label, r in runs.items():
+        if "error" in r:
+            lines.append(f"  {label:34s} failed: {r['error']}")
+        else:
+            lines.append(f"  {label:34s} {r['final']:15.6g} {r['nit']:10d} {r['nfev']:11d} "
+                         f"{r['wall']:8.1f}")
+    return "\n".join(lines)

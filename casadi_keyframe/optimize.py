@@ -61,6 +61,7 @@ class _Evaluator:
         self.export = export or (lambda u: u)
         self.nfev = 0
         self.failures = 0
+        self.last_failure = ""
         self.last_u = None
         self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.seconds = 0.0
@@ -73,9 +74,13 @@ class _Evaluator:
         t = time.perf_counter()
         try:
             f, g = self.gradient(self.problem, u)
-        except SimulationError:
+        except SimulationError as err:
+            # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
+            # up: measured, one iteration and "RELATIVE REDUCTION OF F"); IPOPT rejects it too
             self.failures += 1
-            f, g = np.inf, np.zeros_like(u)
+            self.last_failure = str(err)
+            best = self.best_f if np.isfinite(self.best_f) else 0.0
+            f, g = best + 10.0 * (abs(best) + 1.0), np.zeros_like(u)
         except KeyboardInterrupt:  # IPOPT would swallow it: remember, then re-raise
             self.interrupted = True
             raise
@@ -203,9 +208,10 @@ def _run(problem, method, ev, u0, maxiter, tol, options, history, start, quiet, 
     """One optimizer run from ``u0``: ``(nit, success, message, interrupted)``."""
     k, count = stage
     where = "" if count == 1 else f" of stage {k} (dt = {problem.dt:.6g} s)"
-    f0, _ = ev(u0)
-    if not np.isfinite(f0):
-        raise SimulationError(f"the simulation fails at the starting controls{where}"
+    ev(u0)
+    if ev.failures:
+        raise SimulationError(f"the simulation fails at the starting controls{where} "
+                              f"({ev.last_failure})"
                               + ("; start the continuation at a finer dt" if where else ""), 0)
     desc = f"{problem.name} [{method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
     bar = tqdm(total=maxiter, disable=quiet, desc=desc, leave=False)

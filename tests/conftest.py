@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, ParticleKeyframe,
+from casadi_keyframe import (Adjoint, CenterOfMassKeyframe, ControlProblem, ParticleKeyframe,
                              RegionTarget, Smoothness, StateKeyframe, StepForces)
 from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel, FlockParams, wander_forces
@@ -31,3 +31,16 @@ def small_flock(cutoff="smooth", *, n=8, steps=30, dt=0.1, dim=2, controls=None,
 @pytest.fixture(params=["smooth", "hard"])
 def cutoff(request):
     return request.param
+
+
+class InterruptAfter(Adjoint):
+    """Acts like Ctrl-C after a number of gradient evaluations (and at every one after)."""
+
+    def __init__(self, calls):
+        self.calls = calls
+
+    def __call__(self, problem, u):
+        self.calls -= 1
+        if self.calls < 0:
+            raise KeyboardInterrupt
+        return super().__call__(problem, u)

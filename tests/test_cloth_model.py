@@ -3,7 +3,7 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casadi_keyframe.models.cloth import (BEND, SHEAR, STRETCH, ClothModel, ClothParams,
+from casadi_keyframe.models.cloth import (SHEAR, STRETCH, ClothModel, ClothParams,
                                           pair_block_matrices, sinc_inverse, spring_kernels)
 
 

@@ -4,13 +4,15 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casadi_keyframe import (Adjoint, CenterOfMassKeyframe, ControlProblem, InitialVelocity,
+from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, InitialVelocity,
                              ParticleKeyframe, RegionTarget, Smoothness, StateKeyframe,
                              StepForces, load_problem, solve)
 from casadi_keyframe.controls import resample_steps
 from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel, FlockParams, wander_forces
 from casadi_keyframe.shapes import square
+
+from conftest import InterruptAfter
 
 FREE = FlockParams(avoid_strength=0.0, match_strength=0.0, center_strength=0.0)
 
@@ -32,19 +34,6 @@ def flock(*, steps=24, dt=0.1, params=FREE, n=5, dim=2, seed=0, controls=None, w
                           steps=steps, dt=dt, controls=controls or StepForces(), objective=obj,
                           external=wander_forces(steps, n, dim, strength=wander, seed=seed + 1),
                           name="free_flock", guess=guess)
-
-
-class InterruptAfter(Adjoint):
-    """Acts like Ctrl-C after a number of gradient evaluations (and at every one after)."""
-
-    def __init__(self, calls):
-        self.calls = calls
-
-    def __call__(self, problem, u):
-        self.calls -= 1
-        if self.calls < 0:
-            raise KeyboardInterrupt
-        return super().__call__(problem, u)
 
 
 def cost(term, prob, u) -> float:

@@ -2,11 +2,11 @@
 import numpy as np
 import pytest
 
-from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, RegionTarget, Smoothness,
+from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, Smoothness,
                              StateKeyframe, StepForces, load_problem)
 from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel
-from casadi_keyframe.shapes import Box, Disc, Polygon, cross, square
+from casadi_keyframe.shapes import Box, Disc, cross, square
 
 from conftest import small_flock
 

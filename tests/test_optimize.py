@@ -4,6 +4,8 @@ import pytest
 
 from casadi_keyframe import Adjoint, SimulationError, load_problem, solve
 
+from conftest import InterruptAfter
+
 
 @pytest.fixture(scope="module")
 def race():
@@ -30,19 +32,6 @@ def test_bounds_are_respected(race, method):
     r = solve(prob, method, maxiter=50, quiet=True)
     assert np.abs(r.x).max() <= 0.5 + 1e-9
     assert np.abs(r.x).max() > 0.4  # the bound is active: the problem wants more force
-
-
-class InterruptAfter(Adjoint):
-    """Acts like Ctrl-C after a number of gradient evaluations."""
-
-    def __init__(self, calls):
-        self.calls = calls
-
-    def __call__(self, problem, u):
-        self.calls -= 1
-        if self.calls < 0:
-            raise KeyboardInterrupt
-        return super().__call__(problem, u)
 
 
 @pytest.mark.parametrize("method", ["lbfgsb", "ipopt"])

@@ -42,8 +42,10 @@ def hanging_sheet(rows: int = 5, stretch: float = 500.0, ground: bool = True) ->
 
 
 def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float = 500.0,
-                    adjoint: str = "swapped", rows: int = 5) -> ControlProblem:
-    """The gradient-accuracy case: :func:`hanging_sheet` swung forward, random step forces."""
+                    adjoint: str = "swapped", rows: int = 5, solver: str = "direct",
+                    controls=None) -> ControlProblem:
+    """The gradient-accuracy case: :func:`hanging_sheet` swung forward (step forces on every
+    particle unless ``controls`` says otherwise)."""
     steps = int(round(horizon / dt))
     if steps < 2 or abs(steps * dt - horizon) > 1e-9 * horizon:
         raise ValueError(f"dt = {dt} must divide the horizon {horizon} s into >= 2 steps")
@@ -52,9 +54,10 @@ def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float =
     objective = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05])
                  + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0])
                  + Smoothness(1e-4))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler("direct", adjoint=adjoint),
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
                           x0=x0, v0=np.zeros_like(x0), steps=steps, dt=dt,
-                          controls=StepForces(), objective=objective, name="contact_sheet")
+                          controls=controls or StepForces(), objective=objective,
+                          name="contact_sheet")
 
 
 def compare(g, reference) -> tuple[float, float]:

@@ -111,16 +111,9 @@ def test_swapped_adjoint_is_exact_for_linear_forces(pinned):
 
 def contact_problem(dt=1 / 60, horizon=1 / 3, adjoint="swapped", controls=None, solver="cg"):
     """5 x 5 sheet hanging from two corners, its lower edge resting on the ground (the issue's
-    accuracy case), default dt 1/60."""
-    from casadi_keyframe.models.colliders import Plane
-    steps = int(round(horizon / dt))
-    model = ClothModel.grid(5, 5, pinned=[0, 4], colliders=[Plane((0, 0, -1.007))])
-    x0 = model.rest_positions
-    obj = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05])
-           + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0]) + Smoothness(1e-4))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
-                          x0=x0, v0=np.zeros_like(x0), steps=steps, dt=dt,
-                          controls=controls or StepForces(), objective=obj)
+    accuracy case, shared with the studies), default dt 1/60."""
+    from casadi_keyframe.studies import contact_problem as sheet
+    return sheet(dt, horizon, adjoint=adjoint, solver=solver, controls=controls)
 
 
 def swapped_and_exact(dt, seed=0, amp=0.05, **kw):

@@ -10,9 +10,9 @@ uses the true Jacobian of R (sparse LU): 5-7 iterations to 1e-10 on a 4 x 4 shee
 With ``"cg"`` it uses the step matrix ``A = M - dt D - dt^2 K`` of the model's symmetric,
 clamped stiffness, positive definite so CG applies; the residual is the true one, so it
 converges to the same step, but linearly (14-26 iterations on the same sheet: contact
-damping's position derivative and the clamping are missing from A).  The linearized scheme is the first Newton iterate from
-``v+ = v`` with the Jacobians at the start of the step, which is why the two differ by
-O(dt^3) per step for smooth forces.
+damping's position derivative and the clamping are missing from A).  The linearized scheme
+is the first Newton iterate from ``v+ = v`` with the Jacobians at the start of the step,
+which is why the two differ by O(dt^3) per step for smooth forces.
 
 Adjoint: the swapped adjoint of the linearized scheme IS the exact adjoint here, once it uses
 the true Jacobians at the step's end, ``J = df/dx`` and ``D = df/dv`` at (x+, v+, t+):
@@ -32,16 +32,23 @@ import scipy.sparse as sp
 
 from ..trajectory import SimulationError, Trajectory, check_state
 from .linear_solvers import SOLVERS, SolveError, direct_solve, solve_step
-from .linearized_backward_euler import check_stretch, step_matrices
+from .linearized_backward_euler import (check_stretch, prescribed_velocity_symbolic,
+                                        step_matrices)
+
+
+def residual_jacobian(model, xp, vp, t, dt, mass):
+    """``(dR/dv+, df/dx)`` at the end state (xp, vp) at time t: ``M - dt D - dt^2 df/dx``
+    with the true, unclamped Jacobians (not symmetric), and df/dx itself."""
+    _, D, df_dx = model.jacobians(xp, vp, t, with_df_dx=True)
+    return sp.diags(mass) - dt * D - dt * dt * df_dx, df_dx
 
 
 class BackwardEuler:
     """Backward Euler for models with ``forces`` and sparse ``jacobians`` (cloth).
 
     ``solver`` ("direct" or "cg", see the module docstring) solves each Newton system (CG to
-    ``tol``); Newton stops when its
-    update is below ``newton_tol`` (m/s, relative to ``max(1, |v+|)``) and reports a
-    :class:`SimulationError` after ``max_newton`` iterations.
+    ``tol``); Newton stops when its update is below ``newton_tol`` (m/s, relative to
+    ``max(1, |v+|)``) and reports a :class:`SimulationError` after ``max_newton`` iterations.
     """
 
     name = "backward_euler"
@@ -100,9 +107,8 @@ class BackwardEuler:
         the clamped stiffness (CG applies; linear convergence where clamping or damping's
         position derivative matter)."""
         if self.solver == "direct":
-            _, D, df_dx = model.jacobians(xp, vp, t, with_df_dx=True)
-            jacobian = (sp.diags(mass) - dt * D - dt * dt * df_dx).tocsr()
-            return direct_solve(jacobian, rhs, free, symmetric=False)[0]
+            jacobian, _ = residual_jacobian(model, xp, vp, t, dt, mass)
+            return direct_solve(jacobian.tocsr(), rhs, free, symmetric=False)[0]
         A, _ = step_matrices(model, xp, vp, dt, t)
         return solve_step(self.solver, A, rhs, free, np.zeros_like(rhs), tol=self.tol)
 
@@ -117,10 +123,9 @@ class BackwardEuler:
         ax, av = free * gx[steps].ravel(), free * gv[steps].ravel()
         for n in range(steps - 1, -1, -1):
             t1 = (n + 1) * dt
-            _, D, df_dx = model.jacobians(traj.x[n + 1], traj.v[n + 1], t1, with_df_dx=True)
-            jacobian = (sp.diags(mass) - dt * D - dt * dt * df_dx).T.tocsr()
+            jacobian, df_dx = residual_jacobian(model, traj.x[n + 1], traj.v[n + 1], t1, dt, mass)
             try:
-                lam = direct_solve(jacobian, av + dt * ax, free_mask, symmetric=False)[0]
+                lam = direct_solve(jacobian.T.tocsr(), av + dt * ax, free_mask, symmetric=False)[0]
             except SolveError as err:
                 raise SimulationError(f"adjoint of step {n + 1}: {err}", n + 1) from err
             g_ext[n] = (dt * lam).reshape(shape)
@@ -144,12 +149,7 @@ class BackwardEuler:
         f = model.symbolic_forces(X + dt * Vp, Vp, S[:n_scene])
         mass = ca.repmat(ca.DM(model.masses).T, d, 1)
         residual = mass * (Vp - V) - dt * (f + E)
-        target = ca.SX.zeros(d, n)  # constrained: pinned stay, attached reach their targets
-        at = n_scene
-        for a in model.attachments:
-            k, idx = a.particles.size, a.particles.tolist()
-            target[:, idx] = (ca.reshape(S[at:at + 3 * k], 3, k) - X[:, idx]) / dt
-            at += 3 * k
+        target = prescribed_velocity_symbolic(model, X, S[n_scene:], dt)
         free = ca.DM(model.free_mask().reshape(n, d).T.astype(float))
         residual = free * residual + (1 - free) * (Vp - target)
         G = ca.Function("be_residual", [ca.vec(Vp), X, V, E, dt, S], [ca.vec(residual)])

@@ -60,6 +60,19 @@ def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False):
     return ((sp.diags(mass) - dt * D - dt * dt * K).tocsr(), K, *df_dx)
 
 
+def prescribed_velocity_symbolic(model, X, targets, dt):
+    """``d x n`` end-of-step velocities of the constrained particles (SX): zero for pinned
+    ones, ``(target - x) / dt`` for attached ones, ``targets`` the flat attachment targets
+    (:meth:`model.attachment_targets`); zero for free particles (unused)."""
+    v = ca.SX.zeros(model.dim, model.n)
+    at = 0
+    for a in model.attachments:
+        k, idx = a.particles.size, a.particles.tolist()
+        v[:, idx] = (ca.reshape(targets[at:at + 3 * k], 3, k) - X[:, idx]) / dt
+        at += 3 * k
+    return v
+
+
 def check_stretch(model, x, step: int, limit: float = 5.0) -> None:
     """A spring stretched ``limit`` times its rest length means the step has blown up."""
     stretch = model.max_stretch(x) if hasattr(model, "max_stretch") else 0.0
@@ -200,13 +213,7 @@ class LinearizedBackwardEuler:
         mass = np.repeat(model.masses, d)
         A = ca.diag(ca.DM(mass)) - dt * D - dt * dt * K
         b = dt * (f + ca.vec(E) + dt * ca.mtimes(K, ca.vec(V)))
-        v_new = ca.SX.zeros(d, n)  # constrained: pinned stay, attached reach their targets
-        at = n_scene
-        for a in model.attachments:
-            k = a.particles.size
-            target = ca.reshape(S[at:at + 3 * k], 3, k)
-            v_new[:, a.particles.tolist()] = (target - X[:, a.particles.tolist()]) / dt
-            at += 3 * k
+        v_new = prescribed_velocity_symbolic(model, X, S[n_scene:], dt)
         system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, ca.vec(v_new - V)])
         Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
         dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)

@@ -177,3 +177,23 @@ def test_initial_velocity_control_gradients_for_cloth():
     _, g_ad = prob.objective_and_gradient(u, "exact")
     assert np.linalg.norm(ge - g_ad) < 1e-8 * np.linalg.norm(g_ad)
     assert ga @ ge / (np.linalg.norm(ga) * np.linalg.norm(ge)) >= 0.99
+
+
+@pytest.mark.parametrize("solver", ["cg", "direct"])
+def test_force_for_is_the_inverse_of_a_step(solver):
+    """A step under the force ``force_for`` asks for ends on the asked velocities (free
+    particles; pinned ones keep their prescribed rest), on a sheet in ground contact."""
+    prob = contact_problem(solver=solver)
+    model, integrator, dt = prob.model, prob.integrator, prob.dt
+    rng = np.random.default_rng(3)
+    x = prob.x0 + 0.01 * rng.standard_normal(prob.x0.shape)
+    v = 0.3 * rng.standard_normal(x.shape)
+    v1 = 0.3 * rng.standard_normal(x.shape)
+    force = integrator.force_for(model, x, v, v1, 4, dt)
+    x_end, v_end, _ = integrator.step(model, x, v, force, 4, dt)
+    free = model.free_mask().reshape(x.shape)
+    assert not free.all() and np.abs(force).max() > 1.0
+    np.testing.assert_allclose(v_end[free], v1[free], atol=1e-8)
+    np.testing.assert_allclose(x_end[free], (x + dt * v1)[free], atol=1e-10)
+    np.testing.assert_allclose(v_end[~free], model.prescribed_velocity(x, 4 * dt, dt)[~free],
+                               atol=1e-12)

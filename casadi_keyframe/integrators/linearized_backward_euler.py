@@ -115,23 +115,40 @@ class LinearizedBackwardEuler:
         x = np.empty((steps + 1,) + x0.shape)
         v = np.empty_like(x)
         x[0], v[0] = x0, v0
-        free = model.free_mask()
         dv = None
         for n in range(steps):
-            t = n * dt
-            A, K = step_matrices(model, x[n], v[n], dt, t)
-            b = dt * ((model.forces(x[n], v[n], t) + external[n]).ravel()
-                      + dt * (K @ v[n].ravel()))
-            z = (model.prescribed_velocity(x[n], t, dt) - v[n]).ravel()
-            try:
-                dv = self._solve(A, b, free, z, x0=dv)
-            except SolveError as err:
-                raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
-            v[n + 1] = v[n] + dv.reshape(v[n].shape)
-            x[n + 1] = x[n] + dt * v[n + 1]
-            check_state(x[n + 1], v[n + 1], n + 1)
-            check_stretch(model, x[n + 1], n + 1)
+            x[n + 1], v[n + 1], dv = self.step(model, x[n], v[n], external[n], n, dt, dv)
         return Trajectory(x, v, dt)
+
+    def step(self, model, x, v, external, n: int, dt: float, dv_guess=None):
+        """Step ``n`` (from t = n dt) under the external force ``external`` (``(n, 3)``):
+        ``(x+, v+, dv)``, ``dv`` flat (a warm start for the next step's CG).  Raises
+        SimulationError if the solve fails, the state is not finite or the cloth blows up."""
+        t = n * dt
+        A, K = step_matrices(model, x, v, dt, t)
+        b = dt * ((model.forces(x, v, t) + external).ravel() + dt * (K @ v.ravel()))
+        z = (model.prescribed_velocity(x, t, dt) - v).ravel()
+        try:
+            dv = self._solve(A, b, model.free_mask(), z, x0=dv_guess)
+        except SolveError as err:
+            raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
+        v1 = v + dv.reshape(v.shape)
+        x1 = x + dt * v1
+        check_state(x1, v1, n + 1)
+        check_stretch(model, x1, n + 1)
+        return x1, v1, dv
+
+    @staticmethod
+    def force_for(model, x, v, v1, n: int, dt: float) -> np.ndarray:
+        """The inverse step: the external force ``(n, 3)`` under which :meth:`step` from
+        ``(x, v)`` at step ``n`` ends with velocities ``v1`` (so positions ``x + dt v1``).
+        Exact for the free particles; the constrained ones follow their prescribed motion
+        whatever the force (and ``v1`` there is ignored), so their force has no effect."""
+        t = n * dt
+        A, K = step_matrices(model, x, v, dt, t)
+        prescribed = model.prescribed_velocity(x, t, dt)
+        dv = np.where(model.free_mask(), (v1 - v).ravel(), (prescribed - v).ravel())
+        return (A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape) - model.forces(x, v, t)
 
     def adjoint(self, model, traj: Trajectory, gx, gv):
         """The adjoint chosen at construction; returns ``(g_external, g_x0, g_v0)``.

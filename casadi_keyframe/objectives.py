@@ -127,6 +127,11 @@ class StateTerm(_Addable):
         """The bound position target (``None`` if the term has none)."""
         return getattr(self, "_x", None)
 
+    @property
+    def velocity_target(self):
+        """The bound velocity target (``None`` if the term has none)."""
+        return getattr(self, "_v", None)
+
 
 def _agents(agents, n, label):
     if agents is None:
@@ -193,6 +198,18 @@ class StateKeyframe(StateTerm):
         idx = self._idx.tolist()
         return 0.5 * (self.position_weight * ca.sumsqr(X[:, idx] - xs)
                       + self.velocity_weight * ca.sumsqr(V[:, idx] - vs))
+
+    def moved(self, dx=0.0, dv=0.0, weight_scale: float = 1.0) -> "StateKeyframe":
+        """An unbound copy (after ``bind``) aiming at targets moved by ``dx``, ``dv`` (per
+        constrained particle) with both weights times ``weight_scale``: an augmented
+        Lagrangian's shifted keyframe."""
+        out = self.at_frame(self.frame)
+        out.agents = self._idx
+        out.x = None if self._x is None else self._x + dx
+        out.v = None if self._v is None else self._v + dv
+        out.position_weight = self.position_weight * weight_scale
+        out.velocity_weight = self.velocity_weight * weight_scale
+        return out
 
     def miss(self, traj):
         out = {"term": self.label}

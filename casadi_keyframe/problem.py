@@ -86,11 +86,23 @@ class ControlProblem:
 
         objective = self.objective_terms.retimed(frame_of)
         guess = None if self._guess is None else self.controls.resample(self._guess, steps)
-        return ControlProblem(
-            model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0, steps=steps,
-            dt=self.horizon / steps, controls=self.controls.for_steps(steps),
-            objective=objective, external=resample_steps(self.external, steps), name=self.name,
-            scene=self.scene, guess=guess)
+        return self._rebuilt(steps=steps, dt=self.horizon / steps, objective=objective,
+                             external=resample_steps(self.external, steps), guess=guess)
+
+    def with_objective(self, objective) -> "ControlProblem":
+        """The same problem (model, integrator, start, controls, scene, guess shared) with
+        another objective, e.g. a keyframe with a shifted target or a stiffer weight."""
+        return self._rebuilt(objective=objective)
+
+    def _rebuilt(self, **changes) -> "ControlProblem":
+        """A new problem from this one's arguments with ``changes``; the controls are an
+        unbound copy for the (possibly new) step count."""
+        steps = changes.pop("steps", self.steps)
+        args = dict(model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0,
+                    steps=steps, dt=self.dt, controls=self.controls.for_steps(steps),
+                    objective=self.objective_terms, external=self.external, name=self.name,
+                    scene=self.scene, guess=self._guess)
+        return ControlProblem(**{**args, **changes})
 
     def _steps_for(self, dt: float) -> int:
         """The whole number of steps of size ``dt`` in the horizon, or a ValueError."""

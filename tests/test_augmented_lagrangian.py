@@ -1,0 +1,87 @@
+"""Hard keyframes: the augmented Lagrangian drives the miss a penalty leaves towards zero."""
+import numpy as np
+import pytest
+
+from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, Smoothness, StateKeyframe, StepForces
+from casadi_keyframe.augmented_lagrangian import solve_augmented
+from casadi_keyframe.integrators import LinearizedBackwardEuler
+from casadi_keyframe.optimize import solve
+from casadi_keyframe.studies import hanging_sheet
+
+OPTIONS = {"maxiter": 60, "quiet": True}
+
+
+def swing(weight=20.0, alpha=2e-2):
+    """A soft 3 x 3 sheet, its free particles swung 20 cm forward in 1/3 s: its forces cost
+    enough (``alpha``) that the keyframe penalty alone leaves a miss of millimetres."""
+    model = hanging_sheet(3, stretch=50.0, ground=False)
+    x0 = model.rest_positions
+    free = np.setdiff1d(np.arange(model.n), model.pinned)
+    steps = 10
+    objective = (StateKeyframe(steps, x=x0[free] + [0.0, 0.2, 0.0], position_weight=weight,
+                               agents=free)
+                 + Smoothness(alpha))
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler("direct", adjoint="exact"),
+                          x0=x0, v0=np.zeros_like(x0), steps=steps, dt=1 / 30,
+                          controls=StepForces(), objective=objective, name="swing")
+
+
+def rms_miss(result):
+    return result.breakdown["misses"][0]["rms_position_error"]
+
+
+@pytest.fixture(scope="module")
+def penalty():
+    return solve(swing(), **OPTIONS)
+
+
+def test_multipliers_shrink_the_penalty_miss(penalty):
+    prob = swing()
+    result = solve_augmented(prob, rounds=4, **OPTIONS)
+    misses = [s["misses"][0]["rms_position_error"] for s in result.stages]
+    assert len(result.stages) == 4 and result.nit == sum(s["nit"] for s in result.stages)
+    assert misses[0] == pytest.approx(rms_miss(penalty), rel=1e-6)  # round 0 is the penalty
+    assert rms_miss(penalty) > 0.002  # the control cost pulls (2.3 mm, measured)
+    assert misses[-1] < rms_miss(penalty) / 5  # 0.24 mm, measured
+    assert all(b < a for a, b in zip(misses, misses[1:]))
+    # the result is scored on the true problem, not the shifted one of the last round
+    assert result.fun == pytest.approx(prob.objective(result.x), rel=1e-9)
+    assert result.breakdown["control_cost"] > penalty.breakdown["control_cost"]
+
+
+def test_a_weight_schedule_shrinks_it_and_multipliers_on_top_shrink_it_further(penalty):
+    schedule = solve_augmented(swing(), rounds=3, weight_growth=10.0, multipliers=False,
+                               **OPTIONS)
+    both = solve_augmented(swing(), rounds=3, weight_growth=10.0, **OPTIONS)
+    assert [s["weight_scale"] for s in schedule.stages] == [1.0, 10.0, 100.0]
+    assert rms_miss(schedule) < rms_miss(penalty) / 20  # 0.034 mm, measured
+    assert rms_miss(both) < rms_miss(schedule) / 2  # 0.004 mm, measured
+
+
+def test_shifted_keyframe_aims_past_the_target():
+    prob = swing()
+    term = prob.objective_terms.state_terms[0]
+    moved = term.moved(dx=0.1, dv=-1.0, weight_scale=3.0)
+    again = prob.with_objective(moved + Smoothness(2e-2))
+    bound = again.objective_terms.state_terms[0]
+    np.testing.assert_allclose(bound.position_target, term.position_target + 0.1)
+    assert bound.velocity_target is None and term.velocity_target is None
+    np.testing.assert_array_equal(bound.particles, term.particles)
+    assert bound.position_weight == 3 * term.position_weight
+    assert term.position_target is not bound.position_target  # the original is untouched
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"rounds": 0}, "rounds must be"),
+    ({"weight_growth": 0.5}, "weight_growth must be"),
+])
+def test_bad_options_are_refused(kwargs, message):
+    with pytest.raises(ValueError, match=message):
+        solve_augmented(swing(), **kwargs)
+
+
+def test_a_problem_without_state_keyframe_is_refused():
+    prob = swing()
+    com = prob.with_objective(CenterOfMassKeyframe(10, x=[0, 0.2, 0]) + Smoothness(1e-2))
+    with pytest.raises(ValueError, match="no StateKeyframe"):
+        solve_augmented(com)

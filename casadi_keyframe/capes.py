@@ -13,6 +13,8 @@ clip starts from the cape hanging at rest from the first pose, settled by a shor
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from .characters import Animation, Character, Walk, capsule_clearance, fall, walk
@@ -158,6 +160,14 @@ def simulate_clip(kind="walk", rows: int = 26, cols: int = 16, seconds: float = 
     steps = int(round(seconds / dt))
     traj = LinearizedBackwardEuler().simulate(model, x0, v0, np.zeros((steps, model.n, 3)), dt)
     return model, traj, animation
+
+
+@lru_cache(maxsize=8)
+def cached_clip(kind: str, rows: int, cols: int, seconds: float, dt: float):
+    """:func:`simulate_clip` with the default character and cape, memoised per argument set
+    for the process (problem files are re-imported at every load, so their own caches do
+    not last).  The result is shared: read it, never modify its arrays."""
+    return simulate_clip(kind, rows, cols, seconds=seconds, dt=dt)
 
 
 def clip_report(model: ClothModel, traj, character: Character, animation: Animation) -> dict:

@@ -3,7 +3,8 @@
 ``animate`` writes a GIF, ``snapshot`` a PNG of small multiples at the keyframes and
 ``convergence`` a PNG of the optimizer's history.  All use the Agg backend and close their
 figures.  For a cloth (a model with ``faces``) ``animate`` and ``snapshot`` hand over to
-:mod:`.render_cloth`, which draws in 3-D.
+:mod:`.render_cloth`, which draws in 3-D, and for a blend between source clips (a scene
+with ``clips``) to :mod:`.render_blend`, which draws the clips and the blend side by side.
 """
 from __future__ import annotations
 
@@ -76,8 +77,16 @@ def write_gif(fig, draw, frames, path: Path, fps: int, dpi: int = 80) -> None:
             writer.grab_frame()
 
 
-def _is_cloth(problem) -> bool:
-    return hasattr(problem.model, "faces")
+def _renderer_3d(problem):
+    """The module drawing ``problem`` in 3-D, or None (a flock, drawn here): render_blend
+    for a blend between source clips (``scene["clips"]``), render_cloth for a cloth."""
+    if "clips" in problem.scene:
+        from . import render_blend
+        return render_blend
+    if hasattr(problem.model, "faces"):
+        from . import render_cloth
+        return render_cloth
+    return None
 
 
 class _Scene:
@@ -200,12 +209,13 @@ def animate(problem, trajectory, path, *, fps: int | None = None,
 
     Long trajectories are subsampled to about ``max_frames + 1`` frames (default 150, at
     ``fps`` 20), keeping every keyframe and the last frame.  ``title`` overrides the problem
-    name in the title.  A cloth goes to :func:`.render_cloth.animate` (its own defaults).
+    name in the title.  A cloth goes to :func:`.render_cloth.animate` and a blend of source
+    clips to :func:`.render_blend.animate` (their own defaults).
     """
-    if _is_cloth(problem):
-        from . import render_cloth
+    module = _renderer_3d(problem)
+    if module is not None:
         given = {k: v for k, v in (("fps", fps), ("max_frames", max_frames)) if v is not None}
-        return render_cloth.animate(problem, trajectory, path, title=title, **given)
+        return module.animate(problem, trajectory, path, title=title, **given)
     fps, max_frames = fps or 20, 150 if max_frames is None else max_frames
     path = Path(path)
     fig, ax = plt.subplots()
@@ -225,11 +235,12 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
     """Write a PNG of small multiples: by default the first frame, each keyframe and the last.
 
     At most 6 panels: longer lists keep their first and last frame and are thinned evenly.
-    A cloth goes to :func:`.render_cloth.snapshot`.
+    A cloth goes to :func:`.render_cloth.snapshot`, a blend of source clips to
+    :func:`.render_blend.snapshot`.
     """
-    if _is_cloth(problem):
-        from . import render_cloth
-        return render_cloth.snapshot(problem, trajectory, path, frames)
+    module = _renderer_3d(problem)
+    if module is not None:
+        return module.snapshot(problem, trajectory, path, frames)
     path = Path(path)
     frames = snapshot_frames(problem, trajectory, frames)
     cols = {1: 1, 2: 2, 3: 3, 4: 2}.get(len(frames), 3)

@@ -103,6 +103,17 @@ class _Box:
             pts.append(_circle(ring["center"], ring["normal"], ring["radius"]))
         bodies = [[_body(b, n * traj.dt) for b in problem.model.colliders]
                   for n in range(traj.steps + 1)]
+        self._fit(pts, bodies)
+
+    @classmethod
+    def around(cls, points, bodies) -> "_Box":
+        """The box around ``points`` (a list of ``(k, 3)`` arrays) and ``bodies`` (per frame,
+        a list of :func:`_body` geometries): for views that are not one problem's frames."""
+        box = cls.__new__(cls)
+        box._fit(list(points), bodies)
+        return box
+
+    def _fit(self, pts, bodies):
         for kind, a, b, *r in (g for frame in bodies for g in frame):
             if kind == "round":
                 pts.append(np.array([a - r[0], a + r[0], b - r[0], b + r[0]]))
@@ -151,18 +162,26 @@ class _ClothView:
 
     def draw(self, n: int, full_title: bool = True):
         """Replace the frame-dependent artists with those of frame ``n``."""
-        for artist in self.dynamic:
-            artist.remove()
-        ax, x, faces = self.ax, np.asarray(self.traj.x[n]), self.model.faces
-        self.dynamic = []
-        self._add(Poly3DCollection(x[faces], facecolors=face_colors(x, faces),
-                                   edgecolors=(0, 0, 0, 0.12), lw=0.2))
-        if self.marked.size:
-            self.dynamic.append(ax.scatter(*x[self.marked].T, s=10, c=MARK, depthshade=False))
+        self._clear()
+        self._cloth(np.asarray(self.traj.x[n]))
         self._colliders(n * self.traj.dt)
         self._targets(n)
-        ax.set_title(frame_title(self.name, n, self.traj, full_title),
-                     fontsize=9 if full_title else 8)
+        self.ax.set_title(frame_title(self.name, n, self.traj, full_title),
+                          fontsize=9 if full_title else 8)
+
+    def _clear(self):
+        for artist in self.dynamic:
+            artist.remove()
+        self.dynamic = []
+
+    def _cloth(self, x, color=CLOTH):
+        """The cloth at positions ``x``, shaded ``color``, and its pinned / attached particles."""
+        faces = self.model.faces
+        self._add(Poly3DCollection(x[faces], facecolors=face_colors(x, faces, color),
+                                   edgecolors=(0, 0, 0, 0.12), lw=0.2))
+        if self.marked.size:
+            self.dynamic.append(self.ax.scatter(*x[self.marked].T, s=10, c=MARK,
+                                                depthshade=False))
 
     def _colliders(self, t: float):
         for kind, a, b, *r in (_body(body, t) for body in self.model.colliders):
@@ -189,17 +208,20 @@ class _ClothView:
                     and np.unique(term.particles).size == self.model.n):
                 shape = np.empty((self.model.n, 3))
                 shape[term.particles] = target
-                self._add(Poly3DCollection(shape[self.model.faces], facecolors="none", lw=0.4,
+                # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
+                lw = min(0.4, 120 / len(self.model.faces))
+                self._add(Poly3DCollection(shape[self.model.faces], facecolors="none", lw=lw,
                                            edgecolors=matplotlib.colors.to_rgba(TARGET, alpha)))
             else:
                 self.dynamic.append(self.ax.scatter(*target.T, marker="x", s=40, c=TARGET,
                                                     alpha=alpha, depthshade=False))
 
 
-def _legend(fig, view: _ClothView):
-    """A figure legend listing only what the view draws."""
+def _legend(fig, view: _ClothView, extra=()):
+    """A figure legend listing only what the view draws (and the ``extra`` handles)."""
     line = plt.Line2D
-    h = [Patch(fc=CLOTH, label="cloth"), line([], [], color=COM, lw=0.8, label="centre of mass")]
+    h = [Patch(fc=CLOTH, label="cloth"), *extra,
+         line([], [], color=COM, lw=0.8, label="centre of mass")]
     if view.marked.size:
         h.append(line([], [], ls="", marker="o", ms=3, color=MARK, label="pinned / attached"))
     if view.terms:
@@ -246,11 +268,17 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
             view = _ClothView(ax, problem, trajectory, box=box)
             view.draw(n, full_title=False)
-        fig.suptitle(problem.name, fontsize=11)
-        _legend(fig, view)
-        fig.subplots_adjust(left=0.02, right=0.98, bottom=0.08, top=1 - 0.55 / (3.2 * rows + 0.6),
-                            wspace=0.05, hspace=0.1)
-        fig.savefig(path, dpi=110)
+        save_grid(fig, path, problem.name, view)
     finally:
         plt.close(fig)
     return path
+
+
+def save_grid(fig, path, title: str, view: _ClothView, extra=()) -> None:
+    """Save a grid of 3-D panels as a PNG: ``title`` on top, the legend of ``view`` (and
+    ``extra`` handles) below, narrow margins."""
+    fig.suptitle(title, fontsize=11)
+    _legend(fig, view, extra)
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.08, top=1 - 0.55 / fig.get_figheight(),
+                        wspace=0.05, hspace=0.1)
+    fig.savefig(path, dpi=110)

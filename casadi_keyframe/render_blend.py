@@ -1,0 +1,183 @@
+"""Fig. 6 side by side: the fall clip, the optimised blend and the walk clip, in 3-D.
+
+For a problem whose ``scene`` has ``clips`` (``problems/cape_blend.py``): ``animate`` writes
+a GIF and ``snapshot`` a PNG with three panels per time, left the fall source clip, middle
+the blend, right the walk source clip, each with its cape and its character's capsules.
+Blend frame ``k`` (time ``k dt`` after the blend starts) goes with the fall clip's frame
+``t_a / dt + k`` and the walk clip's ``t_b / dt + k`` (:func:`clip_frame`).
+
+The animation opens with a lead-in of :data:`LEAD_IN` s before the blend (negative ``k``;
+shorter if a clip starts sooner, so that both source panels still play along), during
+which the middle panel shows the fall clip itself in the cloth colour: the blend takes
+over from it.  From ``k = 0`` the middle panel's cape is orange (:data:`BLEND`) and the
+walk target, the problem's keyframe, is a red wireframe, faded until the last frame.  Each
+panel keeps its own limits (equal aspect) over all its frames.  Drawing reuses
+:mod:`.render_cloth`'s view.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+from typing import NamedTuple
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Patch
+from matplotlib.ticker import MaxNLocator
+
+from .render import HIGHLIGHT, select_frames, write_gif
+from .render_cloth import CLOTH, _body, _Box, _ClothView, _legend, save_grid
+
+BLEND = HIGHLIGHT  # orange, as highlighted agents in the flock figures
+LEAD_IN = 0.3  # s of the fall shown before the blend starts
+PANELS = {"fall": "fall (source clip)", "blend": "blend (optimised)",
+          "walk": "walk (source clip)"}
+
+
+class Shown(NamedTuple):
+    """What one panel draws at one time: the cape ``x`` of ``model`` at its time ``t``
+    (for its colliders and the title), in ``color``."""
+
+    model: object
+    x: np.ndarray
+    t: float
+    color: str
+
+
+def clip_frame(problem, kind: str, k: int) -> int:
+    """The frame of source clip ``kind`` ("fall" or "walk") that goes with blend frame ``k``:
+    ``t_a / dt + k`` or ``t_b / dt + k``."""
+    start = problem.scene["t_a" if kind == "fall" else "t_b"]
+    return int(round(start / problem.dt)) + int(k)
+
+
+def lead_in(problem, seconds: float = LEAD_IN) -> int:
+    """Frames shown before the blend: ``seconds`` worth, fewer if either clip starts sooner."""
+    return max(0, min(int(round(seconds / problem.dt)), clip_frame(problem, "fall", 0),
+                      clip_frame(problem, "walk", 0)))
+
+
+def shown(problem, trajectory, panel: str, k: int) -> Shown:
+    """What ``panel`` ("fall", "blend" or "walk") draws at blend frame ``k``: the source
+    clip's matching frame, or the blend's frame k (before the blend, k < 0: the fall clip)."""
+    if panel == "blend" and k >= 0:
+        return Shown(problem.model, np.asarray(trajectory.x[k]), k * trajectory.dt, BLEND)
+    kind = "fall" if panel == "blend" else panel
+    model, clip = problem.scene["clips"][kind]
+    n = clip_frame(problem, kind, k)
+    if not 0 <= n <= clip.steps:
+        raise ValueError(f"blend frame {k} needs {kind} clip frame {n}, outside 0..{clip.steps}")
+    return Shown(model, np.asarray(clip.x[n]), n * clip.dt, CLOTH)
+
+
+def panel_box(problem, trajectory, panel: str, ks) -> _Box:
+    """Limits holding the panel's capes and capsules at every blend frame in ``ks`` (and
+    the keyframe target in the blend panel)."""
+    frames = [shown(problem, trajectory, panel, k) for k in ks]
+    points = [s.x for s in frames]
+    if panel == "blend":
+        points += [np.atleast_2d(t.position_target) for t in _targets(problem)]
+    bodies = [[_body(b, s.t) for b in s.model.colliders] for s in frames]
+    return _Box.around(points, bodies)
+
+
+def _targets(problem):
+    return [t for t in problem.objective_terms.state_terms if t.position_target is not None]
+
+
+class _Panel(_ClothView):
+    """One of the three views over blend frames ``ks``; ``draw(k)`` shows blend frame k,
+    each frame with its own model (the blend panel's lead-in is the fall clip's)."""
+
+    def __init__(self, ax, problem, trajectory, panel: str, ks, box: _Box):
+        self.panel, self.trajectory = panel, trajectory
+        xs = np.array([shown(problem, trajectory, panel, k).x for k in ks])
+        super().__init__(ax, problem, SimpleNamespace(x=xs), name=PANELS[panel], box=box)
+        if panel != "blend":
+            self.terms = []
+        for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
+            axis.set_major_locator(MaxNLocator(4))
+
+    def draw(self, k: int, full_title: bool = True):
+        s = shown(self.problem, self.trajectory, self.panel, k)
+        self.model = s.model
+        self._clear()
+        self._cloth(s.x, s.color)
+        self._colliders(s.t)
+        if k >= 0:
+            self._targets(k)
+        self.ax.set_title(self.title(k, s.t, full_title), fontsize=9 if full_title else 8)
+
+    def title(self, k: int, t: float, full: bool = True) -> str:
+        """The panel's name and its clip's time (the blend's own clock in the middle)."""
+        clock = f"t = {t:.2f} s"
+        if self.panel == "blend":
+            clock = (f"{clock} of {self.problem.steps * self.problem.dt:.2f} s" if k >= 0
+                     else f"lead-in: fall clip at {clock}")
+        return f"{self.name}\n{clock}" if full else f"{self.panel}  {clock}"
+
+
+def _handles():
+    return [Patch(fc=BLEND, label=PANELS["blend"])]
+
+
+def blend_frames(problem) -> np.ndarray:
+    """The blend frames an animation may show: the lead-in (negative) and ``0..steps``."""
+    return np.arange(-lead_in(problem), problem.steps + 1)
+
+
+def _panels(fig, problem, trajectory, ks) -> list[_Panel]:
+    """The fall, blend and walk views side by side in ``fig``, over blend frames ``ks``."""
+    return [_Panel(fig.add_subplot(1, 3, i + 1, projection="3d"), problem, trajectory, p, ks,
+                   panel_box(problem, trajectory, p, ks)) for i, p in enumerate(PANELS)]
+
+
+def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
+            title=None) -> Path:
+    """Write the three-panel GIF; about ``max_frames + 1`` frames, always with the blend's
+    first and last; ``title`` overrides the problem name.  Returns the path."""
+    path, ks = Path(path), blend_frames(problem)
+    name = problem.name if title is None else title
+    fig = plt.figure(figsize=(12.0, 4.8))
+    try:
+        panels = _panels(fig, problem, trajectory, ks)
+        _legend(fig, panels[1], _handles())
+        fig.subplots_adjust(left=0, right=1, bottom=0.08, top=0.85, wspace=0.02)
+
+        def draw(i):
+            k = int(ks[i])
+            for panel in panels:
+                panel.draw(k)
+            stage = (f"blend frame {k} / {problem.steps}" if k >= 0
+                     else f"lead-in, {-k * problem.dt:.2f} s before the blend")
+            fig.suptitle(f"{name} \u2014 {stage}", fontsize=11, y=0.985)
+
+        frames = select_frames(len(ks) - 1, [-ks[0]], max_frames)  # keep the blend's start
+        write_gif(fig, draw, frames, path, fps)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def snapshot(problem, trajectory, path, frames=None) -> Path:
+    """Write a PNG: a row per panel (fall, blend, walk), a column per blend frame
+    (default: the start, two between and the end of the blend)."""
+    path, steps = Path(path), problem.steps
+    ks = sorted({int(k) for k in (np.round(np.linspace(0, steps, 4)) if frames is None
+                                 else frames)})
+    if not ks or ks[0] < 0 or ks[-1] > steps:
+        raise ValueError(f"snapshot frames must be in 0..{steps}, got {ks}")
+    rows, cols, middle = len(PANELS), len(ks), None
+    fig = plt.figure(figsize=(3.2 * cols, 3.0 * rows + 0.7))
+    try:
+        for r, p in enumerate(PANELS):
+            box = panel_box(problem, trajectory, p, range(steps + 1))
+            for c, k in enumerate(ks):
+                ax = fig.add_subplot(rows, cols, r * cols + c + 1, projection="3d")
+                view = _Panel(ax, problem, trajectory, p, range(steps + 1), box)
+                view.draw(k, full_title=False)
+                middle = view if p == "blend" else middle
+        save_grid(fig, path, problem.name, middle, _handles())
+    finally:
+        plt.close(fig)
+    return path

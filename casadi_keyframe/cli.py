@@ -56,9 +56,16 @@ def cmd_solve(args) -> int:
     maxiter = args.maxiter or defaults.get("maxiter", 200)
     out = Path(args.out or Path("results") / prob.name)
     out.mkdir(parents=True, exist_ok=True)
-    result = solve(prob, method, gradient=args.gradient, maxiter=maxiter, quiet=args.quiet,
+    options = dict(method=method, gradient=args.gradient, maxiter=maxiter, quiet=args.quiet,
                    checkpoint=out / "checkpoint.npz",
                    continuation=parse_time_steps(args.continuation))
+    rounds = args.rounds or defaults.get("rounds", 1)
+    growth = args.weight_growth or defaults.get("weight_growth", 1.0)
+    if rounds > 1 or growth != 1.0:
+        from .augmented_lagrangian import solve_augmented
+        result = solve_augmented(prob, rounds=rounds, weight_growth=growth, **options)
+    else:
+        result = solve(prob, **options)
     summary = save_result(result, out, problem_name=prob.name, overrides=overrides)
     render.convergence(result, out / "convergence.png")
     render.snapshot(prob, result.trajectory, out / "keyframes.png")
@@ -69,13 +76,25 @@ def cmd_solve(args) -> int:
           f"{result.nfev}  wall {result.timings['wall_seconds']:.1f} s")
     if len(result.stages) > 1:
         for st in result.stages:
-            print(f"  stage {st['stage']}: dt {st['dt']:.6g} s, {st['steps']} steps, "
-                  f"{st['nit']} iterations, objective {st['fun']:.6g}, {st['seconds']:.1f} s")
+            print("  " + format_stage(st))
     for miss in summary["breakdown"]["misses"]:
         rest = ", ".join(f"{k} {v:.4g}" for k, v in miss.items() if k != "term")
         print(f"  {miss['term']:24s} {rest}")
     print(f"  written to {out}/")
     return 0
+
+
+def format_stage(stage: dict) -> str:
+    """One line for a continuation stage (its dt) or an augmented-Lagrangian round (its
+    weight scale and keyframe misses)."""
+    head = (f"round {stage['stage']}: weight x{stage['weight_scale']:.3g}"
+            if "weight_scale" in stage else
+            f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps")
+    line = (f"{head}, {stage['nit']} iterations, objective {stage['fun']:.6g}, "
+            f"{stage['seconds']:.1f} s")
+    for miss in stage.get("misses", []):
+        line += "; " + ", ".join(f"{k} {v:.4g}" for k, v in miss.items() if k != "term")
+    return line
 
 
 def cmd_gradcheck(args) -> int:
@@ -130,6 +149,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--continuation", metavar="DT,DT,...",
                    help="solve at these time steps first, coarse to fine (e.g. 1/15,1/30,1/60); "
                         "the problem's dt ends the list")
+    s.add_argument("--rounds", type=int, metavar="N",
+                   help="augmented-Lagrangian rounds: after each, the keyframes aim past their "
+                        "target by the miss left (hard keyframes; --maxiter per round)")
+    s.add_argument("--weight-growth", type=float, metavar="G",
+                   help="multiply the keyframe weights by G per round (a penalty schedule)")
     s.add_argument("--out", help="output folder (default results/PROBLEM)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.add_argument("--no-animation", action="store_true", help="skip the GIF")

@@ -40,3 +40,16 @@ def test_gradcheck_prints_agreement(capsys):
     out = capsys.readouterr().out
     line = next(l for l in out.splitlines() if l.strip().startswith("adjoint"))
     assert float(line.split("relative error")[1].split()[0]) < 1e-8
+
+
+def test_solve_in_augmented_lagrangian_rounds(tmp_path, capsys):
+    out = tmp_path / "rounds"
+    code = main(["solve", "cloth_shapes", "--set", "rows=4", "--set", "steps=12",
+                 "--maxiter", "5", "--rounds", "2", "--weight-growth", "10", "--out", str(out),
+                 "--quiet", "--no-animation"])
+    assert code == 0
+    text = capsys.readouterr().out
+    assert "round 0: weight x1," in text and "round 1: weight x10," in text
+    summary = json.loads((out / "summary.json").read_text())
+    assert [s["weight_scale"] for s in summary["stages"]] == [1.0, 10.0]
+    assert summary["message"].startswith("2 augmented-Lagrangian rounds")

@@ -59,6 +59,9 @@ def cmd_solve(args) -> int:
     options = dict(method=method, gradient=args.gradient, maxiter=maxiter, quiet=args.quiet,
                    checkpoint=out / "checkpoint.npz",
                    continuation=parse_time_steps(args.continuation))
+    start = prob.breakdown(prob.initial_controls())
+    print(f"{prob.name}: {prob.size} controls; start ({'guess' if prob.has_guess else 'passive'}"
+          f"): objective {start['objective']:.6g}; {format_misses(start['misses'])}")
     rounds = args.rounds or defaults.get("rounds", 1)
     growth = args.weight_growth or defaults.get("weight_growth", 1.0)
     if rounds > 1 or growth != 1.0:
@@ -78,8 +81,7 @@ def cmd_solve(args) -> int:
         for st in result.stages:
             print("  " + format_stage(st))
     for miss in summary["breakdown"]["misses"]:
-        rest = ", ".join(f"{k} {v:.4g}" for k, v in miss.items() if k != "term")
-        print(f"  {miss['term']:24s} {rest}")
+        print(f"  {format_misses([miss])}")
     print(f"  written to {out}/")
     return 0
 
@@ -92,9 +94,15 @@ def format_stage(stage: dict) -> str:
             f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps")
     line = (f"{head}, {stage['nit']} iterations, objective {stage['fun']:.6g}, "
             f"{stage['seconds']:.1f} s")
-    for miss in stage.get("misses", []):
-        line += "; " + ", ".join(f"{k} {v:.4g}" for k, v in miss.items() if k != "term")
+    if stage.get("misses"):
+        line += "; " + format_misses(stage["misses"])
     return line
+
+
+def format_misses(misses) -> str:
+    """``"StateKeyframe@60 rms_position_error 0.01, ..."``, terms separated by "; "."""
+    return "; ".join(f"{m['term']} " + ", ".join(f"{k} {v:.4g}" for k, v in m.items()
+                                                 if k != "term") for m in misses)
 
 
 def cmd_gradcheck(args) -> int:

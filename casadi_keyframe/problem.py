@@ -124,6 +124,11 @@ class ControlProblem:
         simulation's controls (zeros); a flat float64 vector."""
         return self.controls.zeros() if self._guess is None else self._guess.copy()
 
+    @property
+    def has_guess(self) -> bool:
+        """Whether the optimizer starts from a given guess rather than the passive controls."""
+        return self._guess is not None
+
     def bounds(self):
         return self.controls.bounds()
 

@@ -49,6 +49,7 @@ def test_solve_in_augmented_lagrangian_rounds(tmp_path, capsys):
                  "--quiet", "--no-animation"])
     assert code == 0
     text = capsys.readouterr().out
+    assert "start (passive): objective" in text and "rms_position_error" in text
     assert "round 0: weight x1," in text and "round 1: weight x10," in text
     summary = json.loads((out / "summary.json").read_text())
     assert [s["weight_scale"] for s in summary["stages"]] == [1.0, 10.0]

@@ -1,0 +1,107 @@
+"""How close does each strategy bring the cape blend (problems/cape_blend.py) to its keyframe?
+
+Per strategy: iterations, evaluations, wall seconds, objective, control cost, and the final
+miss over the free particles: rms position miss (m, and as a fraction of the cape's 0.6 m
+width), largest position miss, rms velocity miss (m/s).  Strategies:
+
+* ``passive``: the paper's start (zero forces) with L-BFGS-B and the exact hand adjoint;
+* ``swapped``: the same with the paper's integrator-swapping adjoint;
+* ``continuation``: the same, first at 2 dt;
+* ``schedule``: keyframe weight x10 per round, 3 rounds (``--growth``, ``--rounds``;
+  :func:`solve_augmented` without multipliers);
+* ``multipliers``: augmented Lagrangian with the same weight schedule;
+* ``tracking``: the problem's default start, the PD tracking guess that lands by inverse
+  steps, then L-BFGS-B;
+* ``tracking+multipliers``: the tracking guess, then 3 augmented-Lagrangian rounds;
+* ``tracking+soft``: the same with the keyframe weights 100 times lower in the first round
+  (x10 per round back to the problem's), so that the first round can trade the landing for
+  lower forces and the multipliers bring it back.
+
+    .venv/bin/python benchmarks/cape_blend_strategies.py [--rows 8 --cols 6] [--window 1.0]
+        [--maxiter 100] [--rounds 3] [--growth 10] [--only passive tracking ...]
+
+Each strategy gets ``--maxiter`` L-BFGS-B iterations in all (split over rounds or stages).
+"""
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from casadi_keyframe import load_problem, solve  # noqa: E402
+from casadi_keyframe.augmented_lagrangian import solve_augmented  # noqa: E402
+
+WIDTH = 0.6  # m, the cape's width (cape_model's default)
+
+
+def free_misses(prob, traj) -> dict:
+    """Final position and velocity misses over the free particles (the sewn-on ones follow
+    the transition and are not the optimizer's to move)."""
+    term = prob.objective_terms.state_terms[0]
+    free = prob.controls.idx
+    dx = np.linalg.norm(traj.x[-1, free] - term.position_target[free], axis=1)
+    dv = np.linalg.norm(traj.v[-1, free] - term.velocity_target[free], axis=1)
+    rms = float(np.sqrt((dx ** 2).mean()))
+    return {"rms_x": rms, "width_fraction": rms / WIDTH, "max_x": float(dx.max()),
+            "rms_v": float(np.sqrt((dv ** 2).mean()))}
+
+
+def run(name, build, maxiter, rounds=3, growth=10.0):
+    """Build the strategy's problem and solve it; a row of figures."""
+    per_round = max(maxiter // rounds, 1)
+    if name == "swapped":
+        prob = build(guess="passive", adjoint="swapped")
+    elif name == "tracking+soft":
+        prob = build(position_weight=4.0, velocity_weight=0.04)
+    else:
+        prob = build(guess="tracking" if name.startswith("tracking") else "passive")
+    start_misses = free_misses(prob, prob.simulate(prob.initial_controls()))
+    start = time.perf_counter()
+    if name in ("passive", "swapped", "tracking"):
+        res = solve(prob, maxiter=maxiter, quiet=True)
+    elif name == "continuation":
+        res = solve(prob, maxiter=maxiter // 2, quiet=True, continuation=[2 * prob.dt])
+    else:
+        res = solve_augmented(prob, rounds=rounds, weight_growth=growth,
+                              multipliers=name != "schedule", maxiter=per_round, quiet=True)
+    seconds = time.perf_counter() - start
+    score = build(guess="passive") if name == "tracking+soft" else prob  # default weights
+    return {"strategy": name, "nit": res.nit, "nfev": res.nfev, "seconds": seconds,
+            "objective": score.objective(res.x), "control": res.breakdown["control_cost"],
+            **free_misses(prob, res.trajectory), "start": start_misses}
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rows", type=int, default=8)
+    ap.add_argument("--cols", type=int, default=6)
+    ap.add_argument("--window", type=float, default=1.0)
+    ap.add_argument("--maxiter", type=int, default=100)
+    ap.add_argument("--rounds", type=int, default=3, help="rounds of the round strategies")
+    ap.add_argument("--growth", type=float, default=10.0, help="weight factor per round")
+    ap.add_argument("--only", nargs="*", default=["passive", "swapped", "continuation",
+                                                  "schedule", "multipliers", "tracking",
+                                                  "tracking+multipliers", "tracking+soft"])
+    args = ap.parse_args(argv)
+
+    def build(**kw):
+        return load_problem("cape_blend", rows=args.rows, cols=args.cols, window=args.window,
+                            **kw)
+
+    print(f"cape_blend {args.rows} x {args.cols}, window {args.window} s, "
+          f"{args.maxiter} iterations per strategy, rounds {args.rounds} x{args.growth:g}")
+    print(f"{'strategy':22s} {'start rms':>9s} {'nit':>4s} {'nfev':>5s} {'s':>6s} "
+          f"{'objective':>10s} {'control':>8s} {'rms x m':>8s} {'/width':>7s} {'max x':>7s} "
+          f"{'rms v':>7s}")
+    for name in args.only:
+        r = run(name, build, args.maxiter, args.rounds, args.growth)
+        print(f"{name:22s} {r['start']['rms_x']:9.3g} {r['nit']:4d} {r['nfev']:5d} "
+              f"{r['seconds']:6.0f} {r['objective']:10.4g} {r['control']:8.3g} "
+              f"{r['rms_x']:8.3g} {r['width_fraction']:7.2%} {r['max_x']:7.3g} "
+              f"{r['rms_v']:7.3g}", flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -195,6 +195,12 @@ class _ClothView:
                     self.ax.plot_surface(*mesh.T, color=BODY, alpha=0.15, lw=0, shade=False),
                     self.ax.plot_wireframe(*mesh.T, color=BODY, lw=0.3, alpha=0.5)]
 
+    def is_shape(self, term) -> bool:
+        """Whether ``term`` targets every particle's position, drawn as a wireframe (other
+        targets are crosses)."""
+        return (isinstance(term, StateKeyframe)
+                and np.unique(term.particles).size == self.model.n)
+
     def _targets(self, n: int):
         """Targets of the terms at the current or next keyframe (faded before it)."""
         if not self.terms:
@@ -204,8 +210,7 @@ class _ClothView:
         alpha = 1.0 if frame == n else 0.35
         for term in (t for t in self.terms if t.frame == frame):
             target = np.atleast_2d(term.position_target)
-            if (isinstance(term, StateKeyframe)
-                    and np.unique(term.particles).size == self.model.n):
+            if self.is_shape(term):
                 shape = np.empty((self.model.n, 3))
                 shape[term.particles] = target
                 # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
@@ -224,7 +229,9 @@ def _legend(fig, view: _ClothView, extra=()):
          line([], [], color=COM, lw=0.8, label="centre of mass")]
     if view.marked.size:
         h.append(line([], [], ls="", marker="o", ms=3, color=MARK, label="pinned / attached"))
-    if view.terms:
+    if any(view.is_shape(t) for t in view.terms):
+        h.append(line([], [], color=TARGET, lw=0.8, label="keyframe shape"))
+    if not all(view.is_shape(t) for t in view.terms):
         h.append(line([], [], ls="", marker="x", color=TARGET, label="keyframe target"))
     if view.model.colliders:
         h.append(Patch(fc=(0.5, 0.5, 0.5, 0.3), ec=BODY, label="colliders"))

@@ -94,7 +94,8 @@ def test_animate_dispatches_and_writes_three_panels(blend, tmp_path, monkeypatch
     for (_, title), want in zip(seen["axes"], TITLES):
         assert title.startswith(want) and " s" in title
     assert "t = 0.50 s of 0.50 s" in seen["axes"][1][1]  # ends on the blend's last frame
-    assert {"cloth", "blend (optimised)", "keyframe target"} <= set(seen["legend"])
+    assert {"cloth", "blend (optimised)", "keyframe shape"} <= set(seen["legend"])
+    assert "keyframe target" not in seen["legend"]  # the shape is a wireframe, not crosses
 
 
 def test_snapshot_dispatches(blend, tmp_path):

@@ -52,7 +52,8 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         u = res.x
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
-        breakdown = problem.breakdown(u)
+        traj = res.trajectory  # the dynamics do not depend on the keyframes' aim
+        breakdown = problem.breakdown(u, traj)
         stages.append({"stage": k, "weight_scale": scale, "nit": res.nit, "nfev": res.nfev,
                        "seconds": res.timings["wall_seconds"], "fun": breakdown["objective"],
                        "control_cost": breakdown["control_cost"],
@@ -60,14 +61,12 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         if res.message.startswith("interrupted"):
             break
         if multipliers:
-            traj = p.simulate(u)
             for t in keyframes:
                 sx, sv = shifts[id(t)]
                 # lambda += w_k c  =>  lambda / w_{k+1} = (shift + c) / growth
                 shifts[id(t)] = tuple((s + c) / weight_growth for s, c in zip(
                     (sx, sv), _residual(t, traj)))
     f, g = get_gradient(options.get("gradient", "adjoint"))(problem, u)
-    traj = problem.simulate(u)
     return Result(x=u, fun=float(f), jac=g, nit=sum(s["nit"] for s in stages),
                   nfev=sum(s["nfev"] for s in stages), success=res.success,
                   message=f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}",

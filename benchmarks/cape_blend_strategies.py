@@ -1,11 +1,14 @@
 """How close does each strategy bring the cape blend (problems/cape_blend.py) to its keyframe?
 
-Per strategy: iterations, evaluations, wall seconds, objective, control cost, and the final
+Per strategy: iterations, evaluations, wall seconds, objective, control cost, the final
 miss over the free particles: rms position miss (m, and as a fraction of the cape's 0.6 m
-width), largest position miss, rms velocity miss (m/s).  Strategies:
+width), largest position miss, rms velocity miss (m/s); and whether the blend stays
+physical: the largest spring stretch and the deepest particle in the body (cm).
+Strategies:
 
 * ``passive``: the paper's start (zero forces) with L-BFGS-B and the exact hand adjoint;
 * ``swapped``: the same with the paper's integrator-swapping adjoint;
+* ``ipopt``: the passive start with IPOPT (limited-memory Hessian) instead of L-BFGS-B;
 * ``continuation``: the same, first at 2 dt;
 * ``schedule``: keyframe weight x10 per round, 3 rounds (``--growth``, ``--rounds``;
   :func:`solve_augmented` without multipliers);
@@ -15,7 +18,8 @@ width), largest position miss, rms velocity miss (m/s).  Strategies:
 * ``tracking+multipliers``: the tracking guess, then 3 augmented-Lagrangian rounds;
 * ``tracking+soft``: the same with the keyframe weights 100 times lower in the first round
   (x10 per round back to the problem's), so that the first round can trade the landing for
-  lower forces and the multipliers bring it back.
+  lower forces and the multipliers bring it back;
+* ``tracking+ipopt``: the tracking guess, then IPOPT.
 
     .venv/bin/python benchmarks/cape_blend_strategies.py [--rows 8 --cols 6] [--window 1.0]
         [--maxiter 100] [--rounds 3] [--growth 10] [--only passive tracking ...]
@@ -32,6 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from casadi_keyframe import load_problem, solve  # noqa: E402
 from casadi_keyframe.augmented_lagrangian import solve_augmented  # noqa: E402
+from casadi_keyframe.capes import clip_report  # noqa: E402
 
 WIDTH = 0.6  # m, the cape's width (cape_model's default)
 
@@ -61,6 +66,8 @@ def run(name, build, maxiter, rounds=3, growth=10.0):
     start = time.perf_counter()
     if name in ("passive", "swapped", "tracking"):
         res = solve(prob, maxiter=maxiter, quiet=True)
+    elif name.endswith("ipopt"):
+        res = solve(prob, "ipopt", maxiter=maxiter, quiet=True)
     elif name == "continuation":
         res = solve(prob, maxiter=maxiter // 2, quiet=True, continuation=[2 * prob.dt])
     else:
@@ -68,7 +75,10 @@ def run(name, build, maxiter, rounds=3, growth=10.0):
                               multipliers=name != "schedule", maxiter=per_round, quiet=True)
     seconds = time.perf_counter() - start
     score = build(guess="passive") if name == "tracking+soft" else prob  # default weights
-    return {"strategy": name, "nit": res.nit, "nfev": res.nfev, "seconds": seconds,
+    scene = prob.scene
+    report = clip_report(prob.model, res.trajectory, scene["character"],
+                         scene["animation"].shifted(-scene["t_a"]))
+    return {**report, "strategy": name, "nit": res.nit, "nfev": res.nfev, "seconds": seconds,
             "objective": score.objective(res.x), "control": res.breakdown["control_cost"],
             **free_misses(prob, res.trajectory), "start": start_misses}
 
@@ -81,9 +91,10 @@ def main(argv=None):
     ap.add_argument("--maxiter", type=int, default=100)
     ap.add_argument("--rounds", type=int, default=3, help="rounds of the round strategies")
     ap.add_argument("--growth", type=float, default=10.0, help="weight factor per round")
-    ap.add_argument("--only", nargs="*", default=["passive", "swapped", "continuation",
+    ap.add_argument("--only", nargs="*", default=["passive", "swapped", "ipopt", "continuation",
                                                   "schedule", "multipliers", "tracking",
-                                                  "tracking+multipliers", "tracking+soft"])
+                                                  "tracking+multipliers", "tracking+soft",
+                                                  "tracking+ipopt"])
     args = ap.parse_args(argv)
 
     def build(**kw):
@@ -94,13 +105,14 @@ def main(argv=None):
           f"{args.maxiter} iterations per strategy, rounds {args.rounds} x{args.growth:g}")
     print(f"{'strategy':22s} {'start rms':>9s} {'nit':>4s} {'nfev':>5s} {'s':>6s} "
           f"{'objective':>10s} {'control':>8s} {'rms x m':>8s} {'/width':>7s} {'max x':>7s} "
-          f"{'rms v':>7s}")
+          f"{'rms v':>7s} {'stretch':>7s} {'in body':>7s}")
     for name in args.only:
         r = run(name, build, args.maxiter, args.rounds, args.growth)
         print(f"{name:22s} {r['start']['rms_x']:9.3g} {r['nit']:4d} {r['nfev']:5d} "
               f"{r['seconds']:6.0f} {r['objective']:10.4g} {r['control']:8.3g} "
               f"{r['rms_x']:8.3g} {r['width_fraction']:7.2%} {r['max_x']:7.3g} "
-              f"{r['rms_v']:7.3g}", flush=True)
+              f"{r['rms_v']:7.3g} {r['max_stretch']:7.3g} {100 * r['penetration']:5.2g}cm",
+              flush=True)
 
 
 if __name__ == "__main__":

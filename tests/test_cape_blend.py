@@ -13,7 +13,6 @@ from casadi_keyframe.gradients import Adjoint, FiniteDifference
 
 ROWS, COLS, DT, WINDOW = 8, 6, 1 / 60, 0.5
 T_A, T_B = 0.8, 0.6  # the problem's defaults
-WIDTH = 0.6  # m, the cape's width
 # rms over the free particles: 1 mm (0.17 % of the width; the solve ends about 2e-6 m off,
 # the passive cape 0.6 m) and 1 cm/s (the walking cape moves at 1.3 m/s)
 POSITION_TOLERANCE = 1e-3  # m

@@ -44,33 +44,38 @@ passive miss's cost.
 Hitting the keyframe.  From zero forces (the paper's start) L-BFGS-B stalls far from the
 walk.  ``benchmarks/cape_blend_strategies.py`` measures what the library offers against it
 (8 x 6 cape, 1 s, 100 iterations each; rms position miss over the free particles, passive
-0.61 m):
+0.61 m; the largest spring stretch; the deepest particle in the body):
 
-    exact adjoint, plain                       0.385 m  (18 iterations, then no decrease)
-    swapped adjoint (the paper's)              0.571 m  (its first line search fails)
-    continuation from 2 dt                     0.402 m
-    keyframe weight x10 per round, 3 rounds    0.322 m
-    multipliers + weight x10, 3 rounds         0.051 m  (8.5 % of the width; 0.40 m/s)
-    tracking guess (default), then L-BFGS-B    4e-7 m
+    exact adjoint, L-BFGS-B                    0.385 m   stretch 2.14   8 cm
+    swapped adjoint (the paper's)              0.571 m   (its first line search fails)
+    IPOPT                                      0.010 m   stretch 3.67   4.9 cm
+    continuation from 2 dt                     0.402 m   stretch 1.70   3 cm
+    keyframe weight x10 per round, 3 rounds    0.322 m   stretch 2.13   6 cm
+    multipliers + weight x10, 3 rounds         0.051 m   stretch 1.91   4.1 cm
+    tracking guess (default), then L-BFGS-B    4e-7 m    stretch 1.07   0
 
-So of the optimizer's tools only the augmented Lagrangian (:func:`solve_augmented`) gets
-anywhere, and not to the keyframe: along the gradient the objective curves ~1000 times more
-sharply than along random directions (the gradient sits on cloth falling onto the shoulders
-at 4 m/s in the first steps), and seen from where the passive cape ends, the walk's cape lies
-behind the body.  On the full 26 x 16 cape the same three rounds end 0.26 m off (43 % of the
-width) with a spring stretched 1.99 times.  What lands is a better start: by default
-(``guess="tracking"``) a PD controller pulls the cape along a crossfade of the two shapes
-(:func:`reference_path`) and its last two steps put it on the walk's state
-(:func:`tracking_forces`, :func:`tracking_guess`).  That blend is clean (26 x 16: stretch
-1.16 and no particle in the body, where the passive blend reaches 1.49 and 1.2 cm; 24 m/s^2
-rms, 286 m/s^2 on one particle in the landing step) but it is a guess, not an optimum, and
-L-BFGS-B cannot lower its forces: on the keyframe the gradient is the control cost's alone
-and points off the forces that keep the landing, where the keyframe term curves so sharply
-(about 1e5 N^-2 along it, 8 x 6) that the best step gains some 1e-11, below L-BFGS-B's
-stopping test.  It stops after 1-4 iterations, also with multipliers or with the keyframe
-weights 100 times lower in a first round (8 x 6: control cost 0.0246 in every case).  Do not
-add ``continuation``: the guess resampled to 2 dt no longer lands, and the solve ends 18 cm
-off (13 x 8).  ``guess="passive"`` starts from zero forces, as the paper did.
+So from zero forces IPOPT gets closest, then the augmented Lagrangian
+(:func:`casadi_keyframe.augmented_lagrangian.solve_augmented`), and every one of them tears
+the cape on the way: forces of the size that lands it stretch springs 2-4 times and push
+cloth into the body.  (On the full 26 x 16 cape: IPOPT 2.8 cm rms, 4.7 % of the width, in 59
+iterations, stretch 2.84; three rounds of multipliers 0.26 m.)  Along the gradient the
+objective curves ~1000 times more sharply than along random directions (the gradient sits
+on cloth falling onto the shoulders at 4 m/s in the first steps), and seen from where the
+passive cape ends, the walk's cape lies behind the body.  What lands, and stays physical,
+is a better start: by default (``guess="tracking"``) a PD controller pulls the cape along a
+crossfade of the two shapes (:func:`reference_path`) and its last two steps put it on the
+walk's state (:func:`tracking_forces`, :func:`tracking_guess`).  That blend is clean (26 x
+16: stretch 1.16 and no particle in the body, where the passive blend reaches 1.49 and 1.2
+cm; 24 m/s^2 rms, 286 m/s^2 on one particle in the landing step) but it is a guess, not an
+optimum, and no optimizer here lowers its forces: on the keyframe the gradient is the
+control cost's alone and points off the forces that keep the landing, where the keyframe
+term curves so sharply (about 1e5 N^-2 along it, 8 x 6) that the best step gains some 1e-11,
+below L-BFGS-B's stopping test.  It stops after 1-4 iterations, also with multipliers or
+with the keyframe weights 100 times lower in a first round; IPOPT takes 31 and lowers the
+control cost by 0.4 % while leaving the keyframe 0.4 mm (8 x 6: control cost 0.0246 in
+every case).  Do not add ``continuation``: the guess resampled to 2 dt no longer lands, and
+the solve ends 18 cm off (13 x 8).  ``guess="passive"`` starts from zero forces, as the
+paper did.
 
 The gradient is the exact hand adjoint of the linearized scheme: the paper's swapped adjoint
 is poor in resting contact and over long horizons (notebooks/gradient_accuracy.ipynb;

@@ -62,11 +62,13 @@ def cmd_solve(args) -> int:
     start = prob.breakdown(prob.initial_controls())
     print(f"{prob.name}: {prob.size} controls; start ({'guess' if prob.has_guess else 'passive'}"
           f"): objective {start['objective']:.6g}; {format_misses(start['misses'])}")
-    rounds = args.rounds or defaults.get("rounds", 1)
-    growth = args.weight_growth or defaults.get("weight_growth", 1.0)
-    if rounds > 1 or growth != 1.0:
+    rounds = {key: value for key, value in (("rounds", args.rounds),
+                                             ("weight_growth", args.weight_growth))
+              if value is not None} or {k: defaults[k] for k in ("rounds", "weight_growth")
+                                        if k in defaults}
+    if rounds:
         from .augmented_lagrangian import solve_augmented
-        result = solve_augmented(prob, rounds=rounds, weight_growth=growth, **options)
+        result = solve_augmented(prob, **rounds, **options)
     else:
         result = solve(prob, **options)
     summary = save_result(result, out, problem_name=prob.name, overrides=overrides)

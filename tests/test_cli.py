@@ -1,6 +1,8 @@
 """The command line: list, solve (files written) and gradcheck."""
 import json
 
+import pytest
+
 from casadi_keyframe.cli import main, parse_overrides
 
 
@@ -54,3 +56,11 @@ def test_solve_in_augmented_lagrangian_rounds(tmp_path, capsys):
     summary = json.loads((out / "summary.json").read_text())
     assert [s["weight_scale"] for s in summary["stages"]] == [1.0, 10.0]
     assert summary["message"].startswith("2 augmented-Lagrangian rounds")
+
+
+@pytest.mark.parametrize("flag, value", [("--rounds", "0"), ("--weight-growth", "0.5")])
+def test_bad_rounds_are_refused(flag, value, tmp_path, capsys):
+    code = main(["solve", "cloth_shapes", "--set", "rows=3", "--set", "steps=6", flag, value,
+                 "--out", str(tmp_path), "--quiet", "--no-animation"])
+    assert code == 2
+    assert flag.strip("-").replace("-", "_") in capsys.readouterr().err

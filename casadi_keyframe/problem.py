@@ -94,6 +94,11 @@ class ControlProblem:
         another objective, e.g. a keyframe with a shifted target or a stiffer weight."""
         return self._rebuilt(objective=objective)
 
+    def with_guess(self, guess) -> "ControlProblem":
+        """The same problem starting the optimizer from ``guess`` (flat controls), e.g.
+        controls computed by simulating this problem."""
+        return self._rebuilt(guess=guess)
+
     def _rebuilt(self, **changes) -> "ControlProblem":
         """A new problem from this one's arguments with ``changes``; the controls are an
         unbound copy for the (possibly new) step count."""

@@ -89,7 +89,6 @@ import numpy as np
 from casadi_keyframe.capes import cached_clip, cape_model
 from casadi_keyframe.characters import Character, fall, smoothstep, transition
 from casadi_keyframe.cloths import cloth_problem
-from casadi_keyframe.controls import StepForces
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300}
@@ -132,15 +131,13 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     scene = {"character": character, "animation": motion, "t_a": t_a, "t_b": t_b,
              "window": window, "view": (15, -60),
              "clips": {"fall": (fall_model, fall_traj), "walk": (walk_model, walk_traj)}}
-    options = dict(model=model, steps=steps, dt=dt, objective=objective, name="cape_blend",
-                   x0=x0, v0=v0, controls=StepForces(np.flatnonzero(model.free_mask()[::3])),
-                   adjoint=adjoint, scene=scene)
-    prob = cloth_problem(**options)
+    prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cape_blend",
+                         x0=x0, v0=v0, adjoint=adjoint, scene=scene)  # forces on free particles
     if guess == "passive":
         return prob
     path = reference_path(character, motion, x0, (walk_traj, walk_motion, walk_start), steps,
                           dt)
-    return cloth_problem(**options, guess=tracking_guess(prob, path, (target_x, target_v)))
+    return prob.with_guess(tracking_guess(prob, path, (target_x, target_v)))
 
 
 def blend_steps(steps, window, dt: float) -> int:

@@ -3,13 +3,16 @@
 Each shape writes its signed distance once, symbolically (negative inside, positive
 outside); the numeric ``signed_distance`` evaluates that same CasADi expression.  Shapes
 live in the ground plane: a point's first two coordinates are used.
+
+The distances are exact (no smoothing offset), so a region term ``max(0, sd + margin)^2``
+and its gradient are exact too.  The one non-smooth spot a square root brings, a zero
+argument (a disc's centre, a point on a polygon's edge, any point inside a box), is given
+the derivative 0 instead of NaN: see :func:`_norm`.
 """
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
-
-_TINY = 1e-12
 
 
 class Shape:
@@ -56,7 +59,7 @@ class Box(Shape):
 
     def sd_expr(self, p):
         q = ca.fabs(p - self.center) - self.size / 2
-        outside = ca.sqrt(ca.sumsqr(ca.fmax(q, 0)) + _TINY) - np.sqrt(_TINY)
+        outside = _norm(ca.sumsqr(ca.fmax(q, 0)))  # distance to the box; 0 inside
         return outside + ca.fmin(ca.fmax(q[0], q[1]), 0)
 
     def outline(self):
@@ -75,7 +78,7 @@ class Disc(Shape):
         self.radius = float(radius)
 
     def sd_expr(self, p):
-        return ca.sqrt(ca.sumsqr(p - self.center) + _TINY) - self.radius
+        return _norm(ca.sumsqr(p - self.center)) - self.radius
 
     def outline(self):
         t = np.linspace(0, 2 * np.pi, 64, endpoint=False)
@@ -106,7 +109,7 @@ class Polygon(Shape):
                 straddles = (ai[1] > p[1]) != (bi[1] > p[1])
                 x_cross = ai[0] + e[0] * (p[1] - ai[1]) / e[1]
                 crossings = crossings + ca.logic_and(straddles, p[0] < x_cross)
-        dist = ca.sqrt(ca.mmin(ca.vertcat(*dist2)) + _TINY)
+        dist = _norm(ca.mmin(ca.vertcat(*dist2)))  # exact distance to the boundary
         inside = ca.fmod(crossings, 2)
         return dist * (1 - 2 * inside)
 
@@ -127,6 +130,18 @@ def cross(center, span: float, width: float) -> Polygon:
     pts = [(w, h), (-w, h), (-w, w), (-h, w), (-h, -w), (-w, -w),
            (-w, -h), (w, -h), (w, -w), (h, -w), (h, w), (w, w)]
     return Polygon(np.asarray(pts) + _vec2(center, "cross center"))
+
+
+def _norm(r2):
+    """``sqrt(r2)`` for a squared length ``r2 >= 0``, exact, with derivative 0 at ``r2 = 0``.
+
+    A bare ``sqrt`` has an infinite derivative at 0, which the chain rule turns into NaN
+    (0 * inf), even for a region term that is not active there.  The inner ``if_else`` keeps
+    the square root and its derivative finite whatever order the chain rule multiplies in;
+    the outer one returns the exact value.
+    """
+    positive = r2 > 0
+    return ca.if_else(positive, ca.sqrt(ca.if_else(positive, r2, 1)), 0)
 
 
 def _vec2(value, what) -> np.ndarray:

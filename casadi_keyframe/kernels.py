@@ -4,66 +4,151 @@ A kernel is a small SX ``casadi.Function`` whose inputs and outputs are column v
 describing ONE interaction (a pair of agents, a spring).  :class:`MappedKernel` lifts it
 over an index list with ``Function.map`` in fixed-size chunks and evaluates each chunk
 through ``Function.buffer`` bound to numpy arrays, so no element-by-element conversion
-happens.  Each mapped chunk function is JIT-compiled with the system C compiler when one is
-found (``-O3``); otherwise, or when ``CASADI_KEYFRAME_JIT=0``, CasADi's virtual machine
-evaluates it with identical results.
+happens.
+
+Each mapped chunk function is compiled once per machine, not once per process: its C code
+is compiled with the system C compiler (``gcc -O3``) into a shared library kept in
+:func:`cache_dir` (``$CASADI_KEYFRAME_CACHE``, else ``$XDG_CACHE_HOME/casadi_keyframe/kernels``,
+else ``~/.cache/casadi_keyframe/kernels``), named by a hash of the C code, compiler, flags
+and CasADi version, and every later process loads it from there.  A library is compiled in
+a private folder inside the cache and renamed into place atomically, so concurrent processes
+are safe, a half-written library is never loaded and nothing is written to the temp folder;
+a killed compile leaves a ``*.tmp*`` folder in the cache that a later compile removes.
+Deleting the cache folder is always safe (kernels are recompiled on demand).  With no
+compiler, an unwritable cache folder, a failed compile or ``CASADI_KEYFRAME_JIT=0``,
+CasADi's virtual machine evaluates the kernels with identical results.
 
 Array layout: an input of size k over P interactions is a C-ordered ``(P, k)`` float64
 array, which is exactly the Fortran-ordered ``(k, P)`` matrix the mapped function expects.
 """
 from __future__ import annotations
 
+import functools
+import hashlib
 import os
+import platform
 import shutil
+import subprocess
 import tempfile
+import time
 import warnings
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
 CHUNKS = (2048, 128)
+FLAGS = ("-O3", "-shared", "-fPIC")
+_STALE_SECONDS = 600  # a compile folder older than this was left by a killed process
 _COMPILED: dict = {}
 _JIT_FAILED = False
 
 
+def cache_dir() -> Path:
+    """The folder compiled kernels are kept in (see the module docstring); delete it to clear."""
+    explicit = os.environ.get("CASADI_KEYFRAME_CACHE")
+    if explicit:
+        return Path(explicit).expanduser().absolute()
+    xdg = os.environ.get("XDG_CACHE_HOME", "")
+    base = Path(xdg) if os.path.isabs(xdg) else Path.home() / ".cache"
+    return base / "casadi_keyframe" / "kernels"
+
+
 def jit_available() -> bool:
-    """True when kernels will be JIT-compiled (a C compiler exists and JIT is not disabled)."""
+    """True when kernels will be compiled (a C compiler exists and compiling is not disabled)."""
     if os.environ.get("CASADI_KEYFRAME_JIT", "1") == "0" or _JIT_FAILED:
         return False
     return shutil.which("gcc") is not None or shutil.which("cc") is not None
 
 
-def _jit_options() -> dict:
-    compiler = "gcc" if shutil.which("gcc") else "cc"
-    return {
-        "jit": True,
-        "compiler": "shell",
-        "jit_options": {"flags": ["-O3"], "verbose": False, "compiler": compiler,
-                        "directory": tempfile.gettempdir() + os.sep},
-    }
+@functools.lru_cache(maxsize=None)
+def _compiler() -> tuple[str, str]:
+    """The C compiler's path and version line: part of every cache key."""
+    path = shutil.which("gcc") or shutil.which("cc")
+    if path is None:
+        raise FileNotFoundError("no C compiler (gcc or cc) on PATH")
+    out = subprocess.run([path, "--version"], capture_output=True, text=True, timeout=60)
+    return path, out.stdout.partition("\n")[0]
+
+
+def _remove_stale(folder: Path) -> None:
+    """Remove compile folders left in the cache by killed processes."""
+    for entry in folder.glob("*.tmp*"):
+        try:
+            if time.time() - entry.stat().st_mtime > _STALE_SECONDS:
+                shutil.rmtree(entry) if entry.is_dir() else entry.unlink()
+        except OSError:
+            pass  # another process removed it first, or it is not ours to remove
+
+
+def _compile(code: str, compiler: str, target: Path) -> None:
+    """Compile ``code`` into the shared library ``target``, atomically.
+
+    gcc's own intermediate files go to the private folder too (``TMPDIR``), so a process
+    killed mid-compile leaves nothing in the system temp folder.
+    """
+    target.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale(target.parent)
+    work = tempfile.mkdtemp(prefix=target.stem + ".tmp", dir=target.parent)
+    try:
+        out = os.path.join(work, "kernel.so")
+        subprocess.run([compiler, *FLAGS, "-x", "c", "-", "-o", out, "-lm"],
+                       input=code.encode(), capture_output=True, check=True, cwd=work,
+                       env={**os.environ, "TMPDIR": work, "TMP": work, "TEMP": work})
+        os.replace(out, target)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _cached_library(fn: ca.Function) -> ca.Function:
+    """``fn`` loaded from its compiled library in the cache, compiling it there if missing."""
+    gen = ca.CodeGenerator(fn.name(), {})
+    gen.add(fn)
+    code = gen.dump()
+    compiler, version = _compiler()
+    key = "\0".join([code, compiler, version, " ".join(FLAGS), ca.__version__,
+                     platform.machine()])
+    target = cache_dir() / f"{hashlib.sha256(key.encode()).hexdigest()[:32]}.so"
+    if target.exists():
+        try:
+            return ca.external(fn.name(), str(target))
+        except RuntimeError:
+            pass  # unloadable (e.g. built elsewhere): compile it again below
+    _compile(code, compiler, target)
+    return ca.external(fn.name(), str(target))
+
+
+def _fallback_warning(err: Exception) -> str:
+    """Why compiled kernels are unavailable, naming the cache folder and the fixes."""
+    folder = cache_dir()
+    if isinstance(err, subprocess.CalledProcessError):
+        detail = (err.stderr or b"").decode(errors="replace").strip().splitlines()[-3:]
+        cause = f"the C compiler failed ({' '.join(detail) or err})"
+    else:
+        cause = f"{type(err).__name__}: {err}"
+    return (f"compiled kernels unavailable in cache folder {folder} ({cause}); using CasADi's "
+            "virtual machine instead (same results, slower).  Fix: set CASADI_KEYFRAME_CACHE "
+            "to a writable folder and check that gcc works, or set CASADI_KEYFRAME_JIT=0 to "
+            "skip compiling without this warning.")
 
 
 def _mapped_function(kernel: ca.Function, chunk: int, jit: bool) -> ca.Function:
-    """The kernel mapped over ``chunk`` interactions, compiled once per process."""
+    """The kernel mapped over ``chunk`` interactions, compiled (or loaded) once per process."""
     global _JIT_FAILED
     key = (kernel.serialize(), chunk, jit)
     if key in _COMPILED:
         return _COMPILED[key]
-    mapped = kernel.map(chunk)
     args = [ca.MX.sym(f"a{i}", kernel.size1_in(i), chunk) for i in range(kernel.n_in())]
-    outs = mapped(*args)
+    outs = kernel.map(chunk)(*args)
     outs = list(outs) if isinstance(outs, (list, tuple)) else [outs]
-    name = f"{kernel.name()}_x{chunk}"
-    fn = None
-    if jit:
+    fn = ca.Function(f"{kernel.name()}_x{chunk}", args, outs)
+    if jit and not _JIT_FAILED:
         try:
-            fn = ca.Function(name, args, outs, _jit_options())
-        except Exception as err:  # no working compiler: fall back to the VM
-            _JIT_FAILED = True
-            warnings.warn(f"JIT compilation failed ({err}); using CasADi's virtual machine")
-    if fn is None:
-        fn = ca.Function(name, args, outs)
+            fn = _cached_library(fn)
+        except (OSError, RuntimeError, subprocess.SubprocessError) as err:
+            _JIT_FAILED = True  # warn once; every later kernel uses the VM directly
+            warnings.warn(_fallback_warning(err), RuntimeWarning, stacklevel=3)
     _COMPILED[key] = fn
     return fn
 

@@ -1,3 +1,5 @@
+import os
+
 import numpy as np
 import pytest
 
@@ -6,6 +8,15 @@ from casadi_keyframe import (Adjoint, CenterOfMassKeyframe, ControlProblem, Part
 from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel, FlockParams, wander_forces
 from casadi_keyframe.shapes import Disc, cross, square
+
+
+def pytest_configure(config):
+    """Compiled kernels go to pytest's own cache (``.pytest_cache/d/casadi_keyframe_kernels``),
+    not the user's: the suite leaves the home folder alone, yet later runs and the suite's
+    subprocesses (CLI, notebooks) load them instead of compiling again, and
+    ``pytest --cache-clear`` clears them.  An explicit CASADI_KEYFRAME_CACHE is kept."""
+    if "CASADI_KEYFRAME_CACHE" not in os.environ and getattr(config, "cache", None) is not None:
+        os.environ["CASADI_KEYFRAME_CACHE"] = str(config.cache.mkdir("casadi_keyframe_kernels"))
 
 
 def small_flock(cutoff="smooth", *, n=8, steps=30, dt=0.1, dim=2, controls=None, seed=0):

@@ -136,12 +136,11 @@ def _norm(r2):
     """``sqrt(r2)`` for a squared length ``r2 >= 0``, exact, with derivative 0 at ``r2 = 0``.
 
     A bare ``sqrt`` has an infinite derivative at 0, which the chain rule turns into NaN
-    (0 * inf), even for a region term that is not active there.  The inner ``if_else`` keeps
-    the square root and its derivative finite whatever order the chain rule multiplies in;
-    the outer one returns the exact value.
+    (0 * inf), even for a region term that is not active there.  CasADi differentiates an
+    ``if_else`` branch by branch (the derivative is ``r2 > 0 ? 1 / (2 sqrt(r2)) : 0``), so
+    the infinite one is never multiplied in.
     """
-    positive = r2 > 0
-    return ca.if_else(positive, ca.sqrt(ca.if_else(positive, r2, 1)), 0)
+    return ca.if_else(r2 > 0, ca.sqrt(r2), 0)
 
 
 def _vec2(value, what) -> np.ndarray:

@@ -93,16 +93,16 @@ from casadi_keyframe.objectives import Smoothness, StateKeyframe
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300}
 GUESSES = ("tracking", "passive")
+RANGES = {"rows": "[2, inf)", "cols": "[3, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
+          "t_a": "[0, inf)", "t_b": "[0, inf)", "window": "(0, inf)",
+          "position_weight": "[0, inf)", "velocity_weight": "[0, inf)", "alpha": "[0, inf)",
+          "temporal": "[0, inf)", "guess": GUESSES, "adjoint": ("exact", "swapped")}
 
 
 def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 1 / 60,
           t_a: float = 0.8, t_b: float = 0.6, window: float | None = None,
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
           temporal: float = 1e-7, guess: str = "tracking", adjoint: str = "exact"):
-    if guess not in GUESSES:
-        raise ValueError(f"cape_blend: guess must be one of {GUESSES}, got {guess!r}")
-    if not (np.isfinite(dt) and dt > 0):
-        raise ValueError(f"cape_blend: dt must be a positive time step in s, got {dt}")
     steps = blend_steps(steps, window, dt)
     fall_start, walk_start = frame_of(t_a, dt, "t_a"), frame_of(t_b, dt, "t_b")
     character = Character()
@@ -112,8 +112,6 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
         raise ValueError(f"cape_blend: the blend [t_a, t_a + window] = [{t_a:.6g}, "
                          f"{t_a + window:.6g}] s must lie inside the fall clip [0, "
                          f"{fall_end:.6g}] s")
-    if t_b < 0:
-        raise ValueError(f"cape_blend: t_b = {t_b:.6g} s lies before the walk clip's start, 0 s")
     fall_model, fall_traj, fall_motion = cached_clip("fall", rows, cols, t_a + window, dt)
     walk_model, walk_traj, walk_motion = cached_clip("walk", rows, cols, t_b + window, dt)
     motion = transition(fall_motion, walk_motion, t_a, t_b, window)
@@ -148,9 +146,9 @@ def blend_steps(steps, window, dt: float) -> int:
     elif window is not None and frame_of(window, dt, "window") != steps:
         raise ValueError(f"cape_blend: steps = {steps} and window = {window:.6g} s disagree at "
                          f"dt = {dt:.6g} s; give one of them")
-    if int(steps) != steps or steps < 1:
-        raise ValueError(f"cape_blend: the blend needs a positive whole number of steps, got "
-                         f"{steps} (window / dt)")
+    if int(steps) != steps or steps < 2:
+        raise ValueError(f"cape_blend: the blend needs a whole number of steps, at least 2 (the "
+                         f"tracking guess lands by two steps), got {steps} (window / dt)")
     return int(steps)
 
 

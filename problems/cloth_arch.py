@@ -1,4 +1,4 @@
-"""Fig. 1: a sheet lying on the ground bends up into an arch and holds it.
+"""Fig. 1 (its cloth half): a sheet lying on the ground bends up into an arch and holds it.
 
 Per-step control forces on every particle; the keyframe at the last frame asks for the sheet
 rolled into a half cylinder of the same arc length, its two ends on the ground, at rest.  The
@@ -22,6 +22,9 @@ from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150}
+RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
+          "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
+          "adjoint": ("exact", "swapped")}
 
 
 def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,

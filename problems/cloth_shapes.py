@@ -10,6 +10,9 @@ from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150}
+RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
+          "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
+          "adjoint": ("swapped", "exact")}
 
 
 def shapes(rest: np.ndarray, size: float) -> list[np.ndarray]:

@@ -29,10 +29,15 @@ from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import CenterOfMassKeyframe, ParticleKeyframe, Smoothness
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200}
+RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
+          "size": "(0, inf)", "height": "(0, inf)", "ring_radius": "(0, inf)",
+          "ring_weight": "[0, inf)", "corner_weight": "[0, inf)", "alpha": "[0, inf)",
+          "max_speed": "(0, inf)", "adjoint": ("exact", "swapped")}
 
 
 def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
-          size: float = 1.0, height: float = 1.0, ring_center=(1.5, 0.0, 2.0),
+          size: float = 1.0, height: float = 1.0,
+          ring_center: tuple[float, float, float] = (1.5, 0.0, 2.0),
           ring_radius: float = 0.35, ring_weight: float = 100.0, corner_weight: float = 10.0,
           alpha: float = 0.36, max_speed: float = 8.0, adjoint: str = "exact"):
     ground = Plane((0.0, 0.0, 0.0))

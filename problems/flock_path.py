@@ -5,6 +5,9 @@ from casadi_keyframe.flocks import blob, flock_problem
 from casadi_keyframe.objectives import CenterOfMassKeyframe, Smoothness
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200}
+RANGES = {"agents": "[1, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "seed": "[0, inf)",
+          "dim": "[2, 3]", "keyframes": "[1, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
+          "wander": "[0, inf)", "cutoff": ("smooth", "hard")}
 
 
 def path_point(s: float) -> np.ndarray:

@@ -13,6 +13,10 @@ from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, 
 from casadi_keyframe.shapes import Disc
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200}
+RANGES = {"agents": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "seed": "[0, inf)",
+          "dim": "[2, 3]", "length": "(0, inf)", "keyframes": "[1, inf)", "lead": "(0, inf)",
+          "weight": "[0, inf)", "runner_weight": "[0, inf)", "alpha": "[0, inf)",
+          "wander": "[0, inf)", "cutoff": ("smooth", "hard")}
 
 
 def build(agents: int = 30, steps: int = 160, dt: float = 0.05, seed: int = 0, dim: int = 2,

@@ -1,4 +1,4 @@
-"""Fig. 1: 200 agents form a square, then a cross, by region keyframes."""
+"""Fig. 1 (its flock half): 200 agents form a square, then a cross, by region keyframes."""
 import numpy as np
 
 from casadi_keyframe.flocks import blob, flock_problem
@@ -7,6 +7,9 @@ from casadi_keyframe.objectives import RegionTarget, Smoothness
 from casadi_keyframe.shapes import cross, square
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300}
+RANGES = {"agents": "[1, inf)", "steps": "[2, inf)", "dt": "(0, inf)", "seed": "[0, inf)",
+          "dim": "[2, 3]", "spacing": "(0, inf)", "weight": "[0, inf)", "margin": "[0, inf)",
+          "alpha": "[0, inf)", "wander": "[0, inf)", "cutoff": ("smooth", "hard")}
 
 
 def build(agents: int = 200, steps: int = 200, dt: float = 0.05, seed: int = 0, dim: int = 2,

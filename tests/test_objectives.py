@@ -102,7 +102,8 @@ def test_bad_controls_and_overrides_get_clear_errors():
         prob.objective(np.zeros(7))
     with pytest.raises(ValueError, match="NaN"):
         prob.objective(np.full(60, np.nan))
-    with pytest.raises(TypeError, match=r"unknown override\(s\) \['agnets'\].*valid names"):
+    with pytest.raises(ValueError, match=r"unknown override agnets \(did you mean agents\?\)"
+                                         r".*valid names"):
         load_problem("flock_path", agnets=10)
     with pytest.raises(FileNotFoundError, match="known problems"):
         load_problem("no_such_problem")

@@ -1,29 +1,79 @@
-"""The ``casadi-keyframe`` command line: list, solve and gradcheck problems; print studies."""
+"""The ``casadi-keyframe`` command line: list, show, solve and gradcheck problems; print
+studies."""
 from __future__ import annotations
 
 import argparse
 import ast
+import inspect
+import shutil
 import sys
+import tempfile
+import textwrap
 import time
 from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
 
-from .loading import list_problems, load_module, load_problem
+from .loading import OverrideError, list_problems, load_module, load_problem, overrides_of
+from .trajectory import SimulationError
 
 
 def parse_overrides(items) -> dict:
-    """``["agents=50", "cutoff=hard"]`` -> ``{"agents": 50, "cutoff": "hard"}``."""
+    """``["agents=50", "cutoff=hard", "dt=1/60"]`` -> ``{"agents": 50, "cutoff": "hard",
+    "dt": 0.016666666666666666}``: Python literals, fractions as floats, anything else a
+    string (checked against the problem's ``build`` by :func:`loading.check_overrides`)."""
     out = {}
     for item in items or []:
         key, sep, value = item.partition("=")
+        key = key.strip()
         if not sep or not key.isidentifier():
-            raise SystemExit(f"--set expects key=value, got {item!r}")
+            raise ValueError(f"--set expects KEY=VALUE such as agents=50, got {item!r}")
         try:
-            out[key] = ast.literal_eval(value)
-        except (ValueError, SyntaxError):
-            out[key] = value
+            out[key] = ast.literal_eval(value.strip())
+        except (ValueError, SyntaxError, MemoryError, RecursionError):
+            try:
+                out[key] = float(Fraction(value.strip()))
+            except (ValueError, ZeroDivisionError):
+                out[key] = value
+    return out
+
+
+def at_least(kind, low, *, strict: bool = False):
+    """An argparse type: a ``kind`` (int or float) ``>= low`` (``> low`` if ``strict``)."""
+    what = (f"{'a whole number' if kind is int else 'a number'} {'>' if strict else '>='} "
+            f"{low}")
+
+    def convert(text: str):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expects {what}, got {text!r}") from None
+        if not (value > low if strict else value >= low) or not np.isfinite(value):
+            raise argparse.ArgumentTypeError(f"expects {what}, got {text}")
+        return value
+
+    convert.__name__ = kind.__name__  # argparse names the type in some messages
+    return convert
+
+
+positive_int = at_least(int, 1)
+
+
+def ensure_writable(folder) -> Path:
+    """Create ``folder`` (and its parents) and check a file can be written in it, so a bad
+    ``--out`` is refused before the build and the solve, not at the first checkpoint."""
+    out = Path(folder)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as err:
+        blocker = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
+        reason = (f"{blocker} is a file, not a folder" if blocker is not None
+                  else err.strerror or str(err))
+        raise ValueError(f"cannot write the output folder {out}: {reason}; choose another "
+                         f"--out") from None
     return out
 
 
@@ -34,14 +84,56 @@ def parse_time_steps(text: str | None) -> list[float] | None:
     try:
         return [float(Fraction(item.strip())) for item in text.split(",")]
     except (ValueError, ZeroDivisionError):
-        raise SystemExit(f"--continuation expects time steps in seconds separated by commas, "
+        raise ValueError(f"--continuation expects time steps in seconds separated by commas, "
                          f"coarse to fine, e.g. 1/15,1/30,1/60; got {text!r}") from None
 
 
 def cmd_list(args) -> int:
-    for name, doc in list_problems():
-        print(f"{name:20s} {doc}")
+    width = min(shutil.get_terminal_size((100, 24)).columns, 100)
+    problems = list_problems()
+    column = max(len(name) for name, _ in problems) + 2
+    for name, summary in problems:
+        print(textwrap.fill(summary, width, initial_indent=name.ljust(column),
+                            subsequent_indent=" " * column))
+    print("\n" + textwrap.fill("'casadi-keyframe show PROBLEM' prints a problem's description, "
+                               "its overrides (--set NAME=VALUE) with their defaults and "
+                               "ranges, and its solve defaults.", width))
     return 0
+
+
+def cmd_show(args) -> int:
+    module = load_module(args.problem)
+    print(f"{Path(module.__file__).stem}  ({module.__file__})\n")
+    print(inspect.cleandoc(module.__doc__ or "(no description)") + "\n")
+    rows = [(o.name, o.type_name, format_value(o.default), describe_allowed(o))
+            for o in overrides_of(module)]
+    print("overrides (--set NAME=VALUE):")
+    head = ("name", "type", "default", "allowed")
+    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(3)]
+    for row in [head, *rows]:
+        print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
+    solve = {"method": "lbfgsb", "maxiter": 200, **getattr(module, "SOLVE", {})}
+    print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
+          + " (--method, --maxiter, --rounds, --weight-growth change them)")
+    return 0
+
+
+def describe_allowed(override) -> str:
+    """The allowed values of an override for ``show``: its range, choices, or "any"."""
+    if isinstance(override.allowed, tuple):
+        text = ", ".join(override.allowed)
+    else:
+        text = override.allowed or ("any" if override.kind != "floats" else "any numbers")
+    return text + (", or None" if override.optional else "")
+
+
+def format_value(value) -> str:
+    """A default as typed on the command line: ``1/60`` rather than 0.016666666666666666."""
+    if isinstance(value, float) and len(repr(value)) > 8:
+        fraction = Fraction(value).limit_denominator(1000)
+        if float(fraction) == value:
+            return str(fraction)
+    return str(value)
 
 
 def cmd_solve(args) -> int:
@@ -50,12 +142,12 @@ def cmd_solve(args) -> int:
     from .optimize import solve
 
     overrides = parse_overrides(args.set)
+    out = ensure_writable(args.out) if args.out else None
     prob = load_problem(args.problem, **overrides)
     defaults = getattr(load_module(args.problem), "SOLVE", {})
     method = args.method or defaults.get("method", "lbfgsb")
-    maxiter = args.maxiter or defaults.get("maxiter", 200)
-    out = Path(args.out or Path("results") / prob.name)
-    out.mkdir(parents=True, exist_ok=True)
+    maxiter = args.maxiter if args.maxiter is not None else defaults.get("maxiter", 200)
+    out = out or ensure_writable(Path("results") / prob.name)
     options = dict(method=method, gradient=args.gradient, maxiter=maxiter, quiet=args.quiet,
                    checkpoint=out / "checkpoint.npz",
                    continuation=parse_time_steps(args.continuation))
@@ -149,13 +241,17 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
     sub.add_parser("list", help="list the problem files").set_defaults(func=cmd_list)
+    sh = sub.add_parser("show", help="a problem's description, overrides (type, default, range) "
+                                     "and solve defaults")
+    sh.add_argument("problem", help="problem name (see 'list') or path to a problem file")
+    sh.set_defaults(func=cmd_show)
 
     s = sub.add_parser("solve", help="optimise a problem and write results and pictures")
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
     s.add_argument("--method", choices=("lbfgsb", "ipopt"))
     s.add_argument("--gradient", default="adjoint", choices=("adjoint", "exact", "fd"))
-    s.add_argument("--maxiter", type=int, help="iteration limit (per stage with --continuation)")
+    s.add_argument("--maxiter", type=positive_int, help="iteration limit (per stage with --continuation)")
     s.add_argument("--continuation", metavar="DT,DT,...",
                    help="solve at these time steps first, coarse to fine (e.g. 1/15,1/30,1/60); "
                         "the problem's dt ends the list")
@@ -173,9 +269,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
     g.add_argument("--routes", default="adjoint,exact", help="comma-separated; last is the reference")
-    g.add_argument("--directions", type=int, default=3, help="random central-difference checks")
-    g.add_argument("--h", type=float, default=1e-6, help="finite-difference step")
-    g.add_argument("--scale", type=float, default=0.5, help="size of the random controls")
+    g.add_argument("--directions", type=at_least(int, 0), default=3, help="random central-difference checks")
+    g.add_argument("--h", type=at_least(float, 0, strict=True), default=1e-6, help="finite-difference step")
+    g.add_argument("--scale", type=at_least(float, 0), default=0.5, help="size of the random controls")
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(func=cmd_gradcheck)
 
@@ -187,9 +283,21 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv=None) -> int:
+    """Run a command: 0 on success, 1 when the simulation fails, 2 on bad input (a message,
+    never a traceback)."""
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
+    except OverrideError as err:
+        print(f"error: {err}\n  'casadi-keyframe show {err.problem}' lists the overrides with "
+              f"their types, defaults and ranges", file=sys.stderr)
+        return 2
+    except SimulationError as err:
+        text = " ".join(str(err).split())
+        text = text if "simulation" in text else f"the simulation failed: {text}"
+        fix = "" if "reduce" in text else "; reduce dt (--set dt=...) or the forces"
+        print(f"error: {text}{fix}", file=sys.stderr)
+        return 1
     except (ValueError, TypeError, FileNotFoundError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2

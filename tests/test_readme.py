@@ -24,3 +24,12 @@ def test_readme_cloth_example_runs():
     result, prob = scope["result"], scope["prob"]
     assert result.fun < prob.objective(prob.initial_controls())
     assert abs(result.trajectory.x[-1, 0] - prob.x0[0]).max() == 0  # the pin held
+
+
+def test_the_readme_layout_names_every_module():
+    layout = (Path(__file__).parent.parent / "README.md").read_text().split("## Layout")[1]
+    package = Path(__file__).parent.parent / "casadi_keyframe"
+    modules = [p.name for p in package.glob("*.py") if not p.name.startswith("_")]
+    modules += [p.name + "/" for p in package.iterdir() if (p / "__init__.py").exists()]
+    missing = [m for m in modules if f"`{m}`" not in layout]
+    assert not missing, f"README's Layout section omits {missing}: one phrase each, please"

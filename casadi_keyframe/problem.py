@@ -137,8 +137,12 @@ class ControlProblem:
     def bounds(self):
         return self.controls.bounds()
 
-    def simulate(self, u=None) -> Trajectory:
-        """Simulate with controls ``u`` (default: passive); raises SimulationError on blow-up."""
+    def simulate(self, u=None, *, tape: bool = True) -> Trajectory:
+        """Simulate with controls ``u`` (default: passive); raises SimulationError on blow-up.
+
+        ``tape=False`` is for values only: an integrator that can (``optional_tape``) then
+        keeps no record for its adjoint, which on a large flock is most of the memory.
+        """
         u = self.controls.zeros() if u is None else self.controls.check(u)
         v0 = self.v0
         offset = self.controls.velocity_offset(u)
@@ -146,6 +150,8 @@ class ControlProblem:
             v0 = v0 + offset
         ext = self.controls.external(u)
         ext = self.external if ext is None else self.external + ext
+        if not tape and getattr(self.integrator, "optional_tape", False):
+            return self.integrator.simulate(self.model, self.x0, v0, ext, self.dt, tape=False)
         return self.integrator.simulate(self.model, self.x0, v0, ext, self.dt)
 
     # -- the objective -------------------------------------------------------------------
@@ -162,7 +168,7 @@ class ControlProblem:
         return float(val), np.asarray(grad).ravel()
 
     def objective(self, u) -> float:
-        traj = self.simulate(u)
+        traj = self.simulate(u, tape=False)
         return sum(t.value(traj) for t in self.objective_terms.state_terms) + self.control_cost(u)[0]
 
     def objective_and_gradient(self, u, gradient="adjoint"):
@@ -172,7 +178,7 @@ class ControlProblem:
 
     def breakdown(self, u, traj: Trajectory | None = None) -> dict:
         """Objective split into keyframe error and control cost, plus per-term misses."""
-        traj = self.simulate(u) if traj is None else traj
+        traj = self.simulate(u, tape=False) if traj is None else traj
         terms = self.objective_terms.state_terms
         keyframe = float(sum(t.value(traj) for t in terms))
         control = self.control_cost(u)[0]

@@ -5,7 +5,9 @@ import pytest
 
 from casadi_keyframe.kernels import MappedKernel, jit_available
 from casadi_keyframe.models import FlockModel, FlockParams, wander_forces
-from casadi_keyframe.models.flock import pair_kernels
+from casadi_keyframe.models.flock import PairTape, pair_kernels
+from casadi_keyframe.trajectory import Trajectory
+from conftest import small_flock
 
 
 def random_state(n, dim, seed=0, size=8.0):
@@ -104,3 +106,36 @@ def test_bad_params_are_refused():
         FlockParams(cutoff="soft")
     with pytest.raises(ValueError, match="avoid_radius"):
         FlockParams(avoid_radius=0.0)
+
+
+def test_pair_tapes_are_compact_and_the_adjoint_is_unchanged():
+    prob = small_flock()
+    u = 0.3 * np.random.default_rng(0).standard_normal(prob.size)
+    traj = prob.simulate(u)
+    assert all(t.i.dtype == t.j.dtype == np.uint8 for t in traj.tape)  # 8 agents
+    wide = Trajectory(traj.x, traj.v, traj.dt,
+                      [PairTape(t.i.astype(np.intp), t.j.astype(np.intp)) for t in traj.tape])
+    _, gx, gv = prob.state_cost(traj)
+    for a, b in zip(prob.integrator.adjoint(prob.model, traj, gx, gv),
+                    prob.integrator.adjoint(prob.model, wide, gx, gv)):
+        np.testing.assert_array_equal(a, b)
+    big = PairTape.compact(np.array([0, 70000]), np.array([1, 70001]), 70002)
+    assert big.i.dtype == np.uint32 and big.j.tolist() == [1, 70001]
+
+
+def test_the_objective_keeps_no_pair_tapes(monkeypatch):
+    prob = small_flock()
+    u = 0.3 * np.random.default_rng(1).standard_normal(prob.size)
+    seen = []
+    simulate = prob.integrator.simulate
+
+    def spy(*args, **kwargs):
+        seen.append(simulate(*args, **kwargs))
+        return seen[-1]
+    monkeypatch.setattr(prob.integrator, "simulate", spy)
+    value = prob.objective(u)
+    assert len(seen) == 1 and seen[0].tape == []
+    f = prob.objective_and_gradient(u)[0]
+    assert len(seen[1].tape) == prob.steps and f == value  # the same value, bit for bit
+    with pytest.raises(ValueError, match="no tape"):
+        prob.integrator.adjoint(prob.model, seen[0], *prob.state_cost(seen[0])[1:])

@@ -25,22 +25,28 @@ class SymplecticEuler:
 
     name = "symplectic_euler"
     exact_adjoint = True
+    optional_tape = True  # simulate(..., tape=False) keeps nothing for the adjoint
 
-    def simulate(self, model, x0, v0, external, dt) -> Trajectory:
-        """Run ``len(external)`` steps; ``external`` is ``(steps, n, dim)``."""
+    def simulate(self, model, x0, v0, external, dt, *, tape: bool = True) -> Trajectory:
+        """Run ``len(external)`` steps; ``external`` is ``(steps, n, dim)``.
+
+        With ``tape=False`` the trajectory keeps no per-step record for :meth:`adjoint`
+        (``traj.tape`` is empty): for a value only, the record being most of the memory.
+        """
         steps = external.shape[0]
         x = np.empty((steps + 1,) + x0.shape)
         v = np.empty_like(x)
         x[0], v[0] = x0, v0
         inv_m = (1.0 / model.masses)[:, None]
-        tape = []
+        record = []
         for n in range(steps):
             f, t = model.forces(x[n], v[n])
-            tape.append(t)
+            if tape:
+                record.append(t)
             v[n + 1] = v[n] + dt * inv_m * (f + external[n])
             x[n + 1] = x[n] + dt * v[n + 1]
             check_state(x[n + 1], v[n + 1], n + 1)
-        return Trajectory(x, v, dt, tape)
+        return Trajectory(x, v, dt, record)
 
     def adjoint(self, model, traj: Trajectory, gx, gv):
         """Back-propagate frame gradients ``gx, gv`` ``(steps+1, n, dim)``.
@@ -48,6 +54,9 @@ class SymplecticEuler:
         Returns ``(g_external (steps, n, dim), g_x0, g_v0)``.
         """
         dt, steps = traj.dt, traj.steps
+        if len(traj.tape) != steps:
+            raise ValueError("the trajectory has no tape for the adjoint: simulate it with "
+                             "tape=True (the default)")
         inv_m = (1.0 / model.masses)[:, None]
         g_ext = np.empty((steps,) + traj.x.shape[1:])
         ax, av = gx[steps].copy(), gv[steps].copy()

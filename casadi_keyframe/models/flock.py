@@ -123,10 +123,22 @@ def wander_forces(steps: int, n: int, dim: int, *, strength: float, seed: int,
 
 @dataclass(frozen=True)
 class PairTape:
-    """What one force evaluation remembers for its adjoint: the interacting pairs."""
+    """What one force evaluation remembers for its adjoint: the interacting pairs ``(i, j)``,
+    in the order the forces were summed (so the adjoint sums in the same order).
+
+    A simulation keeps one tape per step, the bulk of the adjoint's memory on a large flock:
+    :meth:`compact` stores the indices in the smallest unsigned type that holds every agent
+    (2 bytes an index up to 65536 agents, 4 up to 2**32, instead of 8).
+    """
 
     i: np.ndarray
     j: np.ndarray
+
+    @classmethod
+    def compact(cls, i: np.ndarray, j: np.ndarray, n: int) -> "PairTape":
+        """The pairs ``i, j`` of agents ``0..n-1`` in the smallest index type for ``n``."""
+        dtype = np.min_scalar_type(max(n - 1, 0))
+        return cls(i.astype(dtype), j.astype(dtype))
 
 
 @dataclass(eq=False)
@@ -157,9 +169,9 @@ class FlockModel:
 
     # -- numeric -----------------------------------------------------------------------
     def neighbour_pairs(self, x: np.ndarray) -> PairTape:
-        """Pairs (i < j) closer than the largest force radius, by a k-d tree."""
+        """Pairs (i < j) closer than the largest force radius, by a k-d tree; compact."""
         pairs = cKDTree(x).query_pairs(self.params.max_radius, output_type="ndarray")
-        return PairTape(pairs[:, 0].astype(np.intp), pairs[:, 1].astype(np.intp))
+        return PairTape.compact(pairs[:, 0], pairs[:, 1], self.n)
 
     def all_pairs(self) -> PairTape:
         """Every pair (i < j): the slow reference the neighbour list must reproduce."""

@@ -19,11 +19,12 @@ import numpy as np
 
 from .gradients import get_gradient
 from .objectives import Objective, StateKeyframe
-from .optimize import Result, solve
+from .optimize import CONVERGED, INTERRUPTED, LIMIT, Result, _evaluate_final, solve
 
 
 def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
-                    multipliers: bool = True, u0=None, **options) -> Result:
+                    multipliers: bool = True, u0=None, time_limit: float | None = None,
+                    **options) -> Result:
     """Solve ``problem`` in ``rounds`` rounds of :func:`solve` (``options`` go to each: method,
     gradient, maxiter per round, checkpoint, quiet, ...), each from the last round's controls,
     with the keyframes' aim moved by the multipliers and their weights times
@@ -32,7 +33,9 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     The result is ``problem``'s (objective, breakdown and trajectory with the true targets
     and weights) at the last round's controls; ``stages`` has one entry per round with its
     weight scale, iterations, evaluations, seconds, objective and the keyframes' misses;
-    ``nit``, ``nfev`` and ``history`` run over all rounds.  Ctrl-C ends the rounds there.
+    ``nit``, ``nfev`` and ``history`` run over all rounds.  The ``status`` is the last
+    round's; Ctrl-C (status 3) or ``time_limit`` (seconds over all rounds, status 1) ends the
+    rounds there.
     """
     if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
         raise ValueError(f"rounds must be a whole number >= 1, got {rounds!r}")
@@ -48,7 +51,9 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     for k in range(rounds):
         scale = float(weight_growth) ** k
         p = _with_keyframes(problem, shifts, scale)
-        res = solve(p, u0=u, **options)
+        left = None if time_limit is None else max(time_limit - (time.perf_counter() - start),
+                                                   1e-3)
+        res = solve(p, u0=u, time_limit=left, **options)
         u = res.x
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
@@ -57,8 +62,9 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         stages.append({"stage": k, "weight_scale": scale, "nit": res.nit, "nfev": res.nfev,
                        "seconds": res.timings["wall_seconds"], "fun": breakdown["objective"],
                        "control_cost": breakdown["control_cost"],
-                       "misses": breakdown["misses"], "message": res.message})
-        if res.message.startswith("interrupted"):
+                       "misses": breakdown["misses"], "status": res.status,
+                       "message": res.message})
+        if res.status == INTERRUPTED or _time_up(time_limit, start):
             break
         if multipliers:
             for t in keyframes:
@@ -66,14 +72,22 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
                 # lambda += w_k c  =>  lambda / w_{k+1} = (shift + c) / growth
                 shifts[id(t)] = tuple((s + c) / weight_growth for s, c in zip(
                     (sx, sv), _residual(t, traj)))
-    f, g = get_gradient(options.get("gradient", "adjoint"))(problem, u)
+    f, g = _evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
+    status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
+    if len(stages) < rounds and status != INTERRUPTED:
+        status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
+                                  f"{len(stages) - 1} of 0..{rounds - 1}; last: {res.message}")
     return Result(x=u, fun=float(f), jac=g, nit=sum(s["nit"] for s in stages),
-                  nfev=sum(s["nfev"] for s in stages), success=res.success,
-                  message=f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}",
+                  nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
+                  status=status, message=message,
                   method=res.method, gradient=res.gradient, trajectory=traj, history=history,
                   timings={"wall_seconds": time.perf_counter() - start,
                            "stage_seconds": [s["seconds"] for s in stages]},
                   breakdown=problem.breakdown(u, traj), stages=stages)
+
+
+def _time_up(time_limit, start) -> bool:
+    return time_limit is not None and time.perf_counter() - start >= time_limit
 
 
 def _with_keyframes(problem, shifts, scale):

@@ -1,5 +1,5 @@
-"""The ``casadi-keyframe`` command line: list, show, solve and gradcheck problems; print
-studies."""
+"""The ``casadi-keyframe`` command line: list, show, solve, render and gradcheck problems;
+print studies."""
 from __future__ import annotations
 
 import argparse
@@ -15,7 +15,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .loading import OverrideError, list_problems, load_module, load_problem, overrides_of
+from .loading import (OverrideError, list_problems, load_module, load_problem, overrides_of,
+                      resolve)
+from .run import EXIT_CODES, SolveRun, run_render, run_solve
 from .trajectory import SimulationError
 
 
@@ -137,10 +139,6 @@ def format_value(value) -> str:
 
 
 def cmd_solve(args) -> int:
-    from . import render
-    from .io import save_result
-    from .optimize import solve
-
     overrides = parse_overrides(args.set)
     out = ensure_writable(args.out) if args.out else None
     prob = load_problem(args.problem, **overrides)
@@ -148,55 +146,20 @@ def cmd_solve(args) -> int:
     method = args.method or defaults.get("method", "lbfgsb")
     maxiter = args.maxiter if args.maxiter is not None else defaults.get("maxiter", 200)
     out = out or ensure_writable(Path("results") / prob.name)
-    options = dict(method=method, gradient=args.gradient, maxiter=maxiter, quiet=args.quiet,
-                   checkpoint=out / "checkpoint.npz",
-                   continuation=parse_time_steps(args.continuation))
-    start = prob.breakdown(prob.initial_controls())
-    print(f"{prob.name}: {prob.size} controls; start ({'guess' if prob.has_guess else 'passive'}"
-          f"): objective {start['objective']:.6g}; {format_misses(start['misses'])}")
     rounds = {key: value for key, value in (("rounds", args.rounds),
                                              ("weight_growth", args.weight_growth))
               if value is not None} or {k: defaults[k] for k in ("rounds", "weight_growth")
                                         if k in defaults}
-    if rounds:
-        from .augmented_lagrangian import solve_augmented
-        result = solve_augmented(prob, **rounds, **options)
-    else:
-        result = solve(prob, **options)
-    summary = save_result(result, out, problem_name=prob.name, overrides=overrides)
-    render.convergence(result, out / "convergence.png")
-    render.snapshot(prob, result.trajectory, out / "keyframes.png")
-    if not args.no_animation:
-        render.animate(prob, result.trajectory, out / "animation.gif")
-    print(f"{prob.name}: {result.message}")
-    print(f"  objective {summary['fun']:.6g}  iterations {result.nit}  evaluations "
-          f"{result.nfev}  wall {result.timings['wall_seconds']:.1f} s")
-    if len(result.stages) > 1:
-        for st in result.stages:
-            print("  " + format_stage(st))
-    for miss in summary["breakdown"]["misses"]:
-        print(f"  {format_misses([miss])}")
-    print(f"  written to {out}/")
-    return 0
+    return run_solve(SolveRun(
+        prob, out, problem_file=str(resolve(args.problem).resolve()), problem_arg=args.problem,
+        overrides=overrides, method=method, gradient=args.gradient, maxiter=maxiter,
+        continuation=parse_time_steps(args.continuation), rounds=rounds,
+        time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
+        animation=not args.no_animation))
 
 
-def format_stage(stage: dict) -> str:
-    """One line for a continuation stage (its dt) or an augmented-Lagrangian round (its
-    weight scale and keyframe misses)."""
-    head = (f"round {stage['stage']}: weight x{stage['weight_scale']:.3g}"
-            if "weight_scale" in stage else
-            f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps")
-    line = (f"{head}, {stage['nit']} iterations, objective {stage['fun']:.6g}, "
-            f"{stage['seconds']:.1f} s")
-    if stage.get("misses"):
-        line += "; " + format_misses(stage["misses"])
-    return line
-
-
-def format_misses(misses) -> str:
-    """``"StateKeyframe@60 rms_position_error 0.01, ..."``, terms separated by "; "."""
-    return "; ".join(f"{m['term']} " + ", ".join(f"{k} {v:.4g}" for k, v in m.items()
-                                                 if k != "term") for m in misses)
+def cmd_render(args) -> int:
+    return run_render(args.results, animation=not args.no_animation)
 
 
 def cmd_gradcheck(args) -> int:
@@ -246,7 +209,8 @@ def build_parser() -> argparse.ArgumentParser:
     sh.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     sh.set_defaults(func=cmd_show)
 
-    s = sub.add_parser("solve", help="optimise a problem and write results and pictures")
+    s = sub.add_parser("solve", help="optimise a problem and write results and pictures",
+                       epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
     s.add_argument("--method", choices=("lbfgsb", "ipopt"))
@@ -263,7 +227,20 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", help="output folder (default results/PROBLEM)")
     s.add_argument("--quiet", action="store_true", help="no progress bar")
     s.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
+                   help="stop the search after this wall time (over all stages and rounds); "
+                        "the best result is written, exit code 3")
+    s.add_argument("--resume", metavar="DIR_OR_NPZ",
+                   help="start from a run's controls: a results folder (the newer of its "
+                        "checkpoint.npz and result.npz) or either file; same problem and --set")
     s.set_defaults(func=cmd_solve)
+
+    r = sub.add_parser("render", help="draw a saved run's pictures again (convergence.png, "
+                                      "keyframes.png, animation.gif) without solving")
+    r.add_argument("results", help="results folder (result.npz and summary.json, or only "
+                                    "checkpoint.npz), or one of those .npz files")
+    r.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    r.set_defaults(func=cmd_render)
 
     g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
     g.add_argument("problem")

@@ -1,12 +1,15 @@
 """Optimizers: L-BFGS-B (scipy) and IPOPT (CasADi nlpsol fed by a Callback).
 
-Both return a :class:`Result` in scipy's vocabulary plus the trajectory, a per-iteration
-history and timings.  Ctrl-C stops the solve and returns the best controls seen so far; with
-``checkpoint=`` that best is also written to disk at every iteration.  ``continuation=``
-solves at coarse time steps first, then refines (see :func:`solve`).
+Both return a :class:`Result` in scipy's vocabulary (``status`` included, see
+:mod:`.outcome`) plus the trajectory, a per-iteration history and timings.  Ctrl-C (or any
+:class:`~.interrupts.Interrupted`) stops the solve and returns the best controls seen so
+far with status 3; ``time_limit=`` stops it with status 1; with ``checkpoint=`` the best is
+also on disk after every iteration, written atomically.  ``continuation=`` solves at coarse
+time steps first, then refines (see :func:`solve`).
 """
 from __future__ import annotations
 
+import signal
 import time
 from dataclasses import dataclass, field
 
@@ -16,14 +19,25 @@ from scipy.optimize import minimize
 from tqdm.auto import tqdm
 
 from .gradients import get_gradient
+from .interrupts import NAMES, Interrupted, catching, check, handled
+from .io import as_checkpoint
+from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS, ipopt_outcome, lbfgsb_outcome
 from .trajectory import SimulationError, Trajectory
 
 METHODS = ("lbfgsb", "ipopt")
+__all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "Result", "solve",
+           "stage_problems"]
 
 
 @dataclass
 class Result:
-    """Outcome of :func:`solve` (``x`` are the controls)."""
+    """Outcome of :func:`solve` (``x`` are the controls, the best point the search saw).
+
+    ``status`` says how the search ended: 0 converged; 1 a limit (iterations, evaluations,
+    ``time_limit``) was reached first; 2 the search failed (a line search found no lower
+    point, an IPOPT error); 3 interrupted (Ctrl-C, SIGTERM).  ``success`` is ``status ==
+    0`` and ``message`` says in a sentence what happened and, on failure, what to try.
+    """
 
     x: np.ndarray
     fun: float
@@ -31,6 +45,7 @@ class Result:
     nit: int
     nfev: int
     success: bool
+    status: int
     message: str
     method: str
     gradient: str
@@ -42,8 +57,9 @@ class Result:
 
     def summary(self) -> dict:
         """JSON-ready summary (no arrays); ``stages`` has one entry per continuation stage
-        (time step, iterations, evaluations, best objective at that step, seconds)."""
+        (time step, iterations, evaluations, best objective at that step, status, seconds)."""
         return {"fun": self.fun, "nit": self.nit, "nfev": self.nfev, "success": self.success,
+                "status": self.status, "status_name": STATUS[self.status],
                 "message": self.message, "method": self.method, "gradient": self.gradient,
                 "timings": self.timings, "breakdown": self.breakdown, "stages": self.stages,
                 "gradient_norm": float(np.linalg.norm(self.jac))}
@@ -53,7 +69,7 @@ class _Evaluator:
     """Memoised objective and gradient that tracks the best point and failed simulations.
 
     ``stage`` is the continuation stage it serves; ``export`` maps its controls to the final
-    problem's grid for the checkpoint."""
+    problem's grid for the checkpoint (an :class:`~.io.Checkpoint` or None)."""
 
     def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None):
         self.problem, self.gradient = problem, get_gradient(gradient)
@@ -65,7 +81,7 @@ class _Evaluator:
         self.last_u = None
         self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.seconds = 0.0
-        self.interrupted = False
+        self.interrupted = None
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
@@ -73,6 +89,7 @@ class _Evaluator:
             return self.last
         t = time.perf_counter()
         try:
+            check()  # a signal caught by interrupts.catching stops the search here
             f, g = self.gradient(self.problem, u)
         except SimulationError as err:
             # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
@@ -81,8 +98,8 @@ class _Evaluator:
             self.last_failure = str(err)
             best = self.best_f if np.isfinite(self.best_f) else 0.0
             f, g = best + 10.0 * (abs(best) + 1.0), np.zeros_like(u)
-        except KeyboardInterrupt:  # IPOPT would swallow it: remember, then re-raise
-            self.interrupted = True
+        except KeyboardInterrupt as err:  # IPOPT would swallow it: remember, then re-raise
+            self.interrupted = getattr(err, "signum", signal.SIGINT)
             raise
         self.seconds += time.perf_counter() - t
         self.nfev += 1
@@ -94,7 +111,8 @@ class _Evaluator:
     def record(self, history, start, bar):
         """Append one iteration (at the last evaluated point) to ``history``; the checkpoint
         gets the best controls on the final grid (``u``), their objective at this stage's
-        time step (``fun``), the ``stage`` and its ``stage_dt``."""
+        time step (``fun``), the iterations so far (``nit``), the ``stage`` and its
+        ``stage_dt``."""
         u, (f, _) = self.last_u, self.last
         control = self.problem.control_cost(u)[0]
         history.append({"iteration": len(history) + 1, "stage": self.stage,
@@ -103,21 +121,26 @@ class _Evaluator:
                         "control_norm": float(np.linalg.norm(u)),
                         "seconds": time.perf_counter() - start, "nfev": self.nfev})
         if self.checkpoint is not None and self.best_u is not None:
-            np.savez(self.checkpoint, u=self.export(self.best_u), fun=self.best_f,
-                     nit=len(history), stage=self.stage, stage_dt=self.problem.dt)
+            self.checkpoint.write(self.export(self.best_u), fun=float(self.best_f),
+                                  nit=len(history), stage=self.stage,
+                                  stage_dt=float(self.problem.dt))
         bar.update(1)
         bar.set_postfix(f=f"{f:.4g}")
+        check()
 
 
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
-          options: dict | None = None, continuation=None) -> Result:
+          options: dict | None = None, continuation=None,
+          time_limit: float | None = None) -> Result:
     """Optimise the problem's controls.
 
     ``method`` is "lbfgsb" or "ipopt"; ``gradient`` a route name or strategy; ``u0`` the
     starting controls at ``problem.dt`` (default: the problem's guess, else passive);
-    ``checkpoint`` a ``.npz`` path that always holds the best controls so far (at
-    ``problem.dt``, also during a coarse stage); ``options`` go to the underlying solver.
+    ``checkpoint`` a ``.npz`` path (or :class:`~.io.Checkpoint`) that always holds the best
+    controls so far (at ``problem.dt``, also during a coarse stage); ``options`` go to the
+    underlying solver; ``time_limit`` (seconds, wall clock, over all stages) stops the
+    search at the first iteration past it (IPOPT: its ``max_wall_time``) with status 1.
 
     ``continuation`` (the paper's section 6: optimise at a large time step, then refine) is a
     list of time steps from coarse to fine, e.g. ``[4 * prob.dt, 2 * prob.dt]``; the
@@ -128,46 +151,58 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``maxiter`` applies to each stage.  The result is the last stage's, at ``problem.dt``;
     ``nit``, ``nfev`` and ``timings`` are totals over the stages, every ``history`` record
     names its ``stage`` and ``dt``, and ``stages`` lists per stage its dt, iterations,
-    evaluations, best objective (at that dt) and seconds.  Ctrl-C during an earlier stage
-    ends the continuation there: the result is that stage's best controls resampled to
-    ``problem.dt`` and evaluated there, and its message names the stage.
+    evaluations, best objective (at that dt), status, message and seconds.  An interrupt or
+    the time limit during an earlier stage ends the continuation there: the result is that
+    stage's best controls resampled to ``problem.dt`` and evaluated there, and its message
+    names the stage.
+
+    A simulation that fails at the starting controls raises :class:`SimulationError`;
+    during the search a failing point counts as a failed evaluation.
     """
     if method not in METHODS:
         raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
     if maxiter < 1:
         raise ValueError("maxiter must be at least 1")
+    if time_limit is not None and not time_limit > 0:
+        raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
     problems = stage_problems(problem, continuation)
     strategy = get_gradient(gradient)
+    search = _Search(method, maxiter, tol, options or {}, quiet, as_checkpoint(checkpoint),
+                     time_limit)
     u = None if u0 is None else _carry(problem, problem.controls.check(u0), problems[0])
-    history, stages = [], []
-    start = time.perf_counter()
+    stages = []
     for k, p in enumerate(problems):
-        ev = _Evaluator(p, strategy, checkpoint, stage=k,
+        ev = _Evaluator(p, strategy, search.checkpoint, stage=k,
                         export=lambda v, p=p: _carry(p, v, problem))
-        t = time.perf_counter()
-        nit, success, message, interrupted = _run(
-            p, method, ev, p.initial_controls() if u is None else u, maxiter, tol,
-            options or {}, history, start, quiet, stage=(k, len(problems)))
-        stages.append({"stage": k, "dt": p.dt, "steps": p.steps, "nit": nit,
-                       "nfev": ev.nfev, "fun": float(ev.best_f), "success": bool(success),
-                       "message": message, "seconds": time.perf_counter() - t,
-                       "evaluation_seconds": ev.seconds, "failed_simulations": ev.failures})
-        if interrupted or p is problem:
+        stages.append(search.run(p, ev, p.initial_controls() if u is None else u,
+                                 (k, len(problems))))
+        if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
         u = _carry(p, ev.best_u, problems[k + 1])
+    return _result(problem, p, ev, strategy, search, stages, len(problems))
+
+
+def _result(problem, p, ev, strategy, search, stages, count) -> Result:
+    """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``)."""
+    status, message = stages[-1]["status"], stages[-1]["message"]
     if p is problem:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
     else:
         u = _carry(p, ev.best_u, problem)
         fun, jac = _evaluate_final(problem, strategy, u)
-        message = (f"interrupted by user in stage {k} of 0..{len(problems) - 1} (dt = "
-                   f"{p.dt:.6g} s): its best controls, resampled to dt = {problem.dt:.6g} s, kept")
+        if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
+            status = LIMIT
+            message = f"time limit reached ({search.time_limit:g} s) before converging"
+        message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} (dt = "
+                   f"{p.dt:.6g} s): its best controls, resampled to dt = {problem.dt:.6g} s, "
+                   "kept")
     traj = problem.simulate(u)
     return Result(x=u, fun=fun, jac=jac, nit=sum(s["nit"] for s in stages),
-                  nfev=sum(s["nfev"] for s in stages), success=bool(success), message=message,
-                  method=method, gradient=getattr(strategy, "name", type(strategy).__name__),
-                  trajectory=traj, history=history,
-                  timings={"wall_seconds": time.perf_counter() - start,
+                  nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
+                  status=status, message=message, method=search.method,
+                  gradient=getattr(strategy, "name", type(strategy).__name__),
+                  trajectory=traj, history=search.history,
+                  timings={"wall_seconds": time.perf_counter() - search.start,
                            "evaluation_seconds": sum(s["evaluation_seconds"] for s in stages),
                            "failed_simulations": sum(s["failed_simulations"] for s in stages),
                            "stage_seconds": [s["seconds"] for s in stages]},
@@ -204,27 +239,54 @@ def stage_problems(problem, continuation) -> list:
     return [problem.resampled(dt) for dt in dts[:-1]] + [problem]
 
 
-def _run(problem, method, ev, u0, maxiter, tol, options, history, start, quiet, stage):
-    """One optimizer run from ``u0``: ``(nit, success, message, interrupted)``."""
-    k, count = stage
-    where = "" if count == 1 else f" of stage {k} (dt = {problem.dt:.6g} s)"
-    ev(u0)
-    if ev.failures:
-        raise SimulationError(f"the simulation fails at the starting controls{where} "
-                              f"({ev.last_failure})"
-                              + ("; start the continuation at a finer dt" if where else ""), 0)
-    desc = f"{problem.name} [{method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
-    bar = tqdm(total=maxiter, disable=quiet, desc=desc, leave=False)
-    run = _lbfgsb if method == "lbfgsb" else _ipopt
-    first = len(history)
-    try:
-        nit, success, message = run(problem, ev, u0, maxiter, tol, options,
-                                    lambda: ev.record(history, start, bar))
-        return nit, success, message, False
-    except KeyboardInterrupt:
-        return len(history) - first, False, "interrupted by user; best result kept", True
-    finally:
-        bar.close()
+class _Search:
+    """What the stages of one :func:`solve` share: the optimizer and its settings, the
+    history, the checkpoint and the clock."""
+
+    def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
+        self.method, self.maxiter, self.tol, self.options = method, maxiter, tol, options
+        self.quiet, self.checkpoint, self.time_limit = quiet, checkpoint, time_limit
+        self.history, self.start = [], time.perf_counter()
+        self.deadline = None if time_limit is None else self.start + time_limit
+
+    def time_up(self) -> bool:
+        return self.deadline is not None and time.perf_counter() >= self.deadline
+
+    def run(self, problem, ev, u0, stage) -> dict:
+        """One optimizer run from ``u0``: the stage's record (``nit``, ``status``,
+        ``message``, ...)."""
+        t, first = time.perf_counter(), len(self.history)
+        status, message = self._search(problem, ev, u0, stage)
+        if status == LIMIT and self.time_up():
+            message = f"time limit reached ({self.time_limit:g} s) before converging"
+        return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
+                "nit": len(self.history) - first, "nfev": ev.nfev, "fun": float(ev.best_f),
+                "success": status == CONVERGED, "status": status, "message": message,
+                "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
+                "failed_simulations": ev.failures}
+
+    def _search(self, problem, ev, u0, stage):
+        k, count = stage
+        where = "" if count == 1 else f" of stage {k} (dt = {problem.dt:.6g} s)"
+        ev(u0)
+        if ev.failures:
+            raise SimulationError(f"the simulation fails at the starting controls{where} "
+                                  f"({ev.last_failure})"
+                                  + ("; start the continuation at a finer dt" if where else ""), 0)
+        desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
+        bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
+        run = _lbfgsb if self.method == "lbfgsb" else _ipopt
+        try:
+            return run(problem, ev, u0, self.maxiter, self.tol, self.options,
+                       lambda: ev.record(self.history, self.start, bar), self.deadline)
+        except KeyboardInterrupt as err:
+            handled()
+            signum = getattr(err, "signum", signal.SIGINT)
+            who = ("by user (SIGINT)" if signum == signal.SIGINT
+                   else f"by {NAMES.get(signum, signum)}")
+            return INTERRUPTED, f"interrupted {who}; best result kept"
+        finally:
+            bar.close()
 
 
 def _carry(source, u, target):
@@ -233,8 +295,8 @@ def _carry(source, u, target):
 
 
 def _evaluate_final(problem, strategy, u):
-    """Objective and gradient of the final problem at ``u`` after an interrupted stage; if
-    that is interrupted too, the objective alone (gradient NaN)."""
+    """Objective and gradient of the final problem at ``u`` after a stage that stopped the
+    continuation; if that is interrupted too, the objective alone (gradient NaN)."""
     try:
         f, g = strategy(problem, u)
         return float(f), g
@@ -242,15 +304,28 @@ def _evaluate_final(problem, strategy, u):
         return float(problem.objective(u)), np.full(u.size, np.nan)
 
 
-def _lbfgsb(problem, ev, u0, maxiter, tol, options, on_iteration):
+class _TimeUp(Exception):
+    """Raised from L-BFGS-B's callback past the deadline (scipy lets it through)."""
+
+
+def _lbfgsb(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": tol, "gtol": 1e-10,
             "maxcor": 20}
     opts.update(options)
     lb, ub = problem.bounds()
     bounds = list(zip(lb, ub)) if np.isfinite(lb).any() or np.isfinite(ub).any() else None
-    res = minimize(ev, u0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts,
-                   callback=lambda *_: on_iteration())
-    return int(res.nit), bool(res.success), str(res.message)
+
+    def callback(intermediate_result):
+        on_iteration()
+        if deadline is not None and time.perf_counter() >= deadline:
+            raise _TimeUp
+
+    try:
+        res = minimize(ev, u0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts,
+                       callback=callback)
+    except _TimeUp:
+        return LIMIT, "time limit reached before converging"
+    return lbfgsb_outcome(res.message, maxiter=opts["maxiter"], maxfun=opts["maxfun"])
 
 
 class _Objective(ca.Callback):
@@ -302,7 +377,7 @@ class _Iteration(ca.Callback):
 
     def __init__(self, n, on_iteration):
         ca.Callback.__init__(self)
-        self.n, self.on_iteration, self.interrupted, self.count = n, on_iteration, False, 0
+        self.n, self.on_iteration, self.interrupted, self.count = n, on_iteration, None, 0
         self.construct("iteration", {})
 
     def get_n_in(self):
@@ -327,29 +402,33 @@ class _Iteration(ca.Callback):
             self.count += 1
             if self.count > 1:  # IPOPT reports iteration 0, the start, first
                 self.on_iteration()
-        except KeyboardInterrupt:
-            self.interrupted = True
+        except KeyboardInterrupt as err:
+            self.interrupted = getattr(err, "signum", signal.SIGINT)
             return [1]
         return [0]
 
 
-def _ipopt(problem, ev, u0, maxiter, tol, options, on_iteration):
+def _ipopt(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     n = problem.size
     phi = _Objective(ev, n)
     it = _Iteration(n, on_iteration)
     U = ca.MX.sym("u", n)
     ipopt = {"hessian_approximation": "limited-memory", "max_iter": maxiter, "tol": tol,
              "print_level": 0, "sb": "yes", "limited_memory_max_history": 20}
+    if deadline is not None:
+        ipopt["max_wall_time"] = max(deadline - time.perf_counter(), 1e-3)
     ipopt.update(options)
     solver = ca.nlpsol("keyframe", "ipopt", {"x": U, "f": phi(U)},
                        {"ipopt": ipopt, "print_time": False, "iteration_callback": it,
                         "error_on_fail": False})
     solver._keep = (phi, it)  # Callbacks must outlive the solver
     lb, ub = problem.bounds()
-    solver(x0=u0, lbx=lb, ubx=ub)
-    stats = solver.stats()
-    status = stats.get("return_status", "unknown")
-    if it.interrupted or ev.interrupted:
-        raise KeyboardInterrupt
-    success = bool(stats.get("success", False))
-    return int(stats.get("iter_count", it.count - 1)), success, status
+    # an interrupt CasADi catches inside IPOPT ends it as NonIpopt_Exception_Thrown: the
+    # handler's log, the evaluator and the iteration hook say it was one
+    with catching(signal.SIGINT) as caught:
+        solver(x0=u0, lbx=lb, ubx=ub)
+    signum = caught.signum or ev.interrupted or it.interrupted
+    if signum:
+        raise Interrupted(signum)
+    return ipopt_outcome(solver.stats().get("return_status", "unknown"),
+                         maxiter=ipopt["max_iter"])

@@ -2,9 +2,11 @@
 
 ``animate`` writes a GIF, ``snapshot`` a PNG of small multiples at the keyframes and
 ``convergence`` a PNG of the optimizer's history.  All use the Agg backend and close their
-figures.  For a cloth (a model with ``faces``) ``animate`` and ``snapshot`` hand over to
-:mod:`.render_cloth`, which draws in 3-D, and for a blend between source clips (a scene
-with ``clips``) to :mod:`.render_blend`, which draws the clips and the blend side by side.
+figures, and write each file to a temporary name moved into place when complete, so an
+interrupted drawing leaves no half-written picture.  For a cloth (a model with ``faces``)
+``animate`` and ``snapshot`` hand over to :mod:`.render_cloth`, which draws in 3-D, and for
+a blend between source clips (a scene with ``clips``) to :mod:`.render_blend`, which draws
+the clips and the blend side by side.
 """
 from __future__ import annotations
 
@@ -19,6 +21,8 @@ from matplotlib.animation import PillowWriter  # noqa: E402
 from matplotlib.collections import LineCollection  # noqa: E402
 from matplotlib.patches import Polygon  # noqa: E402
 
+from .interrupts import check  # noqa: E402
+from .io import atomic_path  # noqa: E402
 from .objectives import CenterOfMassKeyframe, RegionTarget, StateKeyframe  # noqa: E402
 
 AGENT, HIGHLIGHT, REGION, COM, PARTICLE = "#4c72b0", "#e1812c", "#3a923a", "#7b4ea3", "#c03d3e"
@@ -69,12 +73,26 @@ def frame_title(name: str, n: int, traj, full: bool = True) -> str:
 
 
 def write_gif(fig, draw, frames, path: Path, fps: int, dpi: int = 80) -> None:
-    """Grab ``fig`` after ``draw(n)`` for each of ``frames`` into a GIF at ``path``."""
+    """Grab ``fig`` after ``draw(n)`` for each of ``frames`` into a GIF at ``path``.
+
+    Written whole or not at all: an interrupted animation leaves no truncated GIF (and the
+    frames grabbed so far are dropped, not encoded)."""
     writer = PillowWriter(fps=fps)
-    with writer.saving(fig, str(path), dpi=dpi):
+    with atomic_path(path) as tmp, matplotlib.rc_context({"savefig.bbox": None}):
+        writer.setup(fig, str(tmp), dpi=dpi)
         for n in frames:
+            check()
             draw(n)
             writer.grab_frame()
+        writer.finish()
+
+
+def save_figure(fig, path, **kwargs) -> Path:
+    """``fig.savefig`` through a temporary file moved into place (see :func:`.io.atomic_path`)."""
+    check()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, **kwargs)
+    return Path(path)
 
 
 def _renderer_3d(problem):
@@ -257,7 +275,7 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
         fig.suptitle(problem.name, fontsize=11)
         _legend(fig, scenes[0])
         fig.tight_layout(rect=(0, 0.04, 1, 1))
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
     finally:
         plt.close(fig)
     return path
@@ -294,7 +312,7 @@ def convergence(result, path) -> Path:
                 ax.grid(alpha=0.3, which="both", lw=0.5)
             axes[0].legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(path, dpi=110)
+        save_figure(fig, path, dpi=110)
     finally:
         plt.close(fig)
     return path

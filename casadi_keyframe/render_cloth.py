@@ -22,7 +22,8 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
 
 from .models.colliders import Plane, Sphere  # noqa: E402
 from .objectives import StateKeyframe  # noqa: E402
-from .render import frame_title, keyframes, select_frames, snapshot_frames, write_gif  # noqa: E402
+from .render import (frame_title, keyframes, save_figure, select_frames,  # noqa: E402
+                     snapshot_frames, write_gif)
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
 LIGHT = np.array([0.5, -0.6, 0.65]) / np.linalg.norm([0.5, -0.6, 0.65])  # the camera's side
@@ -288,4 +289,4 @@ def save_grid(fig, path, title: str, view: _ClothView, extra=()) -> None:
     _legend(fig, view, extra)
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.08, top=1 - 0.55 / fig.get_figheight(),
                         wspace=0.05, hspace=0.1)
-    fig.savefig(path, dpi=110)
+    save_figure(fig, path, dpi=110)

@@ -85,3 +85,17 @@ def test_a_problem_without_state_keyframe_is_refused():
     com = prob.with_objective(CenterOfMassKeyframe(10, x=[0, 0.2, 0]) + Smoothness(1e-2))
     with pytest.raises(ValueError, match="no StateKeyframe"):
         solve_augmented(com)
+
+
+def test_the_rounds_stop_at_an_interrupt_or_the_time_limit_and_say_so():
+    from conftest import InterruptAfter
+
+    from casadi_keyframe.optimize import INTERRUPTED, LIMIT
+
+    stopped = solve_augmented(swing(), rounds=3, gradient=InterruptAfter(30), maxiter=60,
+                              quiet=True)
+    assert stopped.status == INTERRUPTED and not stopped.success
+    assert len(stopped.stages) < 3 and stopped.stages[-1]["status"] == INTERRUPTED
+    timed = solve_augmented(swing(), rounds=50, maxiter=60, quiet=True, time_limit=0.3)
+    assert timed.status == LIMIT and "time limit reached (0.3 s)" in timed.message
+    assert len(timed.stages) < 50

@@ -22,7 +22,8 @@ def test_solve_writes_results_and_pictures(tmp_path, capsys):
     out = tmp_path / "run"
     code = main(["solve", "flock_path", "--set", "agents=10", "--set", "steps=40",
                  "--maxiter", "15", "--out", str(out), "--quiet"])
-    assert code == 0
+    assert code == 3  # stopped at --maxiter before converging: written, with a hint
+    assert "iteration limit reached (15)" in capsys.readouterr().out
     for name in ("result.npz", "summary.json", "animation.gif", "convergence.png",
                  "keyframes.png", "checkpoint.npz"):
         assert (out / name).stat().st_size > 0, name
@@ -49,10 +50,11 @@ def test_solve_in_augmented_lagrangian_rounds(tmp_path, capsys):
     code = main(["solve", "cloth_shapes", "--set", "rows=4", "--set", "steps=12",
                  "--maxiter", "5", "--rounds", "2", "--weight-growth", "10", "--out", str(out),
                  "--quiet", "--no-animation"])
-    assert code == 0
+    assert code == 3  # the last round stopped at --maxiter
     text = capsys.readouterr().out
     assert "start (passive): objective" in text and "rms_position_error" in text
     assert "round 0: weight x1," in text and "round 1: weight x10," in text
+    assert text.count("iteration limit reached (5)") >= 3  # each round's message, the result's
     summary = json.loads((out / "summary.json").read_text())
     assert [s["weight_scale"] for s in summary["stages"]] == [1.0, 10.0]
     assert summary["message"].startswith("2 augmented-Lagrangian rounds")

@@ -207,13 +207,14 @@ def test_cli_solves_with_continuation(tmp_path, capsys):
     from casadi_keyframe.cli import main, parse_time_steps
 
     assert parse_time_steps("1/15, 1/30,0.0125") == pytest.approx([1 / 15, 1 / 30, 0.0125])
-    with pytest.raises(SystemExit, match="--continuation expects"):
+    with pytest.raises(ValueError, match="--continuation expects"):
         parse_time_steps("1/15,fast")
     base = ["solve", "flock_race", "--set", "agents=6", "--set", "steps=40", "--set",
             "keyframes=4", "--maxiter", "5", "--quiet", "--no-animation"]
-    assert main(base + ["--out", str(tmp_path), "--continuation", "1/10,1/20"]) == 0
+    assert main(base + ["--out", str(tmp_path), "--continuation", "1/10,1/20"]) == 3  # maxiter
     out = capsys.readouterr().out
     assert "stage 0: dt 0.1 s, 20 steps" in out and "stage 1: dt 0.05 s, 40 steps" in out
+    assert out.count("iteration limit reached (5)") >= 2  # the stages' messages are printed
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert [s["steps"] for s in summary["stages"]] == [20, 40]
     assert main(base + ["--out", str(tmp_path), "--continuation", "0.4"]) == 2

@@ -1,0 +1,103 @@
+"""SIGINT and SIGTERM as a remembered :class:`Interrupted` (a KeyboardInterrupt).
+
+A long solve stops the same way whichever signal stops it: the optimizers catch
+KeyboardInterrupt and return their best point, and the command writes it and exits 130
+(SIGINT) or 143 (SIGTERM).  Inside :func:`catching`, the first signal is raised at the next
+safe point (:func:`check`: every objective evaluation, iteration, picture and animation
+frame), not wherever the interpreter happens to be: raised inside a C extension calling
+back into Python, an exception can be swallowed or become a SystemError (seen: CasADi's
+``DM_from_array`` swallowing it, so a solve ran on to convergence; a SystemError from
+``DM.__array__``; IPOPT ending with ``NonIpopt_Exception_Thrown``).  A second signal is
+raised at once (and, should that raise be swallowed, again at the next safe point), except
+inside :func:`deferred` (a file being moved into place), which raises it at its end.
+"""
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+
+NAMES = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}
+_log: list[int] = []  # every signal the handler caught, in order
+_state = {"depth": 0, "seen": 0, "pending": None, "held": 0}
+
+
+class Interrupted(KeyboardInterrupt):
+    """Raised for a signal caught inside :func:`catching`; ``signum`` is the signal."""
+
+    def __init__(self, signum: int = signal.SIGINT):
+        super().__init__(NAMES.get(signum, f"signal {signum}"))
+        self.signum = signum
+
+
+def _handler(signum, frame):
+    _log.append(signum)
+    _state["seen"] += 1
+    _state["pending"] = signum  # kept: code in CasADi may swallow the raise below
+    if _state["seen"] > 1 and not _state["held"]:
+        raise Interrupted(signum)
+
+
+def check() -> None:
+    """A safe point: raise :class:`Interrupted` for a signal caught and not handled yet."""
+    signum = _state["pending"]
+    if signum is not None and not _state["held"]:
+        _state["pending"] = None
+        raise Interrupted(signum)
+
+
+def handled() -> None:
+    """Called where an interrupt has been acted on: later :func:`check` calls pass."""
+    _state["pending"] = None
+
+
+class Catch:
+    """What :func:`catching` yields: ``signum``, the last signal since the block began."""
+
+    def __init__(self):
+        self.start = len(_log)
+
+    @property
+    def signum(self) -> int | None:
+        return _log[-1] if len(_log) > self.start else None
+
+
+@contextlib.contextmanager
+def catching(*signums):
+    """Within the block each of ``signums`` (default SIGINT and SIGTERM) raises
+    :class:`Interrupted` (the first at the next :func:`check`, a second at once) and is
+    logged; the previous handlers come back after.
+
+    Only in the main thread (elsewhere signals cannot be handled: the block just runs); a
+    signal the process ignores (SIGINT in a shell's background job) stays ignored."""
+    catch = Catch()
+    if threading.current_thread() is not threading.main_thread():
+        yield catch
+        return
+    if _state["depth"] == 0:
+        _state.update(seen=0, pending=None)
+    previous = {}
+    _state["depth"] += 1
+    try:
+        for s in signums or (signal.SIGINT, signal.SIGTERM):
+            if signal.getsignal(s) is not signal.SIG_IGN:
+                previous[s] = signal.signal(s, _handler)
+        yield catch
+    finally:
+        _state["depth"] -= 1
+        for s, old in previous.items():
+            signal.signal(s, old)
+
+
+@contextlib.contextmanager
+def deferred():
+    """A second signal arriving inside the block is raised at its end."""
+    seen = _state["seen"]
+    _state["held"] += 1
+    try:
+        yield
+    finally:
+        _state["held"] -= 1
+    if not _state["held"] and _state["seen"] > max(seen, 1) and _state["pending"] is not None:
+        signum, _state["pending"] = _state["pending"], None
+        raise Interrupted(signum)

@@ -1,0 +1,271 @@
+"""Run a solve as a command and leave its outputs on disk (``casadi-keyframe solve`` and
+``render``).
+
+A run writes ``checkpoint.npz`` at every iteration, then ``result.npz`` and
+``summary.json``, then the pictures, each file whole or not at all (:mod:`.io`).  SIGINT
+and SIGTERM stop the search the same way (:mod:`.interrupts`): the best result is written,
+the pictures are skipped (``render`` draws them later) and the exit code names the signal.
+A second signal stops at once; the files already written stay whole.
+"""
+from __future__ import annotations
+
+import json
+import signal
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+from .interrupts import NAMES, catching, check
+from .io import CHECKPOINT, RESULT, Checkpoint, read_run, run_file, save_result
+from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
+from .trajectory import SimulationError, Trajectory
+
+EXIT_CODES = """\
+exit codes:
+  0    converged (IPOPT: also to its acceptable level); result and pictures written
+  1    the search failed (line search, IPOPT error, restoration failure...): the best
+       point is still written; or the simulation fails at the start (nothing written)
+  2    bad input (problem, overrides, options, --resume source)
+  3    stopped at --maxiter or --time-limit before converging; result written: raise the
+       limit or continue with --resume OUT
+  130  interrupted by Ctrl-C (SIGINT); result written, pictures skipped ('render OUT')
+  143  stopped by SIGTERM; as 130"""
+_EXIT = {CONVERGED: 0, FAILED: 1, LIMIT: 3}
+_SIGNAL_EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
+
+
+def exit_code(status: int, signum: int | None = None) -> int:
+    """The command's exit code for a result ``status`` (and the signal that stopped it)."""
+    if status == INTERRUPTED:
+        return _SIGNAL_EXIT.get(signum or signal.SIGINT, 128 + (signum or 2))
+    return _EXIT[status]
+
+
+@dataclass
+class SolveRun:
+    """What ``casadi-keyframe solve`` asks for: the built problem, where its file is and the
+    overrides it was built with, the output folder and the search's options."""
+
+    problem: object
+    out: Path
+    problem_file: str
+    problem_arg: str = ""  # the problem as typed (a name or a path), for the hints
+    overrides: dict = field(default_factory=dict)
+    method: str = "lbfgsb"
+    gradient: str = "adjoint"
+    maxiter: int = 200
+    continuation: list | None = None
+    rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
+    time_limit: float | None = None
+    resume: str | None = None
+    quiet: bool = False
+    animation: bool = True
+
+
+def run_solve(spec: SolveRun) -> int:
+    """Solve, write, draw; return the exit code (see :data:`EXIT_CODES`)."""
+    done = SimpleNamespace(started=False, written=False)
+    with catching() as caught:
+        try:
+            return _solve(spec, caught, done)
+        except Exception:  # raised inside C code, a signal can surface as another error
+            if caught.signum is None:
+                raise
+            signum = caught.signum
+        except KeyboardInterrupt as err:
+            signum = getattr(err, "signum", signal.SIGINT)
+        print(f"\n{spec.problem.name}: {_stopped(signum)} {_where(done, spec)}")
+        return exit_code(INTERRUPTED, signum)
+
+
+def _solve(spec: SolveRun, caught, done) -> int:
+    prob, out = spec.problem, spec.out
+    u0, resumed = resume_controls(spec) if spec.resume else (None, {})
+    origin = ("resumed" if resumed else "guess" if prob.has_guess else "passive")
+    try:
+        start = prob.breakdown(prob.initial_controls() if u0 is None else u0)
+    except SimulationError as err:
+        raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
+                              f"({origin}): {err}", err.step) from None
+    print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
+          f"{start['objective']:.6g}; {format_misses(start['misses'])}")
+    meta = {"problem": prob.name, "problem_file": spec.problem_file,
+            "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient}
+    done.started = True
+    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta))
+    signum = caught.signum if result.status == INTERRUPTED else None
+    extra = {"problem_file": spec.problem_file, **({"resumed_from": resumed} if resumed else {})}
+    summary = save_result(result, out, problem_name=prob.name, overrides=spec.overrides,
+                          **extra)
+    done.written = True
+    report(result, summary, out)
+    if result.status == INTERRUPTED:
+        print(f"  {_stopped(signum)}: pictures skipped; draw them with 'casadi-keyframe "
+              f"render {out}', continue with '{_command(spec, 'solve')} --out {out} "
+              f"--resume {out}'")
+    else:
+        draw(prob, result.trajectory, result, out, animation=spec.animation)
+        print(f"  pictures drawn in {out}/")
+    _hint(result.status, spec)
+    check()  # a signal after the last safe point still counts
+    return exit_code(result.status, signum)
+
+
+def _search(spec: SolveRun, u0, checkpoint):
+    from .optimize import solve
+
+    options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
+                   quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
+                   time_limit=spec.time_limit, u0=u0)
+    if spec.rounds:
+        from .augmented_lagrangian import solve_augmented
+        return solve_augmented(spec.problem, **spec.rounds, **options)
+    return solve(spec.problem, **options)
+
+
+def resume_controls(spec: SolveRun):
+    """The controls to start from and where they came from, read from ``spec.resume`` (a
+    results folder: the newer of its checkpoint and result; or either file).  Refused
+    (ValueError) if they were found for another problem, other overrides or another size."""
+    run = read_run(spec.resume)
+    meta, prob, path = run["meta"], spec.problem, run["path"]
+    given = json.loads(json.dumps(spec.overrides, default=str))
+    if meta.get("problem") != prob.name:
+        raise ValueError(f"--resume {path} holds a run of problem {meta.get('problem')!r}, "
+                         f"not {prob.name!r}")
+    if meta.get("overrides", {}) != given:
+        raise ValueError(f"--resume {path} was solved with overrides {meta.get('overrides')}, "
+                         f"this run has {given}: give the same --set values")
+    if run["u"].size != prob.size:
+        raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
+                         f"{prob.size}")
+    return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun")}
+
+
+def report(result, summary, out) -> None:
+    """Print the outcome: message, totals, each stage or round, the keyframe misses."""
+    print(f"{summary['problem']}: {result.message}")
+    print(f"  objective {summary['fun']:.6g}  iterations {result.nit}  evaluations "
+          f"{result.nfev}  wall {result.timings['wall_seconds']:.1f} s")
+    if len(result.stages) > 1:
+        for st in result.stages:
+            print("  " + format_stage(st))
+    for miss in summary["breakdown"]["misses"]:
+        print(f"  {format_misses([miss])}")
+    print(f"  result written to {out}/{RESULT} and summary.json")
+
+
+def _hint(status: int, spec: SolveRun) -> None:
+    if status == LIMIT:
+        print(f"  hint: raise --maxiter or --time-limit, or continue from this result:\n"
+              f"    {_command(spec, 'solve')} --out {spec.out} --resume {spec.out}")
+    elif status == FAILED:
+        print(f"  hint: '{_command(spec, 'gradcheck')}' compares the gradient routes; "
+              "--gradient exact uses CasADi's exact reverse mode")
+
+
+def _command(spec: SolveRun, command: str) -> str:
+    """``casadi-keyframe COMMAND PROBLEM --set ...`` for this run's problem and overrides."""
+    sets = "".join(f" --set {k}={v if isinstance(v, str) else repr(v)}"
+                   for k, v in spec.overrides.items())
+    return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
+
+
+def _stopped(signum) -> str:
+    signum = signum or signal.SIGINT
+    return "interrupted (Ctrl-C)" if signum == signal.SIGINT else f"stopped by {NAMES.get(signum, signum)}"
+
+
+def _where(done, spec: SolveRun) -> str:
+    """What a second interrupt leaves on disk."""
+    out = spec.out
+    if done.written:
+        return (f"while drawing: the result is in {out}/{RESULT}; draw the pictures with "
+                f"'casadi-keyframe render {out}'")
+    if done.started and (Path(out) / CHECKPOINT).is_file():
+        return (f"before the result was written: the best controls so far are in "
+                f"{out}/{CHECKPOINT}; draw them with 'casadi-keyframe render {out}' or "
+                f"continue with '{_command(spec, 'solve')} --out {out} --resume {out}'")
+    return "before the first iteration: nothing new written"
+
+
+def format_stage(stage: dict) -> str:
+    """One line for a continuation stage (its dt) or an augmented-Lagrangian round (its
+    weight scale and keyframe misses), ending with how it stopped."""
+    head = (f"round {stage['stage']}: weight x{stage['weight_scale']:.3g}"
+            if "weight_scale" in stage else
+            f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps")
+    line = (f"{head}, {stage['nit']} iterations, objective {stage['fun']:.6g}, "
+            f"{stage['seconds']:.1f} s")
+    if stage.get("misses"):
+        line += "; " + format_misses(stage["misses"])
+    return line + (f"; {stage['message']}" if stage.get("message") else "")
+
+
+def format_misses(misses) -> str:
+    """``"StateKeyframe@60 rms_position_error 0.01, ..."``, terms separated by "; "."""
+    return "; ".join(f"{m['term']} " + ", ".join(f"{k} {v:.4g}" for k, v in m.items()
+                                                 if k != "term") for m in misses)
+
+
+def draw(problem, trajectory, result, out, *, animation: bool = True) -> None:
+    """convergence.png (if ``result`` has a history), keyframes.png and animation.gif."""
+    from . import render
+
+    out = Path(out)
+    if getattr(result, "history", None):
+        render.convergence(result, out / "convergence.png")
+    render.snapshot(problem, trajectory, out / "keyframes.png")
+    if animation:
+        render.animate(problem, trajectory, out / "animation.gif")
+
+
+def run_render(source, *, animation: bool = True) -> int:
+    """Draw a saved run's pictures again (``casadi-keyframe render``); the exit code."""
+    with catching() as caught:
+        try:
+            code = _render(source, animation)
+            check()
+            return code
+        except Exception:
+            if caught.signum is None:
+                raise
+            signum = caught.signum
+        except KeyboardInterrupt as err:
+            signum = getattr(err, "signum", signal.SIGINT)
+        print(f"\n{_stopped(signum)}: drawing stopped; the pictures drawn so far are whole")
+        return exit_code(INTERRUPTED, signum)
+
+
+def _render(source, animation: bool) -> int:
+    from .loading import load_problem
+
+    source = Path(source)
+    path = source / RESULT if (source / RESULT).is_file() else run_file(source)
+    run = read_run(path)
+    meta, arrays, out = run["meta"], run["arrays"], path.parent
+    name = meta.get("problem_file")
+    prob = load_problem(name if name and Path(name).is_file() else meta["problem"],
+                        **meta.get("overrides", {}))
+    if run["u"].size != prob.size:
+        raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
+                         f"{meta.get('overrides', {})} has {prob.size}")
+    if "x" in arrays:
+        traj = Trajectory(arrays["x"], arrays["v"], float(arrays["dt"]))
+    else:
+        print(f"{prob.name}: {path.name} holds controls only: simulating them")
+        traj = prob.simulate(run["u"])
+    draw(prob, traj, _history(meta, arrays), out, animation=animation)
+    print(f"{prob.name}: pictures drawn in {out}/ from {path.name}")
+    return 0
+
+
+def _history(meta, arrays) -> SimpleNamespace:
+    """What :func:`render.convergence` reads, from a result.npz's arrays."""
+    objective = arrays.get("history_objective", ())
+    history = [{"iteration": i + 1, "objective": float(f),
+                "keyframe_error": float(arrays["history_keyframe_error"][i]),
+                "seconds": float(arrays["history_seconds"][i])}
+               for i, f in enumerate(objective)]
+    return SimpleNamespace(history=history, method=meta.get("method", "?"),
+                           gradient=meta.get("gradient", "?"))

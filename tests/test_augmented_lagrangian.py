@@ -11,11 +11,24 @@ from casadi_keyframe.studies import hanging_sheet
 OPTIONS = {"maxiter": 60, "quiet": True}
 
 
+def settled(model, seconds=5.0, dt=1 / 30):
+    """Positions of the passive sheet after ``seconds`` of hanging from its pins."""
+    x, v = model.rest_positions, np.zeros((model.n, 3))
+    step = LinearizedBackwardEuler("direct").step
+    for n in range(int(round(seconds / dt))):
+        x, v, _ = step(model, x, v, np.zeros_like(x), n, dt)
+    return x
+
+
 def swing(weight=20.0, alpha=2e-2):
     """A soft 3 x 3 sheet, its free particles swung 20 cm forward in 1/3 s: its forces cost
-    enough (``alpha``) that the keyframe penalty alone leaves a miss of millimetres."""
+    enough (``alpha``) that the keyframe penalty alone leaves a miss of millimetres.
+
+    It starts hanging at rest under its weight, springs stretched: from the unstretched rest
+    shape the penalty's optimum keeps a spring at exactly its rest length after the first
+    step, on the Choi-Ko law's kink, and the later rounds' line searches fail there."""
     model = hanging_sheet(3, stretch=50.0, ground=False)
-    x0 = model.rest_positions
+    x0 = settled(model)
     free = np.setdiff1d(np.arange(model.n), model.pinned)
     steps = 10
     objective = (StateKeyframe(steps, x=x0[free] + [0.0, 0.2, 0.0], position_weight=weight,
@@ -41,8 +54,8 @@ def test_multipliers_shrink_the_penalty_miss(penalty):
     misses = [s["misses"][0]["rms_position_error"] for s in result.stages]
     assert len(result.stages) == 4 and result.nit == sum(s["nit"] for s in result.stages)
     assert misses[0] == pytest.approx(rms_miss(penalty), rel=1e-6)  # round 0 is the penalty
-    assert rms_miss(penalty) > 0.002  # the control cost pulls (2.3 mm, measured)
-    assert misses[-1] < rms_miss(penalty) / 5  # 0.24 mm, measured
+    assert rms_miss(penalty) > 0.002  # the control cost pulls (3.6 mm, measured)
+    assert misses[-1] < rms_miss(penalty) / 5  # 0.27 mm, measured
     assert all(b < a for a, b in zip(misses, misses[1:]))
     # the result is scored on the true problem, not the shifted one of the last round
     assert result.fun == pytest.approx(prob.objective(result.x), rel=1e-9)
@@ -54,8 +67,8 @@ def test_a_weight_schedule_shrinks_it_and_multipliers_on_top_shrink_it_further(p
                                **OPTIONS)
     both = solve_augmented(swing(), rounds=3, weight_growth=10.0, **OPTIONS)
     assert [s["weight_scale"] for s in schedule.stages] == [1.0, 10.0, 100.0]
-    assert rms_miss(schedule) < rms_miss(penalty) / 20  # 0.034 mm, measured
-    assert rms_miss(both) < rms_miss(schedule) / 2  # 0.004 mm, measured
+    assert rms_miss(schedule) < rms_miss(penalty) / 20  # 0.055 mm, measured
+    assert rms_miss(both) < rms_miss(schedule) / 2  # 0.0023 mm, measured
 
 
 def test_shifted_keyframe_aims_past_the_target():

@@ -31,13 +31,18 @@ def test_cg_and_direct_simulations_agree():
 
 def test_exact_route_matches_central_differences_and_taylor():
     prob = cloth_problem()
-    u = 0.05 * np.random.default_rng(1).standard_normal(prob.size)
+    u = 0.05 * np.random.default_rng(4).standard_normal(prob.size)
+    # the Choi-Ko law's stiffness jumps at rest length: differences straddling a spring's
+    # passage through it measure that jump, not the slope, so none passes within 1e-5 here
+    s = prob.model.springs
+    strain = np.linalg.norm(prob.simulate(u).x[1:, s.j] - prob.simulate(u).x[1:, s.i], axis=2)
+    assert np.abs(strain / s.rest - 1).min() > 1e-5
     f0, g = prob.objective_and_gradient(u, "exact")
     rng = np.random.default_rng(2)
     for _ in range(3):
         d = rng.standard_normal(prob.size)
         d /= np.linalg.norm(d)
-        slope = FiniteDifference(1e-6).directional(prob, u, d)
+        slope = FiniteDifference(1e-5).directional(prob, u, d)  # CG's noise floor: h >= 1e-5
         assert abs(g @ d - slope) <= 1e-6 * max(abs(slope), 1e-3 * np.linalg.norm(g))
     h = 0.1 * rng.standard_normal(prob.size)
     eps = 0.5 ** np.arange(1, 7)

@@ -109,7 +109,7 @@ def test_concurrent_processes_compiling_the_same_kernels_agree(tmp_path):
 @needs_compiler
 def test_compiled_kernels_equal_the_virtual_machine(fresh):
     rng = np.random.default_rng(3)
-    for kernel in spring_kernels(1e-6, 0.1).values():
+    for kernel in spring_kernels(1e-6).values():
         inputs = [rng.standard_normal((2100, kernel.size1_in(i))) for i in range(kernel.n_in())]
         inputs[2] = 1 + np.abs(inputs[2])  # positive rest lengths
         vm = MappedKernel(kernel, jit=False)

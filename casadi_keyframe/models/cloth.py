@@ -4,7 +4,7 @@ For a spring (i, j) of rest length ``L`` let ``d = x_j - x_i``, ``dv = v_j - v_i
 regularised length ``r = sqrt(|d|^2 + eps^2)`` and ``u = d / r``.  The force on particle i is
 
 * tension, ``r >= L``:      ``f_i = k_t (r - L) u``                 (pulls i toward j)
-* compression, ``r < L``:   ``f_i = -(k_b kappa^2 + g(r)) u``       (pushes the ends apart)
+* compression, ``r < L``:   ``f_i = -k_b kappa^2 u``               (pushes the ends apart)
 * damping, always:          ``f_i += c ((dv . u) u)``
 
 and j feels ``-f_i``, so internal forces sum to zero.  Under compression the spring is
@@ -15,16 +15,19 @@ with ``y = sinc^{-1}(s)``, ``s = r / L``.  ``z = y^2`` is analytic in ``w = 1 - 
 degree-10 polynomial (:data:`SINC_INV_COEFFS`, |y error| < 1e-5): the force vanishes at
 ``r = L`` exactly and no square root appears in the kernel.
 
-The hand-over term ``g``: the pure Choi-Ko law jumps from stiffness ``k_t`` to almost zero at
-``r = L``, which makes the linearized step (its matrix holds the stiffness) discontinuous in
-the state, so neither its exact nor its swapped gradient means much for springs near rest
-length (measured on a passive hanging 5 x 5 sheet at dt = 1/30: swapped-vs-exact cosine
-0.97 with the pure law, 0.9993 with the hand-over).  With compressive strain ``w = 1 - r/L`` and ``delta = buckle_strain``,
-``g = k_t L delta (1 - (1 - min(w/delta, 1))^3) / 3``: the linear resistance fades out over
-``delta`` and leaves the critical buckling load ``k_t L delta / 3`` (Euler's picture: the
-cloth resists compression until it buckles, then the arc law takes over).  ``g`` has
-stiffness ``k_t`` at rest length, is monotone, and is C^2 at ``w = delta``;
-``buckle_strain = 0`` gives the pure law.
+No strut-like resistance before buckling.  The law's radial stiffness jumps at ``r = L``
+from ``k_t`` to the buckling slope ``24 k_b / L^3``, so the linearized step's matrix jumps
+when a spring passes its rest length (the objective is only piecewise smooth there).  A
+compressive force that resisted like a strut instead (stiffness ``k_t`` over a few percent of
+strain, as an earlier version of this model did to make the stiffness continuous) gives every
+compressed spring a transverse stiffness ``m / r < 0`` large enough to make a flat,
+compressed sheet (a sheet hanging in its plane) a buckling saddle: the passive sheet stays
+exactly planar, and the gradient of any keyframe objective grows by orders of magnitude per
+second of simulated time along it
+(``tests/test_cloth_model.py::test_flat_hanging_sheet_has_a_meaningful_gradient``).  Blending
+only the step's stiffness (continuous matrix, Choi-Ko force) keeps the gradient meaningful
+but breaks the step's agreement with full backward Euler and solved fig. 4 worse; real cloth
+buckles at a tiny load, which is what the Choi-Ko law says.
 
 Spring kinds and their stiffnesses (:class:`ClothParams`):
 
@@ -98,8 +101,6 @@ class ClothParams:
     sheet's membrane stiffness does not depend on the resolution).  ``bend``: buckling
     stiffness ``k_b``, N m^2.  ``damping``: along-spring damping c, N s/m.  ``air_drag``:
     drag per unit mass, 1/s.  ``gravity``: m/s^2.  ``eps``: length regularisation, m.
-    ``buckle_strain``: compressive strain over which linear resistance hands over to
-    buckling (0: the pure Choi-Ko law; see the module docstring).
     """
 
     stretch: float = 500.0
@@ -109,10 +110,9 @@ class ClothParams:
     air_drag: float = 0.1
     gravity: tuple = (0.0, 0.0, -9.81)
     eps: float = 1e-6
-    buckle_strain: float = 0.05
 
     def __post_init__(self):
-        for name in ("stretch", "shear", "bend", "damping", "air_drag", "buckle_strain"):
+        for name in ("stretch", "shear", "bend", "damping", "air_drag"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"ClothParams.{name} must be non-negative and finite, got {value}")
@@ -124,32 +124,27 @@ class ClothParams:
         object.__setattr__(self, "gravity", g)
 
 
-def spring_law(d, dv, L, k_t, k_b, c, eps: float, buckle_strain: float = 0.0):
+def spring_law(d, dv, L, k_t, k_b, c, eps: float):
     """``(f_i, K)`` of one spring as CasADi expressions (see the module docstring): the force
     on particle i and the stiffness ``K ~ df_i/dd`` the implicit step uses.
 
     With magnitude ``m(r)`` and ``f_i = m u``: ``df_i/dd = m' u u^T + m (I/r - d d^T/r^3)``.
     Under compression ``m < 0`` and the transverse term is negative: it says a compressed
     spring would rather rotate than shorten, and at fine resolution it makes the step matrix
-    ``M - dt D - dt^2 K`` indefinite (measured on a 50 x 50 sheet at dt = 1/60).  As Choi and
-    Ko, K keeps it only under tension (``max(m, 0)``); ``m' >= 0`` on both branches, so K is
-    negative semi-definite and the step matrix positive definite for every dt.
+    ``M - dt D - dt^2 K`` indefinite.  As Choi and Ko, K keeps it only under tension
+    (``max(m, 0)``); ``m' >= 0`` on both branches, so K is negative semi-definite and the
+    step matrix positive definite for every dt.
     """
     r = ca.sqrt(ca.dot(d, d) + eps ** 2)
     u = d / r
-    kappa2 = 4 * sinc_inverse_squared(r / L) / L ** 2
-    compression = k_b * kappa2
-    if buckle_strain > 0:
-        t = ca.fmin((1 - r / L) / buckle_strain, 1)
-        compression += k_t * L * buckle_strain * (1 - (1 - t) ** 3) / 3
-    m = ca.if_else(r >= L, k_t * (r - L), -compression)
+    m = ca.if_else(r >= L, k_t * (r - L), -k_b * 4 * sinc_inverse_squared(r / L) / L ** 2)
     force = m * u + c * ca.dot(dv, u) * u
     stiffness = (ca.mtimes(u, ca.jacobian(m, d))
                  + ca.fmax(m, 0) * (ca.SX.eye(3) / r - ca.mtimes(d, d.T) / r ** 3))
     return force, stiffness
 
 
-def spring_kernels(eps: float, buckle_strain: float = 0.0) -> dict[str, ca.Function]:
+def spring_kernels(eps: float) -> dict[str, ca.Function]:
     """``force(d, dv, L, k_t, k_b, c) -> f_i``, ``jac(...) -> (vec K, vec D)`` (row-major) and
     ``vjp`` (see :func:`interaction_kernels`), K from :func:`spring_law`.
 
@@ -158,7 +153,7 @@ def spring_kernels(eps: float, buckle_strain: float = 0.0) -> dict[str, ca.Funct
     """
     d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
     scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
-    force, stiffness = spring_law(d, dv, *scalars, eps, buckle_strain)
+    force, stiffness = spring_law(d, dv, *scalars, eps)
     return interaction_kernels("cloth_spring", d, dv, scalars, force, stiffness)
 
 
@@ -318,7 +313,7 @@ class ClothModel:
         k_t = np.where(s.kind == BEND, 24 * p.bend / s.rest ** 3, k_t)
         self._spring_params = [s.rest[:, None], k_t[:, None], np.full((s.rest.size, 1), p.bend),
                                np.full((s.rest.size, 1), p.damping)]
-        self._kernels = spring_kernels(p.eps, p.buckle_strain)
+        self._kernels = spring_kernels(p.eps)
         self._force, self._jac, self._df_dx, self._vjp = (
             MappedKernel(self._kernels[k], jit=self.jit) for k in ("force", "jac", "df_dx", "vjp"))
         self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)

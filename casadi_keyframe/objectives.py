@@ -212,7 +212,8 @@ class StateKeyframe(StateTerm):
         return out
 
     def miss(self, traj):
-        out = {"term": self.label}
+        """rms (and max) distance to the targets over the keyframe's ``particles``."""
+        out = {"term": self.label, "particles": int(self._idx.size)}
         if self._x is not None:
             err = np.linalg.norm(traj.x[self.frame][self._idx] - self._x, axis=1)
             out.update(rms_position_error=float(np.sqrt(np.mean(err ** 2))),

@@ -203,9 +203,14 @@ def format_stage(stage: dict) -> str:
 
 
 def format_misses(misses) -> str:
-    """``"StateKeyframe@60 rms_position_error 0.01, ..."``, terms separated by "; "."""
-    return "; ".join(f"{m['term']} " + ", ".join(f"{k} {v:.4g}" for k, v in m.items()
-                                                 if k != "term") for m in misses)
+    """``"StateKeyframe@60 over 416 particles: rms_position_error 0.01, ..."``, terms
+    separated by "; " (an rms is over the particles named)."""
+    def head(m):
+        return m["term"] + (f" over {m['particles']} particles:" if "particles" in m else "")
+
+    return "; ".join(head(m) + " " + ", ".join(f"{k} {v:.4g}" for k, v in m.items()
+                                               if k not in ("term", "particles"))
+                     for m in misses)
 
 
 def draw(problem, trajectory, result, out, *, animation: bool = True) -> None:

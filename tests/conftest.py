@@ -19,6 +19,24 @@ def pytest_configure(config):
         os.environ["CASADI_KEYFRAME_CACHE"] = str(config.cache.mkdir("casadi_keyframe_kernels"))
 
 
+def pytest_terminal_summary(terminalreporter):
+    """The slow suite's table of full-size figures (``make test-slow``), when it ran."""
+    import sys
+
+    from casadi_keyframe.run import format_misses
+    module = sys.modules.get("test_slow_figures") or sys.modules.get("tests.test_slow_figures")
+    rows = getattr(module, "TABLE", [])
+    if not rows:
+        return
+    write = terminalreporter.write_line
+    write("")
+    write("figure         controls  iterations  CPU s  misses")
+    for r in rows:
+        write(f"{r['figure']:14s} {r['size']:8d}  {r['iterations']:10d}  {r['cpu_seconds']:5.0f}  "
+              f"{format_misses(r['misses'])}")
+        write(f"{'':14s} {r['message']}")
+
+
 def small_flock(cutoff="smooth", *, n=8, steps=30, dt=0.1, dim=2, controls=None, seed=0):
     """8 agents, 30 steps, unequal masses, drag, wander and every objective term active."""
     rng = np.random.default_rng(seed)

@@ -198,3 +198,13 @@ def test_atomic_files_are_whole_or_absent(tmp_path):
         render.write_gif(fig, draw, range(10), tmp_path / "a.gif", fps=10)
     plt.close(fig)
     assert not (tmp_path / "a.gif").exists() and temporaries(tmp_path) == []
+
+
+def test_misses_say_what_their_rms_is_over():
+    from casadi_keyframe.run import format_misses
+
+    line = format_misses([{"term": "StateKeyframe@60", "particles": 416,
+                           "rms_position_error": 0.01}, {"term": "RegionTarget@50",
+                                                         "fraction_inside": 1.0}])
+    assert line == ("StateKeyframe@60 over 416 particles: rms_position_error 0.01; "
+                    "RegionTarget@50 fraction_inside 1")

@@ -165,9 +165,12 @@ def _hint(status: int, spec: SolveRun) -> None:
 
 
 def _command(spec: SolveRun, command: str) -> str:
-    """``casadi-keyframe COMMAND PROBLEM --set ...`` for this run's problem and overrides."""
+    """``casadi-keyframe COMMAND PROBLEM --set ...`` for this run's problem and overrides (and,
+    for ``solve``, its method and gradient route, so a resumed run goes on the same way)."""
     sets = "".join(f" --set {k}={v if isinstance(v, str) else repr(v)}"
                    for k, v in spec.overrides.items())
+    if command == "solve":
+        sets += f" --method {spec.method} --gradient {spec.gradient}"
     return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
 
 

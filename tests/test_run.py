@@ -125,6 +125,7 @@ def test_the_iteration_limit_exits_3_and_resume_goes_on(tmp_path, capsys):
                  "--no-animation"]) == 3
     text = capsys.readouterr().out
     assert "iteration limit reached (3)" in text and f"--resume {tmp_path}" in text
+    assert "--method lbfgsb --gradient adjoint --out" in text  # resumed the same way
     first = json.loads((tmp_path / "summary.json").read_text())
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--resume",
                  str(tmp_path / "checkpoint.npz"), "--quiet", "--no-animation"]) == 0

@@ -323,9 +323,29 @@ def _lbfgsb(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     try:
         res = minimize(ev, u0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts,
                        callback=callback)
+        status, message = lbfgsb_outcome(res.message, maxiter=opts["maxiter"],
+                                         maxfun=opts["maxfun"])
+        if not (status == FAILED and _line_search_failed(res)
+                and 0 < res.nit < opts["maxiter"]):
+            return status, message  # a failure at the first step: the gradient is suspect
+        # after progress, restart from the best point with no curvature memory: its first
+        # step is along the steepest descent, so a second failure there means no step
+        # lowers phi (a kink, such as the cloth law's at rest length, or round-off)
+        opts["maxiter"] -= res.nit
+        again = minimize(ev, ev.best_u, jac=True, method="L-BFGS-B", bounds=bounds,
+                         options=opts, callback=callback)
     except _TimeUp:
         return LIMIT, "time limit reached before converging"
-    return lbfgsb_outcome(res.message, maxiter=opts["maxiter"], maxfun=opts["maxfun"])
+    if _line_search_failed(again) and again.nit == 0:
+        return CONVERGED, ("converged: no step along the steepest descent lowers the "
+                           "objective (the line search failed, and again from the best point "
+                           "with fresh curvature memory): a kink of the objective or its "
+                           f"round-off floor [L-BFGS-B: {again.message}]")
+    return lbfgsb_outcome(again.message, maxiter=maxiter, maxfun=opts["maxfun"])
+
+
+def _line_search_failed(res) -> bool:
+    return str(res.message).upper().startswith("ABNORMAL")
 
 
 class _Objective(ca.Callback):

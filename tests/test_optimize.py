@@ -147,3 +147,32 @@ def test_the_checkpoint_is_enough_to_resume_and_written_whole(race, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["checkpoint.npz"]  # no temporaries
     again = solve(race, maxiter=1, quiet=True, u0=saved["u"])
     assert again.fun <= r.fun
+
+
+def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(monkeypatch):
+    """After progress, L-BFGS-B restarts once from its best point with no curvature memory:
+    if not even that steepest-descent step lowers phi, the search has converged (to a kink
+    or the round-off floor); a failure at the very first step stays a failure."""
+    import casadi_keyframe.optimize as optimize
+    from scipy.optimize import OptimizeResult
+
+    prob = load_problem("flock_path", agents=6, steps=20)
+    starts = []
+
+    def scripted(nits):
+        def minimize(fun, x0, **kw):
+            starts.append(np.array(x0))
+            fun(x0)
+            if len(starts) == 1:
+                fun(x0 - 1e-3 * fun(x0)[1])  # some progress: a better best point
+            return OptimizeResult(message="ABNORMAL: ", nit=nits[len(starts) - 1])
+        return minimize
+
+    monkeypatch.setattr(optimize, "minimize", scripted([3, 0]))
+    r = solve(prob, maxiter=50, quiet=True)
+    assert len(starts) == 2 and np.array_equal(starts[1], r.x)  # restarted at the best
+    assert r.status == CONVERGED and "no step along the steepest descent" in r.message
+    starts.clear()
+    monkeypatch.setattr(optimize, "minimize", scripted([0, 0]))
+    r = solve(prob, maxiter=50, quiet=True)
+    assert len(starts) == 1 and r.status == FAILED

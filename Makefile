@@ -15,7 +15,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/casadi-keyframe solve cape_blend --out results/cape_blend --quiet
+	$(BIN)/casadi-keyframe solve cloth_shapes --out results/cloth_shapes --quiet
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

@@ -63,7 +63,8 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
                        "seconds": res.timings["wall_seconds"], "fun": breakdown["objective"],
                        "control_cost": breakdown["control_cost"],
                        "misses": breakdown["misses"], "status": res.status,
-                       "message": res.message})
+                       "message": res.message, **{f"start_{k}": v for k, v in
+                                                  res.start.items()}})
         if res.status == INTERRUPTED or _time_up(time_limit, start):
             break
         if multipliers:

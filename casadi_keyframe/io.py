@@ -90,9 +90,15 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
               history_objective=np.array([h["objective"] for h in hist]),
               history_keyframe_error=np.array([h["keyframe_error"] for h in hist]),
               history_seconds=np.array([h["seconds"] for h in hist]),
-              history_stage=np.array([h.get("stage", 0) for h in hist], dtype=int))
+              history_stage=np.array([h.get("stage", 0) for h in hist], dtype=int),
+              start_objective=np.array(_or_nan(result.start["objective"])),
+              start_keyframe_error=np.array(_or_nan(result.start["keyframe_error"])))
     write_json(out / SUMMARY, summary)
     return summary
+
+
+def _or_nan(value) -> float:
+    return np.nan if value is None else float(value)
 
 
 def load_result(out_dir) -> dict:

@@ -55,6 +55,13 @@ class Result:
     breakdown: dict = field(default_factory=dict)
     stages: list = field(default_factory=list)
 
+    @property
+    def start(self) -> dict:
+        """Objective and keyframe error at the starting controls (of the first stage)."""
+        first = self.stages[0] if self.stages else {}
+        return {"objective": first.get("start_objective"),
+                "keyframe_error": first.get("start_keyframe_error")}
+
     def summary(self) -> dict:
         """JSON-ready summary (no arrays); ``stages`` has one entry per continuation stage
         (time step, iterations, evaluations, best objective at that step, status, seconds)."""
@@ -261,6 +268,7 @@ class _Search:
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
                 "nit": len(self.history) - first, "nfev": ev.nfev, "fun": float(ev.best_f),
+                "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
                 "success": status == CONVERGED, "status": status, "message": message,
                 "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
                 "failed_simulations": ev.failures}
@@ -268,7 +276,8 @@ class _Search:
     def _search(self, problem, ev, u0, stage):
         k, count = stage
         where = "" if count == 1 else f" of stage {k} (dt = {problem.dt:.6g} s)"
-        ev(u0)
+        f0, _ = ev(u0)
+        ev.start = (float(f0), float(f0 - problem.control_cost(u0)[0]))
         if ev.failures:
             raise SimulationError(f"the simulation fails at the starting controls{where} "
                                   f"({ev.last_failure})"

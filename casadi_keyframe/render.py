@@ -300,7 +300,10 @@ def convergence(result, path) -> Path:
                         transform=ax.transAxes, color="gray")
                 ax.set_xticks([]), ax.set_yticks([])
         else:
-            for ax, xkey, xlabel in ((axes[0], "iteration", "iteration"),
+            start = getattr(result, "start", None) or {}
+            if start.get("objective") is not None and np.isfinite(start["objective"]):
+                history = [{"iteration": 0, "seconds": 0.0, **start}] + history
+            for ax, xkey, xlabel in ((axes[0], "iteration", "iteration (0: the start)"),
                                      (axes[1], "seconds", "wall time [s]")):
                 x = [h.get(xkey, i + 1) for i, h in enumerate(history)]
                 style = ".-" if len(history) < 30 else "-"

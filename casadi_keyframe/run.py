@@ -275,5 +275,7 @@ def _history(meta, arrays) -> SimpleNamespace:
                 "keyframe_error": float(arrays["history_keyframe_error"][i]),
                 "seconds": float(arrays["history_seconds"][i])}
                for i, f in enumerate(objective)]
-    return SimpleNamespace(history=history, method=meta.get("method", "?"),
+    start = {k: float(arrays[f"start_{k}"]) if f"start_{k}" in arrays else None
+             for k in ("objective", "keyframe_error")}
+    return SimpleNamespace(history=history, start=start, method=meta.get("method", "?"),
                            gradient=meta.get("gradient", "?"))

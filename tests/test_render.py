@@ -103,3 +103,28 @@ def test_three_d_without_highlight(tmp_path):
     assert render.snapshot(p, traj, tmp_path / "s3.png").stat().st_size > 0
     with Image.open(render.animate(p, traj, tmp_path / "a3.gif", max_frames=5)) as im:
         assert im.n_frames == 6
+
+
+def test_the_convergence_plot_starts_at_the_starting_point(tmp_path):
+    import matplotlib.pyplot as plt
+    """Iteration 0 is the start, so a plot shows what the search did from where it began."""
+    from casadi_keyframe import load_problem, solve
+    from casadi_keyframe.render import convergence
+
+    prob = load_problem("flock_path", agents=6, steps=20)
+    result = solve(prob, maxiter=3, quiet=True)
+    assert result.start["objective"] == pytest.approx(prob.objective(prob.initial_controls()))
+    assert result.start["keyframe_error"] <= result.start["objective"]  # no control cost yet
+    drawn = []
+    real = plt.Axes.plot
+
+    def spy(ax, x, y, *args, **kw):
+        drawn.append((list(x), list(y)))
+        return real(ax, x, y, *args, **kw)
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(plt.Axes, "plot", spy)
+        convergence(result, tmp_path / "c.png")
+    x, y = drawn[0]
+    assert x[0] == 0 and y[0] == pytest.approx(result.start["objective"])
+    assert len(x) == result.nit + 1

@@ -44,7 +44,8 @@ passive miss's cost.
 Hitting the keyframe.  From zero forces (the paper's start) L-BFGS-B stalls far from the
 walk.  ``benchmarks/cape_blend_strategies.py`` measures what the library offers against it
 (8 x 6 cape, 1 s, 100 iterations each; rms position miss over the free particles, passive
-0.61 m; the largest spring stretch; the deepest particle in the body):
+0.61 m; the largest spring stretch; the deepest particle in the body; measured with the
+cloth's earlier strut-like compression law, before issue 11 gave it the Choi-Ko law's own):
 
     exact adjoint, L-BFGS-B                    0.385 m   stretch 2.14   8 cm
     swapped adjoint (the paper's)              0.571 m   (its first line search fails)

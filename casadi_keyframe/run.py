@@ -65,16 +65,24 @@ class SolveRun:
 def run_solve(spec: SolveRun) -> int:
     """Solve, write, draw; return the exit code (see :data:`EXIT_CODES`)."""
     done = SimpleNamespace(started=False, written=False)
+    return _guarded(lambda caught: _solve(spec, caught, done),
+                    lambda signum: f"\n{spec.problem.name}: {_stopped(signum)} "
+                                   f"{_where(done, spec)}")
+
+
+def _guarded(work, stopped) -> int:
+    """``work(caught)``'s exit code, or, when SIGINT or SIGTERM stops it, ``stopped(signum)``
+    printed and the signal's exit code."""
     with catching() as caught:
         try:
-            return _solve(spec, caught, done)
+            return work(caught)
         except Exception:  # raised inside C code, a signal can surface as another error
             if caught.signum is None:
                 raise
             signum = caught.signum
         except KeyboardInterrupt as err:
             signum = getattr(err, "signum", signal.SIGINT)
-        print(f"\n{spec.problem.name}: {_stopped(signum)} {_where(done, spec)}")
+        print(stopped(signum))
         return exit_code(INTERRUPTED, signum)
 
 
@@ -230,19 +238,13 @@ def draw(problem, trajectory, result, out, *, animation: bool = True) -> None:
 
 def run_render(source, *, animation: bool = True) -> int:
     """Draw a saved run's pictures again (``casadi-keyframe render``); the exit code."""
-    with catching() as caught:
-        try:
-            code = _render(source, animation)
-            check()
-            return code
-        except Exception:
-            if caught.signum is None:
-                raise
-            signum = caught.signum
-        except KeyboardInterrupt as err:
-            signum = getattr(err, "signum", signal.SIGINT)
-        print(f"\n{_stopped(signum)}: drawing stopped; the pictures drawn so far are whole")
-        return exit_code(INTERRUPTED, signum)
+    def work(caught):
+        code = _render(source, animation)
+        check()
+        return code
+
+    return _guarded(work, lambda signum: f"\n{_stopped(signum)}: drawing stopped; the "
+                                         "pictures drawn so far are whole")
 
 
 def _render(source, animation: bool) -> int:

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .loading import (OverrideError, list_problems, load_module, load_problem, overrides_of,
-                      resolve)
+from .loading import (OverrideError, check_overrides, list_problems, load_module, load_problem,
+                      overrides_of, resolve)
 from .run import EXIT_CODES, SolveRun, run_render, run_solve
 from .trajectory import SimulationError
 
@@ -139,10 +139,12 @@ def format_value(value) -> str:
 
 
 def cmd_solve(args) -> int:
-    overrides = parse_overrides(args.set)
+    module = load_module(args.problem)
+    overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
+    continuation = parse_time_steps(args.continuation)
     out = ensure_writable(args.out) if args.out else None
     prob = load_problem(args.problem, **overrides)
-    defaults = getattr(load_module(args.problem), "SOLVE", {})
+    defaults = getattr(module, "SOLVE", {})
     method = args.method or defaults.get("method", "lbfgsb")
     maxiter = args.maxiter if args.maxiter is not None else defaults.get("maxiter", 200)
     out = out or ensure_writable(Path("results") / prob.name)
@@ -153,7 +155,7 @@ def cmd_solve(args) -> int:
     return run_solve(SolveRun(
         prob, out, problem_file=str(resolve(args.problem).resolve()), problem_arg=args.problem,
         overrides=overrides, method=method, gradient=args.gradient, maxiter=maxiter,
-        continuation=parse_time_steps(args.continuation), rounds=rounds,
+        continuation=continuation, rounds=rounds,
         time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
         animation=not args.no_animation))
 

@@ -189,3 +189,16 @@ def test_a_broken_problem_file_is_named(text, expected, tmp_path, capsys):
         assert main([command, str(path)]) == 2
         err = capsys.readouterr().err
         assert str(path) in err and expected in err
+
+
+def test_solve_records_the_overrides_as_build_got_them(tmp_path):
+    """``agents=10.0`` builds 10 agents and is written as 10, and ``dt=1/30`` as a number."""
+    import json
+
+    code = main(["solve", "flock_path", "--set", "agents=6.0", "--set", "steps=10",
+                 "--set", "dt=1/30", "--maxiter", "2", "--out", str(tmp_path), "--quiet",
+                 "--no-animation"])
+    assert code in (0, 3)
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["overrides"] == {"agents": 6, "steps": 10, "dt": 1 / 30}
+    assert isinstance(summary["overrides"]["agents"], int)

@@ -334,13 +334,15 @@ def _lbfgsb(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
                        callback=callback)
         status, message = lbfgsb_outcome(res.message, maxiter=opts["maxiter"],
                                          maxfun=opts["maxfun"])
+        # a line search that fails after progress restarts from the best point with no
+        # curvature memory: its first step is along the steepest descent, so a second
+        # failure there means no step lowers phi (a kink, such as the cloth law's at rest
+        # length, or round-off); one that fails at the first step leaves the gradient suspect
         if not (status == FAILED and _line_search_failed(res)
-                and 0 < res.nit < opts["maxiter"]):
-            return status, message  # a failure at the first step: the gradient is suspect
-        # after progress, restart from the best point with no curvature memory: its first
-        # step is along the steepest descent, so a second failure there means no step
-        # lowers phi (a kink, such as the cloth law's at rest length, or round-off)
+                and 0 < res.nit < opts["maxiter"] and res.nfev < opts["maxfun"]):
+            return status, message
         opts["maxiter"] -= res.nit
+        opts["maxfun"] -= res.nfev
         again = minimize(ev, ev.best_u, jac=True, method="L-BFGS-B", bounds=bounds,
                          options=opts, callback=callback)
     except _TimeUp:

@@ -165,7 +165,7 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
             fun(x0)
             if len(starts) == 1:
                 fun(x0 - 1e-3 * fun(x0)[1])  # some progress: a better best point
-            return OptimizeResult(message="ABNORMAL: ", nit=nits[len(starts) - 1])
+            return OptimizeResult(message="ABNORMAL: ", nit=nits[len(starts) - 1], nfev=3)
         return minimize
 
     monkeypatch.setattr(optimize, "minimize", scripted([3, 0]))

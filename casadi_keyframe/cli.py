@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .loading import (OverrideError, check_overrides, list_problems, load_module, load_problem,
-                      overrides_of, resolve)
+from .loading import (OverrideError, build_problem, check_overrides, list_problems,
+                      load_module, load_problem, overrides_of, resolve, solve_defaults)
 from .run import EXIT_CODES, SolveRun, run_render, run_solve
 from .trajectory import SimulationError
 
@@ -114,7 +114,7 @@ def cmd_show(args) -> int:
     widths = [max(len(r[i]) for r in [head, *rows]) for i in range(3)]
     for row in [head, *rows]:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
-    solve = {"method": "lbfgsb", "maxiter": 200, **getattr(module, "SOLVE", {})}
+    solve = solve_defaults(module)
     print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
           + " (--method, --maxiter, --rounds, --weight-growth change them)")
     return 0
@@ -143,10 +143,10 @@ def cmd_solve(args) -> int:
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
     out = ensure_writable(args.out) if args.out else None
-    prob = load_problem(args.problem, **overrides)
-    defaults = getattr(module, "SOLVE", {})
-    method = args.method or defaults.get("method", "lbfgsb")
-    maxiter = args.maxiter if args.maxiter is not None else defaults.get("maxiter", 200)
+    prob = build_problem(module, **overrides)
+    defaults = solve_defaults(module)
+    method = args.method or defaults["method"]
+    maxiter = args.maxiter if args.maxiter is not None else defaults["maxiter"]
     out = out or ensure_writable(Path("results") / prob.name)
     rounds = {key: value for key, value in (("rounds", args.rounds),
                                              ("weight_growth", args.weight_growth))

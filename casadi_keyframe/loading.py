@@ -166,12 +166,21 @@ def check_overrides(module, overrides: dict) -> dict:
 def load_problem(problem, **overrides) -> ControlProblem:
     """Build a problem from its file with keyword ``overrides``, checked first by
     :func:`check_overrides`."""
-    module = load_module(problem)
-    checked = check_overrides(module, overrides)
-    prob = module.build(**checked)
+    return build_problem(load_module(problem), **overrides)
+
+
+def build_problem(module, **overrides) -> ControlProblem:
+    """The problem of an already loaded problem file, ``overrides`` checked first."""
+    prob = module.build(**check_overrides(module, overrides))
     if not isinstance(prob, ControlProblem):
         raise TypeError(f"{module.__file__}: build() must return a ControlProblem")
     return prob
+
+
+def solve_defaults(module) -> dict:
+    """How the problem file asks to be solved: its ``SOLVE`` over the library's defaults
+    (L-BFGS-B, 200 iterations; it may add ``rounds``, ``weight_growth``)."""
+    return {"method": "lbfgsb", "maxiter": 200, **getattr(module, "SOLVE", {})}
 
 
 _INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*$")

@@ -89,6 +89,7 @@ class _Evaluator:
         self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.seconds = 0.0
         self.interrupted = None
+        self.start = None  # (objective, keyframe error) at the starting controls
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()

@@ -9,9 +9,9 @@ import time
 import numpy as np
 import pytest
 
-from casadi_keyframe import load_problem, solve
+from casadi_keyframe import solve
 from casadi_keyframe.capes import clip_report
-from casadi_keyframe.loading import load_module
+from casadi_keyframe.loading import build_problem, load_module, solve_defaults
 from casadi_keyframe.optimize import CONVERGED, LIMIT
 
 pytestmark = pytest.mark.slow
@@ -21,11 +21,11 @@ TABLE = []  # rows printed by conftest's terminal summary
 
 def solve_figure(name, **overrides):
     """The problem at its default size solved with its file's SOLVE defaults, recorded."""
-    prob = load_problem(name, **overrides)
-    defaults = getattr(load_module(name), "SOLVE", {})
+    module = load_module(name)
+    prob = build_problem(module, **overrides)
+    defaults = solve_defaults(module)
     start = time.process_time()
-    result = solve(prob, method=defaults.get("method", "lbfgsb"),
-                   maxiter=defaults.get("maxiter", 200), quiet=True)
+    result = solve(prob, method=defaults["method"], maxiter=defaults["maxiter"], quiet=True)
     seconds = time.process_time() - start
     TABLE.append({"figure": name, "size": prob.size, "iterations": result.nit,
                   "cpu_seconds": round(seconds, 1), "message": result.message,

@@ -2,7 +2,7 @@
 
 Per size: forward seconds, gradient seconds (forward + the integrator-swapping adjoint), their
 ratio (target: at most 2), the peak memory traced during the gradient and the seconds of the
-exact hand adjoint's gradient (``adjoint="exact"``); where the unrolled graph fits, the exact
+exact hand adjoint's gradient (``gradient="adjoint"``); where the unrolled graph fits, the exact
 CasADi gradient too (build + first call, later calls, peak RSS growth) and how far the
 swapped gradient is from it (cosine, relative error).
 
@@ -40,7 +40,7 @@ def sphere_center(t):
     return np.array([0.5, 0.23 - 0.06 * t, -0.8])
 
 
-def build(k: int, steps: int, collider: str, solver: str, adjoint: str = "swapped") -> ControlProblem:
+def build(k: int, steps: int, collider: str, solver: str) -> ControlProblem:
     """A k x k sheet (1 m, 1 kg) pinned at its top corners, aimed forward and up."""
     colliders = [Sphere(sphere_center, 0.2)] if collider == "sphere" else []
     model = ClothModel.grid(k, k, pinned=[0, k - 1], colliders=colliders)
@@ -48,7 +48,7 @@ def build(k: int, steps: int, collider: str, solver: str, adjoint: str = "swappe
     objective = (StateKeyframe(steps, x=x0 + [0.0, 0.3, 0.1])
                  + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.2, 0])
                  + Smoothness(1e-4))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver=solver, adjoint=adjoint), x0=x0,
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver=solver), x0=x0,
                           v0=np.zeros_like(x0), steps=steps, dt=1 / 60, controls=StepForces(),
                           objective=objective, name=f"cloth{k}")
 
@@ -63,10 +63,10 @@ def exact_columns(prob, u, g_swapped, repeats: int) -> str:
     """Exact CasADi gradient: build + first call s, later call s, RSS growth MB, cos, rel err."""
     rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     t = time.perf_counter()
-    _, g = prob.objective_and_gradient(u, "exact")
+    _, g = prob.objective_and_gradient(u, "casadi")
     build_s = time.perf_counter() - t
     rss_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss) * RSS_UNIT / 2 ** 20
-    call_s = best_of(lambda: prob.objective_and_gradient(u, "exact"), repeats)
+    call_s = best_of(lambda: prob.objective_and_gradient(u, "casadi"), repeats)
     cos = g_swapped @ g / (np.linalg.norm(g_swapped) * np.linalg.norm(g))
     rel = np.linalg.norm(g_swapped - g) / np.linalg.norm(g)
     return f"{build_s:9.2f} {call_s:7.3f} {rss_mb:7.0f} {cos:7.4f} {rel:7.3f}"
@@ -77,15 +77,14 @@ def measure(k: int, args) -> tuple[float, str]:
     prob = build(k, args.steps, args.collider, args.solver)
     u = random_controls(prob)
     prob.simulate()  # passive run: compiles the kernels; a SimulationError propagates
-    _, g_swapped = prob.objective_and_gradient(u, "adjoint")
+    _, g_swapped = prob.objective_and_gradient(u, "swapped")
     exact = f"{'-':>9} {'-':>7} {'-':>7} {'-':>7} {'-':>7}"
     if k * k * args.steps <= args.exact_max_particles * 100:
         exact = exact_columns(prob, u, g_swapped, args.repeat)  # first: before RSS grows
     fwd = best_of(lambda: prob.simulate(u), args.repeat)
-    grad = best_of(lambda: prob.objective_and_gradient(u, "adjoint"), args.repeat)
-    peak = traced_peak_mb(lambda: prob.objective_and_gradient(u, "adjoint"))
-    hand = build(k, args.steps, args.collider, args.solver, adjoint="exact")
-    hand_s = best_of(lambda: hand.objective_and_gradient(u, "adjoint"), args.repeat)
+    grad = best_of(lambda: prob.objective_and_gradient(u, "swapped"), args.repeat)
+    peak = traced_peak_mb(lambda: prob.objective_and_gradient(u, "swapped"))
+    hand_s = best_of(lambda: prob.objective_and_gradient(u, "adjoint"), args.repeat)
     row = (f"{k:>2d}x{k:<3d} {k * k:9d} {fwd:9.3f} {grad:10.3f} {grad / fwd:6.2f} {peak:8.1f} "
            f"{hand_s:8.3f} " + exact)
     return grad / fwd, row

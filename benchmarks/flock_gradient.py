@@ -26,7 +26,7 @@ def main():
         prob = load_problem("flock_path", agents=n, steps=args.steps)
         u = 0.1 * np.random.default_rng(0).standard_normal(prob.size)
         traj = prob.simulate(u)  # warm-up (JIT compile happens at load)
-        pairs = np.mean([t.i.size for t in traj.tape])
+        pairs = np.mean([t.i.size for t in traj.records])
         fwd = best_of(lambda: prob.simulate(u), args.repeats)
         grad = best_of(lambda: prob.objective_and_gradient(u, "adjoint"), args.repeats)
         peak = traced_peak_mb(lambda: prob.objective_and_gradient(u, "adjoint")) * 2**20

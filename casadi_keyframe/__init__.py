@@ -3,18 +3,19 @@
     prob = casadi_keyframe.load_problem("problems/flock_path.py", agents=50)
     result = casadi_keyframe.solve(prob, method="lbfgsb")
 """
+from .adjoints import Adjoint, CasADiReverse, Exact, FiniteDifference, Swapped
 from .controls import InitialVelocity, StepForces
-from .gradients import Adjoint, Exact, FiniteDifference
 from .loading import list_problems, load_problem
 from .objectives import (CenterOfMassKeyframe, Objective, ParticleKeyframe, RegionTarget,
                          Smoothness, StateKeyframe)
 from .optimize import Result, solve
 from .problem import ControlProblem
-from .trajectory import SimulationError, Trajectory
+from .simulate import backward, simulate
+from .state import SimulationError, State, Trajectory
 
 __all__ = [
-    "Adjoint", "CenterOfMassKeyframe", "ControlProblem", "Exact", "FiniteDifference",
-    "InitialVelocity", "Objective", "ParticleKeyframe", "RegionTarget", "Result",
-    "SimulationError", "Smoothness", "StateKeyframe", "StepForces", "Trajectory",
-    "list_problems", "load_problem", "solve",
+    "Adjoint", "CasADiReverse", "CenterOfMassKeyframe", "ControlProblem", "Exact",
+    "FiniteDifference", "InitialVelocity", "Objective", "ParticleKeyframe", "RegionTarget",
+    "Result", "SimulationError", "Smoothness", "State", "StateKeyframe", "StepForces",
+    "Swapped", "Trajectory", "backward", "list_problems", "load_problem", "simulate", "solve",
 ]

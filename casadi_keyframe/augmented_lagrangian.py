@@ -17,7 +17,7 @@ import time
 
 import numpy as np
 
-from .gradients import get_gradient
+from .adjoints import get_gradient
 from .objectives import Objective, StateKeyframe
 from .optimize import CONVERGED, INTERRUPTED, LIMIT, Result, _evaluate_final, solve
 

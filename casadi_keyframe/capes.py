@@ -21,6 +21,7 @@ from .characters import Animation, Character, Walk, capsule_clearance, fall, wal
 from .integrators import LinearizedBackwardEuler
 from .models.cloth import Attachment, ClothModel, ClothParams
 from .models.colliders import Contact, Plane
+from .simulate import simulate
 
 CAPE_PARAMS = ClothParams(stretch=500.0, shear=50.0, bend=2e-5, damping=0.5, air_drag=2.0)
 """Fabric at dt = 1/60: the default sheet's stiffnesses (about 1 % strain hanging) with
@@ -127,7 +128,7 @@ def settled_state(character: Character, animation: Animation, *, preroll: float,
     early = animation.shifted(steps * dt)
     model = cape_model(character, early, dt=dt, **cape)
     x0, v0 = hanging_state(model, character, early, 0.0)
-    traj = LinearizedBackwardEuler().simulate(model, x0, v0, np.zeros((steps, model.n, 3)), dt)
+    traj = simulate(LinearizedBackwardEuler(), model, x0, v0, np.zeros((steps, model.n, 3)), dt)
     return traj.x[-1], traj.v[-1]
 
 
@@ -158,7 +159,7 @@ def simulate_clip(kind="walk", rows: int = 26, cols: int = 16, seconds: float = 
                            **cape)
     model = cape_model(character, animation, rows=rows, cols=cols, dt=dt, **cape)
     steps = int(round(seconds / dt))
-    traj = LinearizedBackwardEuler().simulate(model, x0, v0, np.zeros((steps, model.n, 3)), dt)
+    traj = simulate(LinearizedBackwardEuler(), model, x0, v0, np.zeros((steps, model.n, 3)), dt)
     return model, traj, animation
 
 

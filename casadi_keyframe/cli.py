@@ -15,10 +15,11 @@ from pathlib import Path
 
 import numpy as np
 
+from .adjoints import ROUTES as GRADIENT_ROUTES
 from .loading import (OverrideError, build_problem, check_overrides, list_problems,
                       load_module, load_problem, overrides_of, resolve, solve_defaults)
 from .run import EXIT_CODES, SolveRun, run_render, run_solve
-from .trajectory import SimulationError
+from .state import SimulationError
 
 
 def parse_overrides(items) -> dict:
@@ -116,7 +117,7 @@ def cmd_show(args) -> int:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
     solve = solve_defaults(module)
     print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
-          + " (--method, --maxiter, --rounds, --weight-growth change them)")
+          + " (--method, --gradient, --maxiter, --rounds, --weight-growth change them)")
     return 0
 
 
@@ -146,6 +147,7 @@ def cmd_solve(args) -> int:
     prob = build_problem(module, **overrides)
     defaults = solve_defaults(module)
     method = args.method or defaults["method"]
+    gradient = args.gradient or defaults["gradient"]
     maxiter = args.maxiter if args.maxiter is not None else defaults["maxiter"]
     out = out or ensure_writable(Path("results") / prob.name)
     rounds = {key: value for key, value in (("rounds", args.rounds),
@@ -154,7 +156,7 @@ def cmd_solve(args) -> int:
                                         if k in defaults}
     return run_solve(SolveRun(
         prob, out, problem_file=str(resolve(args.problem).resolve()), problem_arg=args.problem,
-        overrides=overrides, method=method, gradient=args.gradient, maxiter=maxiter,
+        overrides=overrides, method=method, gradient=gradient, maxiter=maxiter,
         continuation=continuation, rounds=rounds,
         time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
         animation=not args.no_animation))
@@ -165,17 +167,22 @@ def cmd_render(args) -> int:
 
 
 def cmd_gradcheck(args) -> int:
-    from .gradients import FiniteDifference, get_gradient
+    from .adjoints import FiniteDifference, get_gradient
 
     prob = load_problem(args.problem, **parse_overrides(args.set))
     rng = np.random.default_rng(args.seed)
     u = args.scale * rng.standard_normal(prob.size)
+    names = [n.strip() for n in args.routes.split(",")]
+    unknown = [n for n in names if n not in GRADIENT_ROUTES]
+    if unknown:
+        raise ValueError(f"--routes: unknown gradient route(s) {unknown}; choose from "
+                         f"{', '.join(GRADIENT_ROUTES)}")
     routes = {}
-    for name in args.routes.split(","):
+    for name in names:
         t = time.perf_counter()
         _, g = get_gradient(name)(prob, u)
         routes[name] = (g, time.perf_counter() - t)
-    ref_name = args.routes.split(",")[-1]
+    ref_name = names[-1]
     ref = routes[ref_name][0]
     print(f"{prob.name}: {prob.size} controls; reference route '{ref_name}'")
     for name, (g, sec) in routes.items():
@@ -187,8 +194,9 @@ def cmd_gradcheck(args) -> int:
         d = rng.standard_normal(prob.size)
         d /= np.linalg.norm(d)
         slope = fd.directional(prob, u, d)
-        print(f"  direction {k}: central difference {slope:+.10e}  " + "  ".join(
-            f"{n} {g @ d:+.10e}" for n, (g, _) in routes.items()))
+        tangent = prob.directional_derivative(u, d)
+        print(f"  direction {k}: central difference {slope:+.10e}  tangent {tangent:+.10e}  "
+              + "  ".join(f"{n} {g @ d:+.10e}" for n, (g, _) in routes.items()))
     return 0
 
 
@@ -216,7 +224,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
     s.add_argument("--method", choices=("lbfgsb", "ipopt"))
-    s.add_argument("--gradient", default="adjoint", choices=("adjoint", "exact", "fd"))
+    s.add_argument("--gradient", choices=GRADIENT_ROUTES,
+                   help="gradient route (default: the problem's SOLVE, else 'adjoint'): "
+                        "'adjoint' the exact hand adjoint, 'swapped' the paper's approximate "
+                        "one (cloth), 'casadi' CasADi reverse mode (small systems), 'fd' "
+                        "finite differences ('exact' is a deprecated name of 'casadi')")
     s.add_argument("--maxiter", type=positive_int, help="iteration limit (per stage with --continuation)")
     s.add_argument("--continuation", metavar="DT,DT,...",
                    help="solve at these time steps first, coarse to fine (e.g. 1/15,1/30,1/60); "
@@ -247,7 +259,8 @@ def build_parser() -> argparse.ArgumentParser:
     g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
-    g.add_argument("--routes", default="adjoint,exact", help="comma-separated; last is the reference")
+    g.add_argument("--routes", default="adjoint,casadi",
+                   help="comma-separated gradient routes; the last is the reference")
     g.add_argument("--directions", type=at_least(int, 0), default=3, help="random central-difference checks")
     g.add_argument("--h", type=at_least(float, 0, strict=True), default=1e-6, help="finite-difference step")
     g.add_argument("--scale", type=at_least(float, 0), default=0.5, help="size of the random controls")

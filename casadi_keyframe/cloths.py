@@ -9,15 +9,14 @@ from .problem import ControlProblem
 
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
-                  controls=None, scene=None, solver: str = "cg",
-                  adjoint: str = "swapped", guess=None) -> ControlProblem:
+                  controls=None, scene=None, solver: str = "cg", guess=None) -> ControlProblem:
     """A cloth control problem integrated by linearized backward Euler (rest shape and rest
     velocities by default, per-step force controls on the free particles by default)."""
     x0 = model.rest_positions if x0 is None else x0
     v0 = np.zeros_like(x0) if v0 is None else v0
     if controls is None:
         controls = StepForces(agents=np.flatnonzero(model.free_mask()[::3]))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver),
                           x0=x0, v0=v0, steps=steps, dt=dt, controls=controls,
                           objective=objective, name=name, scene=scene, guess=guess)
 

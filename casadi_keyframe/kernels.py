@@ -186,6 +186,8 @@ class MappedKernel:
     ``MappedKernel(kernel)(a, b, ...)`` returns a list of ``(P, m_j)`` arrays, one per kernel
     output.  Large batches run in chunks of ``CHUNKS[0]``; the remainder in one padded chunk
     (small when it fits), so a call costs few Python round trips and tiny systems stay cheap.
+    The mapped functions are compiled (or loaded) at the first call, so a model can hold
+    kernels it may never evaluate (tangent kernels, say) at no cost.
     """
 
     def __init__(self, kernel: ca.Function, *, jit: bool | None = None):
@@ -196,8 +198,18 @@ class MappedKernel:
                 raise ValueError(f"kernel input {i} must be a column vector")
         self.kernel = kernel
         self.jit = jit_available() if jit is None else jit
-        self._chunks = [_Chunk(_mapped_function(kernel, c, self.jit), c) for c in CHUNKS]
+        self._chunks: list[_Chunk] = []
         self.n_out = kernel.n_out()
+
+    def compile(self) -> "MappedKernel":
+        """Compile (or load from the cache) now rather than at the first call; returns self."""
+        self._compiled()
+        return self
+
+    def _compiled(self) -> list[_Chunk]:
+        if not self._chunks:
+            self._chunks = [_Chunk(_mapped_function(self.kernel, c, self.jit), c) for c in CHUNKS]
+        return self._chunks
 
     def __call__(self, *inputs: np.ndarray) -> list[np.ndarray]:
         if len(inputs) != self.kernel.n_in():
@@ -212,7 +224,8 @@ class MappedKernel:
                     f"({count}, {self.kernel.size1_in(i)}), got {a.shape}")
             arrays.append(a)
         outputs = [np.empty((count, self.kernel.size1_out(j))) for j in range(self.n_out)]
-        big, small = self._chunks[0], self._chunks[-1]
+        chunks = self._compiled()
+        big, small = chunks[0], chunks[-1]
         lo = 0
         while lo < count:  # full big chunks, then one padded chunk of the smallest size that fits
             n = min(big.size, count - lo)
@@ -248,7 +261,7 @@ def pair_incidence(i: np.ndarray, j: np.ndarray, n: int) -> ca.DM:
 
 def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) -> dict[str, ca.Function]:
     """The kernels of one interaction whose force is the SX expression ``force`` in the
-    symbols ``x``, ``v``, ``params``, as ``{"force", "jac", "df_dx", "vjp"}``:
+    symbols ``x``, ``v``, ``params``, as ``{"force", "jac", "df_dx", "vjp", "jvp"}``:
 
     * ``force(x, v, *params) -> f``;
     * ``jac(...) -> (vec K, vec D)``, row-major 3x3 blocks, ``D = df/dv`` and K the stiffness
@@ -260,7 +273,10 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
       not symmetric), row-major;
     * ``vjp(x, v, *params, lam, w, q, dt) -> (gx, gv)``: the gradients in x and v of
       ``lam . (dt f + dt^2 K w + dt D q)``, the exact adjoint of a linearized implicit step
-      with this K, contracted per interaction (second derivatives included, no tensor formed).
+      with this K, contracted per interaction (second derivatives included, no tensor formed);
+    * ``jvp(x, v, *params, w, q, dt, dx, dv) -> dg``: the same function's other side, the
+      derivative of ``g = dt f + dt^2 K w + dt D q`` along ``(dx, dv)`` (the tangent of the
+      linearized step, forward mode).
     """
     K = (ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x) if stiffness is None
          else stiffness)
@@ -268,7 +284,9 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
     args = [x, v, *params]
     lam, w, q = (ca.SX.sym(s, force.shape[0]) for s in ("lam", "w", "q"))
     dt = ca.SX.sym("dt")
-    phi = ca.dot(lam, dt * force + dt ** 2 * ca.mtimes(K, w) + dt * ca.mtimes(D, q))
+    g = dt * force + dt ** 2 * ca.mtimes(K, w) + dt * ca.mtimes(D, q)
+    phi = ca.dot(lam, g)
+    dx, dv = ca.SX.sym("dx", x.shape[0]), ca.SX.sym("dv", v.shape[0])
     return {
         "force": ca.Function(f"{name}", args, [force]),
         "jac": ca.Function(f"{name}_jac", args,
@@ -276,4 +294,6 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
         "df_dx": ca.Function(f"{name}_df_dx", args, [ca.reshape(df_dx.T, -1, 1)]),
         "vjp": ca.Function(f"{name}_vjp", args + [lam, w, q, dt],
                            [ca.gradient(phi, x), ca.gradient(phi, v)]),
+        "jvp": ca.Function(f"{name}_jvp", args + [w, q, dt, dx, dv],
+                           [ca.jtimes(g, ca.vertcat(x, v), ca.vertcat(dx, dv))]),
     }

@@ -179,8 +179,10 @@ def build_problem(module, **overrides) -> ControlProblem:
 
 def solve_defaults(module) -> dict:
     """How the problem file asks to be solved: its ``SOLVE`` over the library's defaults
-    (L-BFGS-B, 200 iterations; it may add ``rounds``, ``weight_growth``)."""
-    return {"method": "lbfgsb", "maxiter": 200, **getattr(module, "SOLVE", {})}
+    (L-BFGS-B, 200 iterations, the exact "adjoint" gradient route; it may add ``rounds``,
+    ``weight_growth``)."""
+    return {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint",
+            **getattr(module, "SOLVE", {})}
 
 
 _INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*$")

@@ -43,6 +43,15 @@ class Objective:
     def control_terms(self):
         return [t for t in self.terms if isinstance(t, ControlTerm)]
 
+    def bound(self, model, steps: int) -> "Objective":
+        """A copy whose state terms are bound to ``model`` over ``steps`` (checked and
+        compiled, see :meth:`StateTerm.bind`); the terms given stay as they were."""
+        out = Objective([t.at_frame(t.frame) if isinstance(t, StateTerm) else t
+                         for t in self.terms])
+        for term in out.state_terms:
+            term.bind(model, steps)
+        return out
+
     def retimed(self, frame_of) -> "Objective":
         """The same objective with every state term moved to frame ``frame_of(term)`` (for a
         problem resampled in time).  Control terms are shared: they are time integrals

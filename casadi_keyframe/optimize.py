@@ -18,11 +18,11 @@ import numpy as np
 from scipy.optimize import minimize
 from tqdm.auto import tqdm
 
-from .gradients import get_gradient
+from .adjoints import get_gradient
 from .interrupts import NAMES, Interrupted, catching, check, handled
 from .io import as_checkpoint
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS, ipopt_outcome, lbfgsb_outcome
-from .trajectory import SimulationError, Trajectory
+from .state import SimulationError, Trajectory
 
 METHODS = ("lbfgsb", "ipopt")
 __all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "Result", "solve",

@@ -1,12 +1,15 @@
 """ControlProblem: a model, an integrator, controls and an objective over a horizon."""
 from __future__ import annotations
 
+import copy
+
 import casadi as ca
 import numpy as np
 
 from .controls import Controls, resample_steps
-from .objectives import Objective, StateTerm
-from .trajectory import Trajectory
+from .objectives import Objective
+from .simulate import simulate
+from .state import Trajectory
 
 
 class ControlProblem:
@@ -36,18 +39,16 @@ class ControlProblem:
         if self.external.shape != (self.steps,) + shape:
             raise ValueError(f"external forces must have shape {(self.steps,) + shape}, "
                              f"got {self.external.shape}")
-        self.controls = controls
-        controls.bind(model.n, model.dim, self.steps)
-        self.objective_terms = objective if isinstance(objective, Objective) else Objective(
+        self.controls = copy.copy(controls)  # bound here: the caller's object stays as given
+        self.controls.bind(model.n, model.dim, self.steps)
+        objective = objective if isinstance(objective, Objective) else Objective(
             objective if isinstance(objective, (list, tuple)) else [objective])
+        self.objective_terms = objective.bound(model, self.steps)
         if not self.objective_terms.state_terms:
             raise ValueError("the objective has no keyframe term: nothing to aim for")
-        for term in self.objective_terms.state_terms:
-            term.bind(model, self.steps)
         self._control_fn = self._compile_control_terms()
         self.scene = dict(scene or {})
-        self._guess = None if guess is None else controls.check(guess).copy()
-        self._exact = None
+        self._guess = None if guess is None else self.controls.check(guess).copy()
 
     # -- the simulation ------------------------------------------------------------------
     @property
@@ -137,29 +138,33 @@ class ControlProblem:
     def bounds(self):
         return self.controls.bounds()
 
-    def simulate(self, u=None, *, tape: bool = True) -> Trajectory:
+    def simulate(self, u=None, *, records: bool = True) -> Trajectory:
         """Simulate with controls ``u`` (default: passive); raises SimulationError on blow-up.
 
-        ``tape=False`` is for values only: an integrator that can (``optional_tape``) then
-        keeps no record for its adjoint, which on a large flock is most of the memory.
+        ``records=False`` is for values only: the run keeps nothing for a backward pass,
+        which on a large flock is most of the memory.
         """
         u = self.controls.zeros() if u is None else self.controls.check(u)
-        v0 = self.v0
+        return simulate(self.integrator, self.model, self.x0, *self._start_and_forces(u),
+                        self.dt, records=records)
+
+    def _start_and_forces(self, u):
+        """``(v0, external)`` under controls u: the start velocities and every step's force."""
         offset = self.controls.velocity_offset(u)
-        if offset is not None:
-            v0 = v0 + offset
         ext = self.controls.external(u)
-        ext = self.external if ext is None else self.external + ext
-        if not tape and getattr(self.integrator, "optional_tape", False):
-            return self.integrator.simulate(self.model, self.x0, v0, ext, self.dt, tape=False)
-        return self.integrator.simulate(self.model, self.x0, v0, ext, self.dt)
+        return (self.v0 if offset is None else self.v0 + offset,
+                self.external if ext is None else self.external + ext)
 
     # -- the objective -------------------------------------------------------------------
-    def state_cost(self, traj: Trajectory):
-        """Keyframe cost of a trajectory and its derivative per frame, ``(value, gx, gv)``."""
+    def state_cost(self, traj: Trajectory, *, gradient: bool = True):
+        """Keyframe cost of a trajectory and its derivative per frame, ``(value, gx, gv)``;
+        with ``gradient=False`` the value only (``gx, gv`` None)."""
+        terms = self.objective_terms.state_terms
+        if not gradient:
+            return float(sum(t.value(traj) for t in terms)), None, None
         gx = np.zeros_like(traj.x)
         gv = np.zeros_like(traj.v)
-        value = sum(t.accumulate(traj, gx, gv) for t in self.objective_terms.state_terms)
+        value = sum(t.accumulate(traj, gx, gv) for t in terms)
         return float(value), gx, gv
 
     def control_cost(self, u):
@@ -168,25 +173,39 @@ class ControlProblem:
         return float(val), np.asarray(grad).ravel()
 
     def objective(self, u) -> float:
-        traj = self.simulate(u, tape=False)
-        return sum(t.value(traj) for t in self.objective_terms.state_terms) + self.control_cost(u)[0]
+        traj = self.simulate(u, records=False)
+        return self.state_cost(traj, gradient=False)[0] + self.control_cost(u)[0]
 
     def objective_and_gradient(self, u, gradient="adjoint"):
-        """``(phi, dphi/du)`` by the named route: "adjoint", "exact" or "fd" (or a strategy)."""
-        from .gradients import get_gradient
+        """``(phi, dphi/du)`` by the named route ("adjoint", "swapped", "casadi" or "fd", see
+        :mod:`casadi_keyframe.adjoints`) or a strategy object."""
+        from .adjoints import get_gradient
         return get_gradient(gradient)(self, self.controls.check(u))
+
+    def directional_derivative(self, u, du) -> float:
+        """``dphi/du . du`` by one tangent-linear pass (the integrator's exact ``step_jvp``
+        carried through the simulation), no backward pass."""
+        u, du = self.controls.check(u), self.controls.check(du)
+        v0, ext = self._start_and_forces(u)
+        d_offset, d_ext = self.controls.velocity_offset(du), self.controls.external(du)
+        tangent = (np.zeros_like(self.x0),
+                   np.zeros_like(self.v0) if d_offset is None else d_offset,
+                   np.zeros_like(ext) if d_ext is None else d_ext)
+        traj, dx, dv = simulate(self.integrator, self.model, self.x0, v0, ext, self.dt,
+                                records=False, tangent=tangent)
+        _, gx, gv = self.state_cost(traj)
+        return float(np.vdot(gx, dx) + np.vdot(gv, dv) + self.control_cost(u)[1] @ du)
 
     def breakdown(self, u, traj: Trajectory | None = None) -> dict:
         """Objective split into keyframe error and control cost, plus per-term misses."""
-        traj = self.simulate(u, tape=False) if traj is None else traj
-        terms = self.objective_terms.state_terms
-        keyframe = float(sum(t.value(traj) for t in terms))
+        traj = self.simulate(u, records=False) if traj is None else traj
+        keyframe = self.state_cost(traj, gradient=False)[0]
         control = self.control_cost(u)[0]
         return {"objective": keyframe + control, "keyframe_error": keyframe,
                 "control_cost": control, "control_norm": float(np.linalg.norm(u)),
-                "misses": [t.miss(traj) for t in terms]}
+                "misses": [t.miss(traj) for t in self.objective_terms.state_terms]}
 
-    # -- symbolic forms for the exact route ------------------------------------------------
+    # -- the control terms, compiled -------------------------------------------------------
     def _compile_control_terms(self) -> ca.Function:
         U = ca.MX.sym("U", self.size)
         val = 0
@@ -194,29 +213,6 @@ class ControlProblem:
             val += term.symbolic(U, self.controls, self.dt)
         val = ca.MX(val) if not isinstance(val, ca.MX) else val
         return ca.Function("control_cost", [U], [val, ca.gradient(val, U)])
-
-    def symbolic_objective(self, U):
-        """The whole objective as an MX expression of U, through the unrolled simulation."""
-        forces, dv0 = self.controls.symbolic(U)
-        X = ca.DM(self.x0.T)
-        V = ca.DM(self.v0.T) + (dv0 if dv0 is not None else 0)
-        step = self.integrator.symbolic_step(self.model)
-        by_frame: dict[int, list[StateTerm]] = {}
-        for t in self.objective_terms.state_terms:
-            by_frame.setdefault(t.frame, []).append(t)
-        J = 0
-        for n in range(self.steps + 1):
-            for t in by_frame.get(n, []):
-                J += t.symbolic(X, V)
-            if n < self.steps:
-                E = ca.DM(self.external[n].T)
-                if forces is not None:
-                    E = E + forces[n]
-                S = self.integrator.step_parameters(self.model, n * self.dt, self.dt)
-                X, V = step(X, V, E, self.dt, S)
-        for term in self.objective_terms.control_terms:
-            J += term.symbolic(U, self.controls, self.dt)
-        return J
 
 
 def _state(value, shape, what) -> np.ndarray:

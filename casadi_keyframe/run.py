@@ -18,7 +18,7 @@ from types import SimpleNamespace
 from .interrupts import NAMES, catching, check
 from .io import CHECKPOINT, RESULT, Checkpoint, read_run, run_file, save_result
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from .trajectory import SimulationError, Trajectory
+from .state import SimulationError, Trajectory
 
 EXIT_CODES = """\
 exit codes:
@@ -169,7 +169,7 @@ def _hint(status: int, spec: SolveRun) -> None:
               f"    {_command(spec, 'solve')} --out {spec.out} --resume {spec.out}")
     elif status == FAILED:
         print(f"  hint: '{_command(spec, 'gradcheck')}' compares the gradient routes; "
-              "--gradient exact uses CasADi's exact reverse mode")
+              "--gradient casadi uses CasADi's reverse mode (small systems)")
 
 
 def _command(spec: SolveRun, command: str) -> str:

@@ -81,7 +81,7 @@ paper did.
 The gradient is the exact hand adjoint of the linearized scheme: the paper's swapped adjoint
 is poor in resting contact and over long horizons (notebooks/gradient_accuracy.ipynb;
 cloth_arch and cloth_toss measure what it costs there), and this problem has contact
-throughout and 60 steps.  ``adjoint="swapped"`` runs the paper's method.
+throughout and 60 steps.  ``--gradient swapped`` runs the paper's method.
 """
 from __future__ import annotations
 
@@ -91,19 +91,20 @@ from casadi_keyframe.capes import cached_clip, cape_model
 from casadi_keyframe.characters import Character, fall, smoothstep, transition
 from casadi_keyframe.cloths import cloth_problem
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
+from casadi_keyframe.state import State
 
-SOLVE = {"method": "lbfgsb", "maxiter": 300}
+SOLVE = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint"}
 GUESSES = ("tracking", "passive")
 RANGES = {"rows": "[2, inf)", "cols": "[3, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
           "t_a": "[0, inf)", "t_b": "[0, inf)", "window": "(0, inf)",
           "position_weight": "[0, inf)", "velocity_weight": "[0, inf)", "alpha": "[0, inf)",
-          "temporal": "[0, inf)", "guess": GUESSES, "adjoint": ("exact", "swapped")}
+          "temporal": "[0, inf)", "guess": GUESSES}
 
 
 def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 1 / 60,
           t_a: float = 0.8, t_b: float = 0.6, window: float | None = None,
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
-          temporal: float = 1e-7, guess: str = "tracking", adjoint: str = "exact"):
+          temporal: float = 1e-7, guess: str = "tracking"):
     steps = blend_steps(steps, window, dt)
     fall_start, walk_start = frame_of(t_a, dt, "t_a"), frame_of(t_b, dt, "t_b")
     character = Character()
@@ -131,7 +132,7 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
              "window": window, "view": (15, -60),
              "clips": {"fall": (fall_model, fall_traj), "walk": (walk_model, walk_traj)}}
     prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cape_blend",
-                         x0=x0, v0=v0, adjoint=adjoint, scene=scene)  # forces on free particles
+                         x0=x0, v0=v0, scene=scene)  # forces on free particles
     if guess == "passive":
         return prob
     path = reference_path(character, motion, x0, (walk_traj, walk_motion, walk_start), steps,
@@ -232,7 +233,7 @@ def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
     m = model.masses[:, None]
     g = np.asarray(model.params.gravity)
     land_from = steps if end is None else steps - min(max(landing_steps, 2), steps)
-    x, v, dv = prob.x0, prob.v0, None
+    x, v, work = prob.x0, prob.v0, integrator.init(model)
     forces = np.zeros((steps,) + x.shape)
     for n in range(steps):
         if n == land_from:
@@ -243,7 +244,8 @@ def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
         else:
             forces[n] = m * (a_ref[n] + kp[n] * (path[n] - x) + kd[n] * (v_ref[n] - v) - g
                              + model.params.air_drag * v_ref[n])
-        x, v, dv = integrator.step(model, x, v, forces[n], n, dt, dv)
+        reached, _ = integrator.step(model, State(x, v), forces[n], n, dt, work)
+        x, v = reached.x, reached.v
     return forces
 
 

@@ -16,10 +16,9 @@ from casadi_keyframe.cloths import cloth_problem, rotate_about
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
 
-SOLVE = {"method": "lbfgsb", "maxiter": 150}
+SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
-          "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
-          "adjoint": ("exact", "swapped")}
+          "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)"}
 
 
 def shapes(rest: np.ndarray, size: float) -> list[np.ndarray]:
@@ -35,8 +34,7 @@ def shapes(rest: np.ndarray, size: float) -> list[np.ndarray]:
 
 
 def build(rows: int = 12, cols: int = 12, steps: int = 120, dt: float = 1 / 60,
-          size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4,
-          adjoint: str = "exact"):
+          size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4):
     model = ClothModel.grid(rows, cols, width=size, height=size, mass=0.3,
                             pinned=[0, cols - 1])
     frames = np.linspace(steps / 3, steps, 3).round().astype(int)
@@ -44,4 +42,4 @@ def build(rows: int = 12, cols: int = 12, steps: int = 120, dt: float = 1 / 60,
                      for f, x in zip(frames, shapes(model.rest_positions, size))),
                     Smoothness(alpha))
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
-                         name="cloth_shapes", adjoint=adjoint, scene={"view": (15, -30)})
+                         name="cloth_shapes", scene={"view": (15, -30)})

@@ -17,8 +17,8 @@ The default gradient is the exact hand adjoint of the linearized step: with the 
 swapped adjoint L-BFGS-B stalls here (6 x 6 sheet: 6 iterations, objective 10.6, corners
 0.71 m off; exact: objective 1.6, corners 0.17 m off), because the velocity patterns the
 springs absorb in the first steps are exactly where the swapped adjoint is wrong (cosine
-0.46 to the exact gradient at random 0.3 m/s perturbations).  ``adjoint="swapped"`` runs
-the paper's method.
+0.46 to the exact gradient at random 0.3 m/s perturbations).  ``--gradient swapped``
+runs the paper's method.
 """
 import numpy as np
 
@@ -28,18 +28,18 @@ from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import CenterOfMassKeyframe, ParticleKeyframe, Smoothness
 
-SOLVE = {"method": "lbfgsb", "maxiter": 200}
+SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
           "size": "(0, inf)", "height": "(0, inf)", "ring_radius": "(0, inf)",
           "ring_weight": "[0, inf)", "corner_weight": "[0, inf)", "alpha": "[0, inf)",
-          "max_speed": "(0, inf)", "adjoint": ("exact", "swapped")}
+          "max_speed": "(0, inf)"}
 
 
 def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
           size: float = 1.0, height: float = 1.0,
           ring_center: tuple[float, float, float] = (1.5, 0.0, 2.0),
           ring_radius: float = 0.35, ring_weight: float = 100.0, corner_weight: float = 10.0,
-          alpha: float = 0.36, max_speed: float = 8.0, adjoint: str = "exact"):
+          alpha: float = 0.36, max_speed: float = 8.0):
     ground = Plane((0.0, 0.0, 0.0))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
                             origin=(-size / 2, -size / 2, height), colliders=[ground])
@@ -65,4 +65,4 @@ def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cloth_toss",
                          v0=np.tile(throw, (model.n, 1)),
                          controls=InitialVelocity(lower=-max_speed, upper=max_speed),
-                         adjoint=adjoint, scene=scene)
+                         scene=scene)

@@ -7,6 +7,7 @@ from casadi_keyframe.capes import (CAPE_PARAMS, cape_contacts, cape_model, clip_
                                    hanging_state, simulate_clip)
 from casadi_keyframe.characters import Character, fall, walk
 from casadi_keyframe.integrators import LinearizedBackwardEuler
+from casadi_keyframe.simulate import simulate
 
 ROWS, COLS, DT = 8, 6, 1 / 60
 CHARACTER = Character()
@@ -72,7 +73,7 @@ def test_the_check_does_catch_a_cape_that_passes_through_the_body():
     contacts["body"] = type(contacts["body"])(1e-6, 0.0, 0.012, 0.006)
     model = cape_model(CHARACTER, animation, rows=ROWS, cols=COLS, contacts=contacts)
     x0, v0 = hanging_state(model, CHARACTER, animation, 0.0)
-    traj = LinearizedBackwardEuler().simulate(model, x0, v0, np.zeros((70, model.n, 3)), DT)
+    traj = simulate(LinearizedBackwardEuler(), model, x0, v0, np.zeros((70, model.n, 3)), DT)
     assert deepest(traj, animation) > 3 * TOLERANCE
 
 

@@ -6,6 +6,7 @@ import pytest
 import scipy.sparse as sp
 
 from casadi_keyframe.integrators import LinearizedBackwardEuler
+from casadi_keyframe.simulate import simulate
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.cloth import Attachment
 from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
@@ -83,7 +84,7 @@ def test_contact_stiffness_is_df_dx_without_curvature_terms():
     bend = k * ramp(h - (r - sphere.radius), width)[:, None] * curvature(d, r)
     assert np.abs(bend).max() > 1.0  # the sphere's curvature term is really there
     dropped += sp.block_diag([b.reshape(3, 3) for b in bend]).toarray()
-    i, j = model._self.pairs(x)
+    i, j = model.interactions(x)
     dp = x[j] - x[i]
     rp = np.sqrt(np.einsum("pk,pk->p", dp, dp) + 1e-12)
     assert i.size
@@ -98,7 +99,7 @@ def test_self_contact_forces_sum_to_zero_and_skip_springs():
     x, v = jammed_state(model, 1)
     fc = model.contact_forces(x, v)
     np.testing.assert_allclose(fc.sum(0), 0, atol=1e-10)
-    i, j = model._self.pairs(x)
+    i, j = model.interactions(x)
     joined = set(zip(model.springs.i.tolist(), model.springs.j.tolist()))
     assert i.size and not {(a, b) for a, b in zip(i, j)} & (joined | {(b, a) for a, b in joined})
 
@@ -107,7 +108,7 @@ def test_sheet_resting_on_a_sphere_does_not_pass_through():
     sphere = Sphere((0.5, 0.5, -0.32), 0.3)
     model = ClothModel.grid(7, 7, plane="xy", colliders=[sphere, Plane((0, 0, -0.7))])
     x0 = model.rest_positions
-    traj = LinearizedBackwardEuler().simulate(model, x0, np.zeros_like(x0),
+    traj = simulate(LinearizedBackwardEuler(), model, x0, np.zeros_like(x0),
                                              np.zeros((90, model.n, 3)), 1 / 60)
     gap = np.linalg.norm(traj.x - sphere.center, axis=2) - sphere.radius
     assert gap.min() > -0.01  # never deeper than the thickness into the sphere
@@ -119,7 +120,7 @@ def test_attached_particles_follow_their_path_and_pins_stay():
     path = lambda t: np.array([[0.0, 0.5 * t, np.sin(2 * t)]])  # noqa: E731
     model = ClothModel.grid(3, 3, pinned=[2], attachments=[Attachment([0], path)])
     x0 = model.rest_positions
-    traj = LinearizedBackwardEuler().simulate(model, x0, np.zeros_like(x0),
+    traj = simulate(LinearizedBackwardEuler(), model, x0, np.zeros_like(x0),
                                              np.zeros((20, model.n, 3)), 0.05)
     for n in range(1, 21):
         np.testing.assert_allclose(traj.x[n, 0], path(n * 0.05)[0], atol=1e-12)
@@ -152,7 +153,7 @@ def test_a_blown_up_cloth_is_reported_not_returned():
     pull = np.zeros((30, model.n, 3))
     pull[:, -1] = [0, 0, -2000.0]  # an absurd control on one corner
     with pytest.raises(SimulationError, match="blew up"):
-        LinearizedBackwardEuler().simulate(model, x0, np.zeros_like(x0), pull, 1 / 30)
+        simulate(LinearizedBackwardEuler(), model, x0, np.zeros_like(x0), pull, 1 / 30)
 
 
 def test_a_sphere_sweeping_through_the_sheet_stays_stable():
@@ -161,7 +162,7 @@ def test_a_sphere_sweeping_through_the_sheet_stays_stable():
     sphere = Sphere(lambda t: np.array([0.5, -0.3 + 0.8 * t, -0.5]), 0.2)
     model = ClothModel.grid(12, 12, pinned=[0, 11], colliders=[sphere])
     x0 = model.rest_positions
-    traj = LinearizedBackwardEuler().simulate(model, x0, np.zeros_like(x0),
+    traj = simulate(LinearizedBackwardEuler(), model, x0, np.zeros_like(x0),
                                              np.zeros((30, model.n, 3)), 1 / 30)
     centers = np.array([sphere.center(n / 30) for n in range(31)])
     gap = np.linalg.norm(traj.x - centers[:, None], axis=2) - sphere.radius

@@ -189,7 +189,7 @@ def test_cloth_continuation_reaches_the_direct_objective_in_fewer_fine_iteration
     """5 x 5 cloth_shapes, 48 steps of 1/60 s, keyframes at frames 16, 32, 48; stages 1/15,
     1/30, 1/60 s; the exact adjoint (the swapped one stalls the direct solve after a few
     iterations, see the module docstring of problems/cloth_shapes.py)."""
-    prob = load_problem("cloth_shapes", rows=5, cols=5, steps=48, adjoint="exact")
+    prob = load_problem("cloth_shapes", rows=5, cols=5, steps=48)
     maxiter = 40
     direct = solve(prob, maxiter=maxiter, quiet=True)
     cont = solve(prob, maxiter=maxiter, quiet=True, continuation=[1 / 15, 1 / 30])

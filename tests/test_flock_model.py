@@ -6,7 +6,9 @@ import pytest
 from casadi_keyframe.kernels import MappedKernel, jit_available
 from casadi_keyframe.models import FlockModel, FlockParams, wander_forces
 from casadi_keyframe.models.flock import PairTape, pair_kernels
-from casadi_keyframe.trajectory import Trajectory
+from casadi_keyframe import problem as problem_module
+from casadi_keyframe.simulate import backward, simulate
+from casadi_keyframe.state import Trajectory
 from conftest import small_flock
 
 
@@ -19,8 +21,9 @@ def random_state(n, dim, seed=0, size=8.0):
 def test_neighbour_list_equals_all_pairs(cutoff, dim):
     model = FlockModel(np.ones(300), dim, FlockParams(cutoff=cutoff))
     x, v = random_state(300, dim, size=30.0)
-    fast, tape = model.forces(x, v)
-    slow, _ = model.forces(x, v, model.all_pairs())
+    tape = model.interactions(x)
+    fast = model.forces(x, v, 0.0, tape)
+    slow = model.forces(x, v, 0.0, model.all_pairs())
     assert tape.i.size < model.all_pairs().i.size / 5  # the list really is sparse
     np.testing.assert_allclose(fast, slow, rtol=0, atol=1e-12 * np.abs(slow).max())
 
@@ -28,7 +31,7 @@ def test_neighbour_list_equals_all_pairs(cutoff, dim):
 def test_internal_forces_sum_to_zero(cutoff):
     model = FlockModel(np.random.default_rng(1).uniform(0.5, 2, 100), 3, FlockParams(cutoff=cutoff))
     x, v = random_state(100, 3)
-    f, _ = model.forces(x, v)
+    f = model.forces(x, v)
     assert np.abs(f).max() > 1.0
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-11)
 
@@ -38,7 +41,7 @@ def test_symbolic_forces_equal_numeric(cutoff):
     x, v = random_state(20, 2, size=4.0)
     X, V = ca.MX.sym("X", 2, 20), ca.MX.sym("V", 2, 20)
     sym = ca.Function("f", [X, V], [model.symbolic_forces(X, V)])
-    np.testing.assert_allclose(np.array(sym(x.T, v.T)).T, model.forces(x, v)[0], atol=1e-12)
+    np.testing.assert_allclose(np.array(sym(x.T, v.T)).T, model.forces(x, v), atol=1e-12)
 
 
 def test_vjp_equals_transposed_jacobian(cutoff):
@@ -49,15 +52,18 @@ def test_vjp_equals_transposed_jacobian(cutoff):
     f = ca.vec(model.symbolic_forces(X, V))
     jac = ca.Function("j", [X, V], [ca.jacobian(f, ca.vec(X)), ca.jacobian(f, ca.vec(V))])
     jx, jv = (np.array(m) for m in jac(x.T, v.T))
-    _, tape = model.forces(x, v)
-    gx, gv = model.forces_vjp(x, v, tape, mu)
+    tape = model.interactions(x)
+    gx, gv = model.forces_vjp(x, v, 0.0, tape, mu)
     np.testing.assert_allclose(gx.ravel(), jx.T @ mu.ravel(), atol=1e-11)
     np.testing.assert_allclose(gv.ravel(), jv.T @ mu.ravel(), atol=1e-11)
+    dx, dv = np.random.default_rng(5).standard_normal((2, 15, 2))
+    df = model.forces_jvp(x, v, 0.0, tape, dx, dv)
+    np.testing.assert_allclose(df.ravel(), jx @ dx.ravel() + jv @ dv.ravel(), atol=1e-11)
 
 
 def test_smooth_cutoff_vanishes_with_its_derivative_at_the_radius():
     p = FlockParams(cutoff="smooth", eps=1e-9)
-    force, _ = pair_kernels(2, p)
+    force = pair_kernels(2, p)["force"]
     d = ca.SX.sym("d", 2)
     f = force(d, ca.DM.zeros(2))
     jac = ca.Function("j", [d], [f, ca.jacobian(f, d)])
@@ -69,7 +75,7 @@ def test_smooth_cutoff_vanishes_with_its_derivative_at_the_radius():
 
 
 def test_mapped_kernel_jit_equals_virtual_machine_and_plain_call():
-    force, _ = pair_kernels(3, FlockParams())
+    force = pair_kernels(3, FlockParams())["force"]
     d, dv = np.random.default_rng(5).standard_normal((2, 2100, 3))
     vm = MappedKernel(force, jit=False)(d, dv)[0]
     plain = np.array(force.map(2100)(d.T, dv.T)).T
@@ -79,7 +85,7 @@ def test_mapped_kernel_jit_equals_virtual_machine_and_plain_call():
 
 
 def test_mapped_kernel_rejects_wrong_shapes():
-    force, _ = pair_kernels(2, FlockParams())
+    force = pair_kernels(2, FlockParams())["force"]
     with pytest.raises(ValueError, match="shape"):
         MappedKernel(force, jit=False)(np.zeros((5, 3)), np.zeros((5, 2)))
 
@@ -112,12 +118,12 @@ def test_pair_tapes_are_compact_and_the_adjoint_is_unchanged():
     prob = small_flock()
     u = 0.3 * np.random.default_rng(0).standard_normal(prob.size)
     traj = prob.simulate(u)
-    assert all(t.i.dtype == t.j.dtype == np.uint8 for t in traj.tape)  # 8 agents
+    assert all(t.i.dtype == t.j.dtype == np.uint8 for t in traj.records)  # 8 agents
     wide = Trajectory(traj.x, traj.v, traj.dt,
-                      [PairTape(t.i.astype(np.intp), t.j.astype(np.intp)) for t in traj.tape])
+                      [PairTape(t.i.astype(np.intp), t.j.astype(np.intp)) for t in traj.records])
     _, gx, gv = prob.state_cost(traj)
-    for a, b in zip(prob.integrator.adjoint(prob.model, traj, gx, gv),
-                    prob.integrator.adjoint(prob.model, wide, gx, gv)):
+    (ga, a0), (gb, b0) = (backward(prob.integrator, prob.model, t, gx, gv) for t in (traj, wide))
+    for a, b in [(ga, gb), (a0.x, b0.x), (a0.v, b0.v)]:
         np.testing.assert_array_equal(a, b)
     big = PairTape.compact(np.array([0, 70000]), np.array([1, 70001]), 70002)
     assert big.i.dtype == np.uint32 and big.j.tolist() == [1, 70001]
@@ -127,15 +133,14 @@ def test_the_objective_keeps_no_pair_tapes(monkeypatch):
     prob = small_flock()
     u = 0.3 * np.random.default_rng(1).standard_normal(prob.size)
     seen = []
-    simulate = prob.integrator.simulate
 
     def spy(*args, **kwargs):
         seen.append(simulate(*args, **kwargs))
         return seen[-1]
-    monkeypatch.setattr(prob.integrator, "simulate", spy)
+    monkeypatch.setattr(problem_module, "simulate", spy)
     value = prob.objective(u)
-    assert len(seen) == 1 and seen[0].tape == []
+    assert len(seen) == 1 and seen[0].records == []
     f = prob.objective_and_gradient(u)[0]
-    assert len(seen[1].tape) == prob.steps and f == value  # the same value, bit for bit
-    with pytest.raises(ValueError, match="no tape"):
-        prob.integrator.adjoint(prob.model, seen[0], *prob.state_cost(seen[0])[1:])
+    assert len(seen[1].records) == prob.steps and f == value  # the same value, bit for bit
+    with pytest.raises(ValueError, match="kept no per-step records"):
+        backward(prob.integrator, prob.model, seen[0], *prob.state_cost(seen[0])[1:])

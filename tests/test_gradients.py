@@ -20,7 +20,7 @@ def test_adjoint_matches_exact_reverse_mode(cutoff, dim):
     prob = small_flock(cutoff, dim=dim)
     u = controls_for(prob)
     fa, ga = prob.objective_and_gradient(u, "adjoint")
-    fe, ge = prob.objective_and_gradient(u, "exact")
+    fe, ge = prob.objective_and_gradient(u, "casadi")
     assert fa == pytest.approx(fe, rel=1e-12)
     assert rel(ga, ge) < 1e-8
     # every term contributes: the gradient has many non-zero entries
@@ -33,14 +33,14 @@ def test_adjoint_matches_exact_for_other_controls(controls):
     prob = small_flock(controls=controls)
     u = controls_for(prob, seed=1)
     assert rel(prob.objective_and_gradient(u, "adjoint")[1],
-               prob.objective_and_gradient(u, "exact")[1]) < 1e-8
+               prob.objective_and_gradient(u, "casadi")[1]) < 1e-8
 
 
 def test_gradients_match_central_differences(cutoff):
     prob = small_flock(cutoff)
     u = controls_for(prob, seed=2)
     _, ga = prob.objective_and_gradient(u, "adjoint")
-    _, ge = prob.objective_and_gradient(u, "exact")
+    _, ge = prob.objective_and_gradient(u, "casadi")
     fd = FiniteDifference(h=1e-5)
     rng = np.random.default_rng(3)
     for _ in range(4):

@@ -144,13 +144,13 @@ def test_compile_folders_of_killed_runs_are_removed_when_stale(fresh):
         folder.mkdir()
         (folder / "kernel.so").write_bytes(b"half")
     os.utime(old, (time.time() - 2 * kernels._STALE_SECONDS,) * 2)
-    MappedKernel(tiny_kernel(), jit=True)
+    MappedKernel(tiny_kernel(), jit=True).compile()
     assert not old.exists() and new.exists()
 
 
 @needs_compiler
 def test_unloadable_library_in_the_cache_is_compiled_again(fresh, monkeypatch, tmp_path):
-    MappedKernel(tiny_kernel(), jit=True)
+    MappedKernel(tiny_kernel(), jit=True).compile()
     other = tmp_path / "other"
     other.mkdir()
     for name in os.listdir(fresh):
@@ -171,8 +171,8 @@ def test_unwritable_cache_folder_falls_back_to_the_vm_with_one_warning(fresh, mo
     monkeypatch.setenv("CASADI_KEYFRAME_CACHE", str(blocker / "cache"))
     x = np.random.default_rng(0).standard_normal((300, 2))
     with pytest.warns(RuntimeWarning, match="CASADI_KEYFRAME_CACHE") as record:
-        fallback = MappedKernel(tiny_kernel(), jit=True)
-        MappedKernel(tiny_kernel("other"), jit=True)
+        fallback = MappedKernel(tiny_kernel(), jit=True).compile()
+        MappedKernel(tiny_kernel("other"), jit=True).compile()
     assert len(record) == 1 and str(blocker / "cache") in str(record[0].message)
     assert not kernels.jit_available()
     np.testing.assert_array_equal(fallback(x)[0], MappedKernel(tiny_kernel(), jit=False)(x)[0])
@@ -182,5 +182,5 @@ def test_unwritable_cache_folder_falls_back_to_the_vm_with_one_warning(fresh, mo
 def test_failed_compile_falls_back_and_leaves_no_compile_folder(fresh, monkeypatch):
     monkeypatch.setattr(kernels, "FLAGS", ("-O3", "--no-such-flag"))
     with pytest.warns(RuntimeWarning, match="compiler failed"):
-        MappedKernel(tiny_kernel(), jit=True)
+        MappedKernel(tiny_kernel(), jit=True).compile()
     assert os.listdir(fresh) == []

@@ -1,9 +1,10 @@
-"""Modified PCG against a direct solve, with and without constrained components."""
+"""The linear solver objects: modified PCG against sparse LU, with and without constrained
+components, transpose solves, the statistics they report, and their refusals."""
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from casadi_keyframe.integrators.linear_solvers import SolveError, direct_solve, modified_pcg
+from casadi_keyframe.linear import ModifiedPCG, SolveError, SparseLU, linear_solver
 
 
 def spd(n, seed=0):
@@ -12,34 +13,65 @@ def spd(n, seed=0):
     return (B @ B.T + sp.diags(rng.uniform(1, 2, n))).tocsr()
 
 
+def mask(n, pinned):
+    free = np.ones(n, bool)
+    free[:pinned] = False
+    return free
+
+
 @pytest.mark.parametrize("pinned", [0, 7])
 def test_cg_equals_direct_solve(pinned):
     A = spd(120)
     b = np.random.default_rng(1).standard_normal(120)
-    free = np.ones(120, bool)
-    free[:pinned] = False
+    free = mask(120, pinned)
     z = np.where(free, 0.0, 0.3)
-    x_cg, it = modified_pcg(A, b, free, z, tol=1e-12)
-    x_lu, _ = direct_solve(A, b, free, z)
+    x_cg, info = ModifiedPCG(tol=1e-12).init(free).factor(A).solve(b, z)
+    x_lu, lu_info = SparseLU().init(free).factor(A).solve(b, z)
     np.testing.assert_allclose(x_cg, x_lu, rtol=1e-9, atol=1e-10)
-    assert it > 0 and np.all(x_cg[~free] == 0.3)
+    assert info.iterations > 0 and info.residual <= 1e-12 and np.all(x_cg[~free] == 0.3)
+    assert lu_info.iterations == 0 and lu_info.residual < 1e-12
     residual = (A @ x_cg - b)[free]
     assert np.linalg.norm(residual) < 1e-9 * np.linalg.norm(b)
+
+
+@pytest.mark.parametrize("pinned", [0, 5])
+def test_a_factorisation_solves_the_transposed_system(pinned):
+    """Sparse LU of a non-symmetric A solves ``A^T x = b`` with the same factors, the
+    constrained part moved to the right-hand side through ``A^T``."""
+    n = 60
+    A = (spd(n) + 0.3 * sp.random(n, n, density=0.05, random_state=4)).tocsr()
+    free = mask(n, pinned)
+    b = np.random.default_rng(5).standard_normal(n)
+    z = np.where(free, 0.0, -0.2)
+    x, info = SparseLU(symmetric=False).init(free).factor(A).solve_transpose(b, z)
+    assert np.abs((A.T @ x - b)[free]).max() < 1e-12 and np.all(x[~free] == -0.2)
+    assert info.residual < 1e-12
+    y, _ = SparseLU(symmetric=False).init(free).factor(A).solve(b, z)
+    assert np.abs((A @ y - b)[free]).max() < 1e-12 and np.abs(x - y).max() > 1e-3
 
 
 def test_cg_reports_failure_to_converge():
     A = spd(200)
     with pytest.raises(SolveError, match="did not converge"):
-        modified_pcg(A, np.ones(200), np.ones(200, bool), tol=1e-14, maxiter=2)
+        ModifiedPCG(tol=1e-14, maxiter=2).init(np.ones(200, bool)).factor(A).solve(np.ones(200))
 
 
 def test_cg_refuses_an_indefinite_matrix():
     A = sp.diags([1.0, -2.0, 3.0]).tocsr()
     with pytest.raises(SolveError, match="not positive definite"):
-        modified_pcg(A, np.ones(3), np.ones(3, bool))
+        ModifiedPCG().init(np.ones(3, bool)).factor(A)
 
 
 def test_direct_solve_reports_a_singular_matrix():
     A = sp.diags([1.0, 0.0, 3.0]).tocsr()
     with pytest.raises(SolveError, match="singular"):
-        direct_solve(A, np.ones(3), np.ones(3, bool))
+        SparseLU().init(np.ones(3, bool)).factor(A)
+
+
+def test_solvers_by_name_and_bad_names():
+    assert isinstance(linear_solver("cg", tol=1e-6), ModifiedPCG)
+    assert isinstance(linear_solver("direct"), SparseLU)
+    with pytest.raises(ValueError, match="solver must be one of"):
+        linear_solver("lu")
+    with pytest.raises(TypeError, match="init"):
+        linear_solver(3.0)

@@ -8,7 +8,7 @@ import time
 import numpy as np
 import pytest
 
-from casadi_keyframe import gradients
+from casadi_keyframe import adjoints
 from casadi_keyframe.cli import main
 from casadi_keyframe.io import atomic_path, read_run
 from casadi_keyframe.run import exit_code
@@ -105,12 +105,12 @@ def test_an_interrupt_while_drawing_leaves_no_truncated_gif(tmp_path):
 
 def test_a_failed_search_exits_1_with_its_cause_and_keeps_the_best(tmp_path, capsys,
                                                                     monkeypatch):
-    class WrongSign(gradients.Adjoint):
+    class WrongSign(adjoints.Adjoint):
         def __call__(self, problem, u):
             f, g = super().__call__(problem, u)
             return f, -g
 
-    monkeypatch.setitem(gradients.GRADIENTS, "adjoint", WrongSign)
+    monkeypatch.setitem(adjoints.GRADIENTS, "adjoint", WrongSign)
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--quiet", "--no-animation"]) == 1
     text = capsys.readouterr().out
     assert "line search failed" in text and "gradient may be inaccurate" in text

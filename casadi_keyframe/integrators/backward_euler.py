@@ -14,124 +14,151 @@ damping's position derivative and the clamping are missing from A).  The lineari
 is the first Newton iterate from ``v+ = v`` with the Jacobians at the start of the step,
 which is why the two differ by O(dt^3) per step for smooth forces.
 
-Adjoint: the swapped adjoint of the linearized scheme IS the exact adjoint here, once it uses
-the true Jacobians at the step's end, ``J = df/dx`` and ``D = df/dv`` at (x+, v+, t+):
+Backward step (exact): the swapped adjoint of the linearized scheme IS the exact adjoint
+here, once it uses the true Jacobians at the step's end, ``J = df/dx`` and ``D = df/dv`` at
+(x+, v+, t+):
 
     w = a_v(n+1) + dt a_x(n+1)
     (M - dt D - dt^2 J)^T lam = w          (free components; sparse LU, J is not symmetric)
     dphi/de_n = dt lam,   a_v(n) = M lam + dphi/dv_n,   a_x(n) = a_x(n+1) + dt J^T lam + dphi/dx_n
 
-exact up to the Newton tolerance.  The "exact" gradient route differentiates CasADi's Newton
-rootfinder on the same residual (implicit function theorem) and checks it.
+exact up to the Newton tolerance.  Tangent step (exact): the same matrix, forward,
+
+    (M - dt D - dt^2 J) dv+ = M dv + dt J dx + dt de,     dx+ = dx + dt dv+
+
+The "casadi" gradient route differentiates CasADi's Newton rootfinder on the same residual
+(implicit function theorem) and checks both.
 """
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..trajectory import SimulationError, Trajectory, check_state
-from .linear_solvers import SOLVERS, SolveError, direct_solve, solve_step
+from ..linear import ModifiedPCG, SolveError, SolveInfo, SparseLU
+from ..state import SimulationError, State, check_state
+from .base import Integrator, Workspace, free_components, mass_diagonal
 from .linearized_backward_euler import (check_stretch, prescribed_velocity_symbolic,
                                         step_matrices)
 
 
-def residual_jacobian(model, xp, vp, t, dt, mass):
+def residual_jacobian(model, xp, vp, t, dt, interactions=None):
     """``(dR/dv+, df/dx)`` at the end state (xp, vp) at time t: ``M - dt D - dt^2 df/dx``
     with the true, unclamped Jacobians (not symmetric), and df/dx itself."""
-    _, D, df_dx = model.jacobians(xp, vp, t, with_df_dx=True)
-    return sp.diags(mass) - dt * D - dt * dt * df_dx, df_dx
+    _, D, df_dx = model.jacobians(xp, vp, t, with_df_dx=True, interactions=interactions)
+    return sp.diags(mass_diagonal(model)) - dt * D - dt * dt * df_dx, df_dx
 
 
-class BackwardEuler:
+@dataclass(frozen=True)
+class NewtonStep:
+    """What a backward Euler step keeps: Newton's iteration count and its linear solves."""
+
+    iterations: int
+    solves: tuple[SolveInfo, ...]
+
+
+class BackwardEuler(Integrator):
     """Backward Euler for models with ``forces`` and sparse ``jacobians`` (cloth).
 
     ``solver`` ("direct" or "cg", see the module docstring) solves each Newton system (CG to
     ``tol``); Newton stops when its update is below ``newton_tol`` (m/s, relative to
     ``max(1, |v+|)``) and reports a :class:`SimulationError` after ``max_newton`` iterations.
+    The backward and tangent steps use sparse LU on the true Jacobian whatever ``solver``.
     """
 
     name = "backward_euler"
-    exact_adjoint = True
 
     def __init__(self, solver: str = "direct", tol: float = 1e-12, newton_tol: float = 1e-10,
                  max_newton: int = 50):
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
+        if solver not in ("direct", "cg"):
+            raise ValueError(f"solver must be one of ['cg', 'direct'], got {solver!r}")
         if not (0 < newton_tol < 1) or int(max_newton) < 1:
             raise ValueError("newton_tol must be in (0, 1) and max_newton at least 1, got "
                              f"{newton_tol}, {max_newton}")
         self.solver, self.tol = solver, tol
+        self.newton_solver = ModifiedPCG(tol) if solver == "cg" else SparseLU(symmetric=False)
+        self.jacobian_solver = SparseLU(symmetric=False)
         self.newton_tol, self.max_newton = newton_tol, int(max_newton)
-        self.newton_iterations: list[int] = []
 
-    def simulate(self, model, x0, v0, external, dt) -> Trajectory:
-        steps = external.shape[0]
-        x = np.empty((steps + 1,) + x0.shape)
-        v = np.empty_like(x)
-        x[0], v[0] = x0, v0
+    def init(self, model) -> Workspace:
+        return Workspace(self.jacobian_solver.init(model.free_mask()))
+
+    def step(self, model, state, external, n, dt, work=None):
+        """v+ of one step by Newton's method; the constrained components take their
+        prescribed velocity."""
+        x, v, t, step = state.x, state.v, n * dt, n + 1
         free = model.free_mask()
-        self.newton_iterations = []
-        for n in range(steps):
-            v[n + 1] = self._newton(model, x[n], v[n], external[n], n * dt, dt, free, n + 1)
-            x[n + 1] = x[n] + dt * v[n + 1]
-            check_state(x[n + 1], v[n + 1], n + 1)
-            check_stretch(model, x[n + 1], n + 1)
-        return Trajectory(x, v, dt)
-
-    def _newton(self, model, x, v, e, t, dt, free, step: int) -> np.ndarray:
-        """v+ of one step; the constrained components take their prescribed velocity."""
-        mass = np.repeat(model.masses, model.dim)
+        plan = self.newton_solver.init(free)
+        mass = mass_diagonal(model)
         vp = np.where(free.reshape(v.shape), v, model.prescribed_velocity(x, t, dt))
-        delta = None
+        delta, solves = None, []
         for it in range(1, self.max_newton + 1):
             xp = x + dt * vp
-            residual = mass * (vp - v).ravel() - dt * (model.forces(xp, vp, t + dt) + e).ravel()
+            contacts = model.interactions(xp)
+            residual = mass * (vp - v).ravel() - dt * (model.forces(xp, vp, t + dt, contacts)
+                                                       + external).ravel()
             try:
-                delta = self._newton_step(model, xp, vp, t + dt, dt, mass, -residual, free)
+                delta, info = self._newton_step(model, xp, vp, t + dt, dt, -residual, plan,
+                                                contacts)
             except SolveError as err:
                 raise SimulationError(f"step {step}: {err}", step) from err
+            solves.append(info)
             vp = vp + delta.reshape(vp.shape)
             if not np.all(np.isfinite(vp)):
                 break
             if np.abs(delta).max() <= self.newton_tol * max(1.0, np.abs(vp).max()):
-                self.newton_iterations.append(it)
-                return vp
+                x1 = x + dt * vp
+                check_state(x1, vp, step)
+                check_stretch(model, x1, step)
+                return State(x1, vp), NewtonStep(it, tuple(solves))
         raise SimulationError(
             f"step {step}: Newton's method did not converge in {self.max_newton} iterations "
             f"(last update {np.abs(delta).max():.2e} m/s); reduce dt or the stiffness", step)
 
-    def _newton_step(self, model, xp, vp, t, dt, mass, rhs, free):
+    def _newton_step(self, model, xp, vp, t, dt, rhs, plan, contacts):
         """Newton update: with "direct", the true Jacobian of the residual (sparse LU,
         quadratic convergence); with "cg", the symmetric positive definite step matrix of
         the clamped stiffness (CG applies; linear convergence where clamping or damping's
         position derivative matter)."""
         if self.solver == "direct":
-            jacobian, _ = residual_jacobian(model, xp, vp, t, dt, mass)
-            return direct_solve(jacobian.tocsr(), rhs, free, symmetric=False)[0]
-        A, _ = step_matrices(model, xp, vp, dt, t)
-        return solve_step(self.solver, A, rhs, free, np.zeros_like(rhs), tol=self.tol)
+            jacobian, _ = residual_jacobian(model, xp, vp, t, dt, contacts)
+            return plan.factor(jacobian).solve(rhs)
+        A, _ = step_matrices(model, xp, vp, dt, t, interactions=contacts)
+        return plan.factor(A).solve(rhs, np.zeros_like(rhs))
 
-    def adjoint(self, model, traj: Trajectory, gx, gv):
-        """The exact adjoint of backward Euler; returns ``(g_external, g_x0, g_v0)``."""
-        dt, steps = traj.dt, traj.steps
-        free_mask = model.free_mask()
-        free = free_mask.astype(float)
-        mass = np.repeat(model.masses, model.dim)
-        shape = traj.x.shape[1:]
-        g_ext = np.empty((steps,) + shape)
-        ax, av = free * gx[steps].ravel(), free * gv[steps].ravel()
-        for n in range(steps - 1, -1, -1):
-            t1 = (n + 1) * dt
-            jacobian, df_dx = residual_jacobian(model, traj.x[n + 1], traj.v[n + 1], t1, dt, mass)
-            try:
-                lam = direct_solve(jacobian.T.tocsr(), av + dt * ax, free_mask, symmetric=False)[0]
-            except SolveError as err:
-                raise SimulationError(f"adjoint of step {n + 1}: {err}", n + 1) from err
-            g_ext[n] = (dt * lam).reshape(shape)
-            ax = free * (ax + dt * (df_dx.T @ lam) + gx[n].ravel())
-            av = free * (mass * lam + gv[n].ravel())
-        return g_ext, ax.reshape(shape), av.reshape(shape)
+    def _end_jacobian(self, model, end, n, dt, work):
+        """The factored ``M - dt D - dt^2 J`` and ``J`` at the step's end state."""
+        jacobian, df_dx = residual_jacobian(model, end.x, end.v, (n + 1) * dt, dt)
+        try:
+            return work.factor(jacobian.tocsr()), df_dx
+        except SolveError as err:
+            raise SimulationError(f"derivative of step {n + 1}: {err}", n + 1) from err
+
+    def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
+        """The exact backward step of backward Euler (module docstring)."""
+        work = self.init(model) if work is None else work
+        shape = start.x.shape
+        free = free_components(model, shape).ravel()
+        ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
+        system, df_dx = self._end_jacobian(model, end, n, dt, work)
+        lam, _ = system.solve_transpose(av + dt * ax)
+        ax = free * (ax + dt * (df_dx.T @ lam))
+        av = free * (mass_diagonal(model) * lam)
+        return State(ax.reshape(shape), av.reshape(shape)), (dt * lam).reshape(shape)
+
+    def step_jvp(self, model, start, end, record, n, dt, tangent, d_external, work=None):
+        """The exact tangent step of backward Euler (module docstring)."""
+        work = self.init(model) if work is None else work
+        shape = start.x.shape
+        free = free_components(model, shape).ravel()
+        dx, dv = free * tangent.x.ravel(), free * tangent.v.ravel()
+        system, df_dx = self._end_jacobian(model, end, n, dt, work)
+        rhs = mass_diagonal(model) * dv + dt * (df_dx @ dx) + dt * np.asarray(d_external).ravel()
+        dv1, _ = system.solve(rhs)
+        dv1 = free * dv1
+        return State((free * (dx + dt * dv1)).reshape(shape), dv1.reshape(shape))
 
     @staticmethod
     def step_parameters(model, t: float, dt: float) -> np.ndarray:

@@ -1,4 +1,5 @@
-r"""Linearized backward Euler, eqs. (10)-(12), and the integrator-swapping adjoint (13)-(15).
+r"""Linearized backward Euler, eqs. (10)-(12): its step, its exact backward and tangent steps,
+and the paper's integrator-swapping backward step (13)-(15), which is APPROXIMATE.
 
 Forward step (Baraff-Witkin):  ``A dv = b`` with ``A = M - dt D - dt^2 K``,
 ``b = dt (f_n + dt K v_n + e_n)``, ``K = df/dx|_n`` (at zero velocity), ``D = df/dv|_n``;
@@ -10,9 +11,9 @@ of spring damping is left out of K) with -K and -D positive semi-definite (the c
 the destabilising parts of its stiffness: compressed springs' transverse term, contact
 curvature), so A is symmetric positive definite for every dt; CG refuses it otherwise.
 
-Adjoint ("adjoint", APPROXIMATE): the exact adjoint of this scheme needs second derivatives
-of f (derivatives of K and D), a 3p x 3p x 3p tensor.  Following the paper we use instead
-the adjoint of FULL backward Euler, ``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the
+Swapped backward step (:meth:`swapped_step_vjp`, the "swapped" gradient route, APPROXIMATE):
+the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D), a
+3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler, ``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the
 adjoint variables.  Its Jacobians belong to the step's end state n+1, so its matrix is the A
 the forward pass builds there (recomputed, not stored, to keep memory at O(particles x steps)):
 
@@ -21,6 +22,9 @@ the forward pass builds there (recomputed, not stored, to keep memory at O(parti
     dphi/de_n = dt mu
     a_v(n) = M mu + dphi/dv_n
     a_x(n) = a_x(n+1) + dt J^T mu + dphi/dx_n,    J = df/dx at n+1 (all of it)
+
+The paper's eqs. (13)-(15) are written in "hat" variables; the code's ``mu`` is the paper's
+adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal masses are right).
 
 A holds the model's clamped stiffness K (so it stays positive definite), but the position
 adjoint needs the true force Jacobian J: with K there the gradient misses the compressed
@@ -31,33 +35,44 @@ step's adjoint carries an O(dt^3) local error.  Stiff springs (dt sqrt(k/m) not 
 changes of stiffness (springs entering buckling or contact within a step), the clamping and
 the damping term left out of K make the error larger in practice; for forces linear in x and
 v it is exact.
-The "exact" gradient route (CasADi reverse mode through :meth:`symbolic_step`) is the
-reference that measures this error.
+The "casadi" gradient route (reverse mode through :meth:`symbolic_step`) is the reference
+that measures this error.
 
-``adjoint="exact"`` instead gives the exact adjoint of the linearized scheme by hand
-(:meth:`_exact_adjoint`): the same solve with A per step plus per-spring contractions of
+Exact backward step (:meth:`step_vjp`, the "adjoint" route): the exact adjoint of the
+linearized scheme by hand: the same solve with A per step plus per-spring contractions of
 the force laws' second and third derivatives, so it costs little more than the swapped one
-and, unlike CasADi's unrolled graph, fits any cloth size.
+and, unlike CasADi's unrolled graph, fits any cloth size.  Step n solves
+``R = b(x, v, e) - A(x, v) dv = 0``; with ``w = a_v + dt a_x`` (the cotangent of dv) and
+``A^T lam = w`` (A of step n): ``dphi/de_n = dt lam``, ``a_x(n) = a_x + d_x[lam . R]``,
+``a_v(n) = w + d_v[lam . R]``, the second derivatives hidden in
+``d_x[lam . (dt^2 K (v + dv) + dt D dv)]`` contracted by the model
+(:meth:`linearization_vjp`).
+
+Tangent step (:meth:`step_jvp`): the same relation forward,
+``A ddv = dt de + dt^2 K dv_n + d[dt f + dt^2 K w + dt D q](dx_n, dv_n)`` with ``w = v_{n+1}``
+and ``q = dv`` held (the model's :meth:`linearization_jvp`), then ``dv_{n+1} = dv_n + ddv``,
+``dx_{n+1} = dx_n + dt dv_{n+1}``.
 """
 from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..trajectory import SimulationError, Trajectory, check_state
-from .linear_solvers import SOLVERS, SolveError, solve_step
+from ..linear import SolveError, SolveInfo, linear_solver
+from ..state import SimulationError, State, check_state
+from .base import Integrator, Workspace, free_components, mass_diagonal
 
-ADJOINTS = ("swapped", "exact")
 
-
-def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False):
+def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):
     """``(A, K)`` of an implicit step linearized at (x, v) at time t, both sparse ``3n x 3n``,
     ``A = M - dt D - dt^2 K``; with ``with_df_dx`` also the full force Jacobian ``df/dx``
     (unclamped, damping included)."""
-    K, D, *df_dx = model.jacobians(x, v, t, with_df_dx=with_df_dx)
-    mass = np.repeat(model.masses, model.dim)
-    return ((sp.diags(mass) - dt * D - dt * dt * K).tocsr(), K, *df_dx)
+    K, D, *df_dx = model.jacobians(x, v, t, with_df_dx=with_df_dx, interactions=interactions)
+    return ((sp.diags(mass_diagonal(model)) - dt * D - dt * dt * K).tocsr(), K, *df_dx)
 
 
 def prescribed_velocity_symbolic(model, X, targets, dt):
@@ -83,60 +98,116 @@ def check_stretch(model, x, step: int, limit: float = 5.0) -> None:
             "the controls", step)
 
 
-class LinearizedBackwardEuler:
-    """Linearized implicit Euler for models with ``forces`` and sparse ``jacobians``.
+@dataclass(frozen=True)
+class LinearizedStep:
+    """What a linearized step keeps: the interactions at its start state (self-contact
+    pairs) and how its linear solve went."""
 
-    ``tol`` is CG's relative tolerance for the steps, ``adjoint_tol`` for the adjoint's
-    solves: a gradient needs fewer digits than a trajectory (1e-8 changes the 20 x 20
-    benchmark gradient by 5e-8 relative and saves 15 % of the adjoint's time; the swapped
-    adjoint's own error is 1e-2 to 1e-1).
+    interactions: object
+    solve: SolveInfo
+
+
+class LinearizedBackwardEuler(Integrator):
+    """Linearized implicit Euler for models with ``forces`` and sparse ``jacobians`` (cloth).
+
+    ``solver`` is "cg" (modified PCG), "direct" (sparse LU) or a solver object
+    (:mod:`casadi_keyframe.linear`); ``tol`` is CG's relative tolerance for the steps and
+    ``adjoint_tol`` for the backward and tangent steps' solves: a gradient needs fewer
+    digits than a trajectory.
     """
 
     name = "linearized_backward_euler"
 
-    def __init__(self, solver: str = "cg", tol: float = 1e-10, adjoint: str = "swapped",
+    def __init__(self, solver="cg", tol: float = 1e-10, adjoint=None,
                  adjoint_tol: float = 1e-8):
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
-        if adjoint not in ADJOINTS:
-            raise ValueError(f"adjoint must be one of {ADJOINTS}, got {adjoint!r}")
-        self.solver, self.tol, self.adjoint_kind = solver, tol, adjoint
-        self.adjoint_tol = adjoint_tol
+        if adjoint is not None:
+            warnings.warn(
+                "LinearizedBackwardEuler(adjoint=...) is deprecated and has no effect: the "
+                "gradient route chooses the backward pass (gradient='adjoint' for the exact "
+                "one, 'swapped' for the paper's approximate one)", DeprecationWarning,
+                stacklevel=2)
+        options = {"tol": tol} if solver == "cg" else {}
+        self.linear_solver = linear_solver(solver, **options)
+        self.solver = getattr(self.linear_solver, "name", type(self.linear_solver).__name__)
+        self.tol, self.adjoint_tol = tol, adjoint_tol
 
-    @property
-    def exact_adjoint(self) -> bool:
-        return self.adjoint_kind == "exact"
+    def init(self, model) -> Workspace:
+        return Workspace(self.linear_solver.init(model.free_mask()))
 
-    def _solve(self, A, b, free, z=None, x0=None, tol=None):
-        return solve_step(self.solver, A, b, free, z, tol=tol or self.tol, x0=x0)
-
-    def simulate(self, model, x0, v0, external, dt) -> Trajectory:
-        steps = external.shape[0]
-        x = np.empty((steps + 1,) + x0.shape)
-        v = np.empty_like(x)
-        x[0], v[0] = x0, v0
-        dv = None
-        for n in range(steps):
-            x[n + 1], v[n + 1], dv = self.step(model, x[n], v[n], external[n], n, dt, dv)
-        return Trajectory(x, v, dt)
-
-    def step(self, model, x, v, external, n: int, dt: float, dv_guess=None):
-        """Step ``n`` (from t = n dt) under the external force ``external`` (``(n, 3)``):
-        ``(x+, v+, dv)``, ``dv`` flat (a warm start for the next step's CG).  Raises
-        SimulationError if the solve fails, the state is not finite or the cloth blows up."""
-        t = n * dt
-        A, K = step_matrices(model, x, v, dt, t)
-        b = dt * ((model.forces(x, v, t) + external).ravel() + dt * (K @ v.ravel()))
+    def step(self, model, state, external, n, dt, work=None):
+        """Step ``n`` (from t = n dt) under ``external`` (``(n, 3)``); raises SimulationError
+        if the solve fails, the state is not finite or the cloth blows up."""
+        work = self.init(model) if work is None else work
+        x, v, t = state.x, state.v, n * dt
+        contacts = model.interactions(x)
+        A, K = step_matrices(model, x, v, dt, t, interactions=contacts)
+        b = dt * ((model.forces(x, v, t, contacts) + external).ravel() + dt * (K @ v.ravel()))
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
         try:
-            dv = self._solve(A, b, model.free_mask(), z, x0=dv_guess)
+            dv, info = work.factor(A).solve(b, z, x0=work.warm)
         except SolveError as err:
             raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
+        work.warm = dv
         v1 = v + dv.reshape(v.shape)
         x1 = x + dt * v1
         check_state(x1, v1, n + 1)
         check_stretch(model, x1, n + 1)
-        return x1, v1, dv
+        return State(x1, v1), LinearizedStep(contacts, info)
+
+    def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
+        """The exact backward step of the linearized scheme (module docstring)."""
+        work = self.init(model) if work is None else work
+        shape, t = start.x.shape, n * dt
+        free = free_components(model, shape).ravel()
+        ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
+        contacts = record.interactions
+        A, K = step_matrices(model, start.x, start.v, dt, t, interactions=contacts)
+        w = av + dt * ax
+        lam = self._derivative_solve(work, A, w, n, transpose=True)
+        bx, bv = model.linearization_vjp(start.x, start.v, t, lam.reshape(shape), end.v,
+                                         end.v - start.v, dt, interactions=contacts)
+        ax = free * (ax + bx.ravel())
+        av = free * (w + bv.ravel() + dt * dt * (K.T @ lam))
+        return State(ax.reshape(shape), av.reshape(shape)), (dt * lam).reshape(shape)
+
+    def step_jvp(self, model, start, end, record, n, dt, tangent, d_external, work=None):
+        """The exact tangent step of the linearized scheme (module docstring)."""
+        work = self.init(model) if work is None else work
+        shape, t = start.x.shape, n * dt
+        free = free_components(model, shape)
+        dx, dv = free * tangent.x, free * tangent.v
+        contacts = record.interactions
+        A, K = step_matrices(model, start.x, start.v, dt, t, interactions=contacts)
+        rhs = (dt * np.asarray(d_external).ravel() + dt * dt * (K @ dv.ravel())
+               + model.linearization_jvp(start.x, start.v, t, end.v, end.v - start.v, dt, dx,
+                                         dv, interactions=contacts).ravel())
+        ddv = self._derivative_solve(work, A, rhs, n, transpose=False)
+        dv1 = free * (dv + ddv.reshape(shape))
+        return State(free * (dx + dt * dv1), dv1)
+
+    def swapped_step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
+        """APPROXIMATE: the paper's integrator-swapping backward step, eqs. (13)-(15): the
+        exact adjoint of full backward Euler at the step's end state (module docstring)."""
+        work = self.init(model) if work is None else work
+        shape = start.x.shape
+        free = free_components(model, shape).ravel()
+        ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
+        A, _, df_dx = step_matrices(model, end.x, end.v, dt, (n + 1) * dt, with_df_dx=True)
+        mu = self._derivative_solve(work, A, av + dt * ax, n, transpose=True)
+        ax = free * (ax + dt * (df_dx.T @ mu))
+        av = free * (mass_diagonal(model) * mu)
+        return State(ax.reshape(shape), av.reshape(shape)), (dt * mu).reshape(shape)
+
+    def _derivative_solve(self, work, A, b, n: int, transpose: bool):
+        """A solve of a backward or tangent step, warm-started from the pass's last one."""
+        system = work.factor(A)
+        solve = system.solve_transpose if transpose else system.solve
+        try:
+            out, _ = solve(b, x0=work.warm, tol=self.adjoint_tol)
+        except SolveError as err:
+            raise SimulationError(f"derivative of step {n + 1}: {err}", n + 1) from err
+        work.warm = out
+        return out
 
     @staticmethod
     def force_for(model, x, v, v1, n: int, dt: float) -> np.ndarray:
@@ -145,66 +216,12 @@ class LinearizedBackwardEuler:
         Exact for the free particles; the constrained ones follow their prescribed motion
         whatever the force (and ``v1`` there is ignored), so their force has no effect."""
         t = n * dt
-        A, K = step_matrices(model, x, v, dt, t)
+        contacts = model.interactions(x)
+        A, K = step_matrices(model, x, v, dt, t, interactions=contacts)
         prescribed = model.prescribed_velocity(x, t, dt)
         dv = np.where(model.free_mask(), (v1 - v).ravel(), (prescribed - v).ravel())
-        return (A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape) - model.forces(x, v, t)
-
-    def adjoint(self, model, traj: Trajectory, gx, gv):
-        """The adjoint chosen at construction; returns ``(g_external, g_x0, g_v0)``.
-
-        Pinned and attached particles follow prescribed motion, which no control changes:
-        their adjoints are dropped, and their parts of ``g_x0, g_v0`` are zero.
-        """
-        if self.adjoint_kind == "exact":
-            return self._exact_adjoint(model, traj, gx, gv)
-        return self._swapped_adjoint(model, traj, gx, gv)
-
-    def _swapped_adjoint(self, model, traj: Trajectory, gx, gv):
-        """The integrator-swapping adjoint (13)-(15): approximate."""
-        dt, steps = traj.dt, traj.steps
-        free = model.free_mask().astype(float)
-        mass = np.repeat(model.masses, model.dim)
-        shape = traj.x.shape[1:]
-        g_ext = np.empty((steps,) + shape)
-        ax, av = free * gx[steps].ravel(), free * gv[steps].ravel()
-        mu = None
-        for n in range(steps - 1, -1, -1):
-            A, _, df_dx = step_matrices(model, traj.x[n + 1], traj.v[n + 1], dt, (n + 1) * dt,
-                                        with_df_dx=True)
-            mu = self._solve(A, av + dt * ax, free > 0, x0=mu, tol=self.adjoint_tol)  # A^T = A
-            g_ext[n] = (dt * mu).reshape(shape)
-            ax = free * (ax + dt * (df_dx.T @ mu) + gx[n].ravel())
-            av = free * (mass * mu + gv[n].ravel())
-        return g_ext, ax.reshape(shape), av.reshape(shape)
-
-    def _exact_adjoint(self, model, traj: Trajectory, gx, gv):
-        """The exact adjoint of the linearized scheme, at about the swapped adjoint's cost.
-
-        Step n solves ``R = b(x, v, e) - A(x, v) dv = 0``.  With ``w = a_v + dt a_x`` (the
-        adjoint of dv) and ``A^T lam = w`` (A of step n, as the forward pass built it):
-        ``dphi/de_n = dt lam``, ``a_x(n) = a_x + d_x[lam . R]``, ``a_v(n) = w + d_v[lam . R]``.
-        The second derivatives hidden in ``d_x[lam . (dt^2 K (v + dv) + dt D dv)]`` are
-        contracted per spring by the model (:meth:`linearization_vjp`): the paper's
-        3p x 3p x 3p tensors are never formed.  Needs ``model.linearization_vjp``.
-        """
-        dt, steps = traj.dt, traj.steps
-        free = model.free_mask().astype(float)
-        shape = traj.x.shape[1:]
-        g_ext = np.empty((steps,) + shape)
-        ax, av = free * gx[steps].ravel(), free * gv[steps].ravel()
-        lam = None
-        for n in range(steps - 1, -1, -1):
-            t = n * dt
-            A, K = step_matrices(model, traj.x[n], traj.v[n], dt, t)
-            w = av + dt * ax
-            lam = self._solve(A, w, free > 0, x0=lam, tol=self.adjoint_tol)  # A^T = A
-            g_ext[n] = (dt * lam).reshape(shape)
-            bx, bv = model.linearization_vjp(traj.x[n], traj.v[n], t, lam.reshape(shape),
-                                             traj.v[n + 1], traj.v[n + 1] - traj.v[n], dt)
-            ax = free * (ax + bx.ravel() + gx[n].ravel())
-            av = free * (w + bv.ravel() + dt * dt * (K.T @ lam) + gv[n].ravel())
-        return g_ext, ax.reshape(shape), av.reshape(shape)
+        return ((A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape)
+                - model.forces(x, v, t, contacts))
 
     @staticmethod
     def step_parameters(model, t: float, dt: float) -> np.ndarray:

@@ -1,73 +1,55 @@
-r"""Symplectic Euler, eq. (1), and its exact adjoint, eq. (8).
+r"""Symplectic Euler, eq. (1), with its exact backward step, eq. (8), and its tangent step.
 
 Forward:  ``v_{n+1} = v_n + dt M^-1 (f(x_n, v_n) + e_n)``,  ``x_{n+1} = x_n + dt v_{n+1}``,
 where ``e_n`` is every external force of step n (wander plus controls).
 
-Adjoint (exact): with ``a_x, a_v`` the adjoints of frame n+1 and ``w = a_v + dt a_x``,
+Backward (exact): with ``a_x, a_v`` the cotangents of frame n+1 and ``w = a_v + dt a_x``,
 
     dphi/de_n = mu = dt M^-1 w
-    a_v(n)    = w   + (df/dv)^T mu + dphi/dv_n
-    a_x(n)    = a_x + (df/dx)^T mu + dphi/dx_n
+    a_v(n)    = w   + (df/dv)^T mu        (+ dphi/dv_n, added by the backward loop)
+    a_x(n)    = a_x + (df/dx)^T mu        (+ dphi/dx_n)
 
-Only the transposed Jacobian-vector products ``(df/dx)^T mu`` and ``(df/dv)^T mu`` of the
-model are used.
+The paper's eq. (8) writes ``M^-1`` outside the force Jacobians' transposes; here it is
+applied to ``w`` once, which is the same for equal masses and right for unequal ones.
+
+Tangent (exact): ``dv_{n+1} = dv_n + dt M^-1 ((df/dx) dx_n + (df/dv) dv_n + de_n)``,
+``dx_{n+1} = dx_n + dt dv_{n+1}``.
+
+The model supplies ``interactions(x)`` (a flock's neighbour pairs, kept as the step's record)
+and the products ``forces_vjp`` and ``forces_jvp`` over them.
 """
 from __future__ import annotations
 
 import casadi as ca
 import numpy as np
 
-from ..trajectory import Trajectory, check_state
+from ..state import State, check_state
+from .base import Integrator
 
 
-class SymplecticEuler:
-    """Explicit symplectic Euler for models with ``forces`` and ``forces_vjp``."""
+class SymplecticEuler(Integrator):
+    """Explicit symplectic Euler for models with ``forces``, ``forces_vjp`` and ``forces_jvp``."""
 
     name = "symplectic_euler"
-    exact_adjoint = True
-    optional_tape = True  # simulate(..., tape=False) keeps nothing for the adjoint
 
-    def simulate(self, model, x0, v0, external, dt, *, tape: bool = True) -> Trajectory:
-        """Run ``len(external)`` steps; ``external`` is ``(steps, n, dim)``.
+    def step(self, model, state, external, n, dt, work=None):
+        pairs = model.interactions(state.x)
+        f = model.forces(state.x, state.v, n * dt, pairs)
+        v1 = state.v + dt * (1.0 / model.masses)[:, None] * (f + external)
+        x1 = state.x + dt * v1
+        check_state(x1, v1, n + 1)
+        return State(x1, v1), pairs
 
-        With ``tape=False`` the trajectory keeps no per-step record for :meth:`adjoint`
-        (``traj.tape`` is empty): for a value only, the record being most of the memory.
-        """
-        steps = external.shape[0]
-        x = np.empty((steps + 1,) + x0.shape)
-        v = np.empty_like(x)
-        x[0], v[0] = x0, v0
-        inv_m = (1.0 / model.masses)[:, None]
-        record = []
-        for n in range(steps):
-            f, t = model.forces(x[n], v[n])
-            if tape:
-                record.append(t)
-            v[n + 1] = v[n] + dt * inv_m * (f + external[n])
-            x[n + 1] = x[n] + dt * v[n + 1]
-            check_state(x[n + 1], v[n + 1], n + 1)
-        return Trajectory(x, v, dt, record)
+    def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
+        w = cotangent.v + dt * cotangent.x
+        mu = dt * (1.0 / model.masses)[:, None] * w
+        jx, jv = model.forces_vjp(start.x, start.v, n * dt, record, mu)
+        return State(cotangent.x + jx, w + jv), mu
 
-    def adjoint(self, model, traj: Trajectory, gx, gv):
-        """Back-propagate frame gradients ``gx, gv`` ``(steps+1, n, dim)``.
-
-        Returns ``(g_external (steps, n, dim), g_x0, g_v0)``.
-        """
-        dt, steps = traj.dt, traj.steps
-        if len(traj.tape) != steps:
-            raise ValueError("the trajectory has no tape for the adjoint: simulate it with "
-                             "tape=True (the default)")
-        inv_m = (1.0 / model.masses)[:, None]
-        g_ext = np.empty((steps,) + traj.x.shape[1:])
-        ax, av = gx[steps].copy(), gv[steps].copy()
-        for n in range(steps - 1, -1, -1):
-            w = av + dt * ax
-            mu = dt * inv_m * w
-            g_ext[n] = mu
-            jx, jv = model.forces_vjp(traj.x[n], traj.v[n], traj.tape[n], mu)
-            ax = ax + jx + gx[n]
-            av = w + jv + gv[n]
-        return g_ext, ax, av
+    def step_jvp(self, model, start, end, record, n, dt, tangent, d_external, work=None):
+        df = model.forces_jvp(start.x, start.v, n * dt, record, tangent.x, tangent.v)
+        dv1 = tangent.v + dt * (1.0 / model.masses)[:, None] * (df + d_external)
+        return State(tangent.x + dt * dv1, dv1)
 
     @staticmethod
     def step_parameters(model, t: float, dt: float) -> np.ndarray:

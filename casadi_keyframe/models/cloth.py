@@ -64,6 +64,8 @@ from ..kernels import (MappedKernel, interaction_kernels, pair_difference, pair_
                        scatter_pairs)
 from .colliders import Body, Contact, SelfContact
 
+KERNELS = ("force", "jac", "df_dx", "vjp", "jvp")  # of every interaction, see interaction_kernels
+
 SPRING_KINDS = ("stretch", "shear", "bend")
 STRETCH, SHEAR, BEND = range(3)
 PLANES = ("xz", "xy")
@@ -319,8 +321,7 @@ class ClothModel:
         self._spring_params = [s.rest[:, None], k_t[:, None], np.full((s.rest.size, 1), p.bend),
                                np.full((s.rest.size, 1), p.damping)]
         self._kernels = spring_kernels(p.eps)
-        self._force, self._jac, self._df_dx, self._vjp = (
-            MappedKernel(self._kernels[k], jit=self.jit) for k in ("force", "jac", "df_dx", "vjp"))
+        self._springs = {k: MappedKernel(self._kernels[k], jit=self.jit) for k in KERNELS}
         self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)
         self._drag_blocks = np.outer(-p.air_drag * self.masses, np.eye(3).ravel())
         self._gravity = self.masses[:, None] * np.asarray(p.gravity)[None, :]
@@ -330,6 +331,11 @@ class ClothModel:
                 raise ValueError(f"colliders must be Plane, Sphere or Capsule bodies, got {body!r}")
         self._self = (None if self.self_contact is None else
                       SelfContact(self.self_contact, np.stack([s.i, s.j], 1), self.n))
+        # mapped kernels of every collider and of self-contact (compiled at first use)
+        self._bodies = tuple({k: MappedKernel(b.kernels[k], jit=self.jit) for k in KERNELS}
+                             for b in self.colliders)
+        self._pairs = (None if self._self is None else
+                       {k: MappedKernel(SelfContact.kernels[k], jit=self.jit) for k in KERNELS})
         self.attachments = tuple(self.attachments)
         constrained = np.concatenate([self.pinned] + [a.particles for a in self.attachments])
         if np.unique(constrained).size != constrained.size:
@@ -442,6 +448,19 @@ class ClothModel:
         return float((np.linalg.norm(pair_difference(x, s.i, s.j), axis=1) / s.rest).max())
 
     # -- numeric -------------------------------------------------------------------------
+    def interactions(self, x: np.ndarray):
+        """What the forces at positions x act over beyond the fixed springs: the self-contact
+        pairs ``(i, j)`` (None without self-contact).  Found once per state and passed to
+        :meth:`forces`, :meth:`jacobians` and the step derivatives, which otherwise search
+        again."""
+        return None if self._self is None else self._self.pairs(x)
+
+    def _contacts(self, x, interactions):
+        if self._self is None:
+            return None
+        i, j = self._self.pairs(x) if interactions is None else interactions
+        return (i, j) if i.size else None
+
     def _spring_inputs(self, x, v):
         x, v = self._check_state(x, "x"), self._check_state(v, "v")
         s = self.springs
@@ -449,31 +468,34 @@ class ClothModel:
 
     def spring_forces(self, x: np.ndarray, v: np.ndarray) -> np.ndarray:
         """Internal spring forces (elastic + damping) on every particle, ``(n, 3)`` N."""
-        (fs,) = self._force(*self._spring_inputs(x, v))
+        (fs,) = self._springs["force"](*self._spring_inputs(x, v))
         return scatter_pairs(fs, self.springs.i, self.springs.j, self.n)
 
-    def contact_forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
+    def contact_forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
+                       interactions=None) -> np.ndarray:
         """Forces of the colliders at time t and of self-contact, ``(n, 3)`` N."""
         out = np.zeros((self.n, 3))
-        for body in self.colliders:
-            out += body.evaluate("force", x, v, t, jit=self.jit)[0]
-        if self._self is not None:
-            i, j = self._self.pairs(x)
-            if i.size:
-                (fp,) = self._self.evaluate("force", x, v, i, j, jit=self.jit)
-                out += scatter_pairs(fp, i, j, self.n)
+        for body, kernels in zip(self.colliders, self._bodies):
+            out += kernels["force"](x, v, *body.inputs(self.n, t))[0]
+        pairs = self._contacts(x, interactions)
+        if pairs is not None:
+            (fp,) = self._pairs["force"](*self._self.inputs(x, v, *pairs))
+            out += scatter_pairs(fp, *pairs, self.n)
         return out
 
-    def forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0) -> np.ndarray:
+    def forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
+               interactions=None) -> np.ndarray:
         """Total force ``(n, 3)`` N at time t: springs + gravity ``m_i g`` + drag
-        ``-air_drag m_i v_i`` + contacts."""
+        ``-air_drag m_i v_i`` + contacts (self-contact over ``interactions``, default: those
+        of x)."""
         drag = self.params.air_drag * self.masses[:, None] * np.asarray(v, dtype=float)
         out = self.spring_forces(x, v) + self._gravity - drag
         if self.colliders or self._self is not None:
-            out += self.contact_forces(x, v, t)
+            out += self.contact_forces(x, v, t, interactions)
         return out
 
-    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0, with_df_dx: bool = False):
+    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0, with_df_dx: bool = False,
+                  interactions=None):
         """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric, ``-K`` and ``-D``
         positive semi-definite; with ``with_df_dx`` also the full ``df/dx`` (not symmetric).
 
@@ -484,12 +506,14 @@ class ClothModel:
         Euler (exact and swapped) need the true ``df/dx``, damping's part included.
         """
         inputs = self._spring_inputs(x, v)
-        pairs = self._jac(*inputs) + (self._df_dx(*inputs) if with_df_dx else [])
+        pairs = self._springs["jac"](*inputs) + (self._springs["df_dx"](*inputs)
+                                                  if with_df_dx else [])
         particles = [np.zeros((self.n, 9)), self._drag_blocks.copy(), np.zeros((self.n, 9))]
-        for body in self.colliders:
-            blocks = body.evaluate("jac", x, v, t, jit=self.jit)
+        for body, kernels in zip(self.colliders, self._bodies):
+            columns = body.inputs(self.n, t)
+            blocks = kernels["jac"](x, v, *columns)
             if with_df_dx:
-                blocks += body.evaluate("df_dx", x, v, t, jit=self.jit)
+                blocks += kernels["df_dx"](x, v, *columns)
             for acc, b in zip(particles, blocks):
                 acc += b
         size = 3 * self.n
@@ -498,16 +522,16 @@ class ClothModel:
             data = self._gather @ np.concatenate([pair_blocks.ravel(), particle_blocks.ravel()])
             out.append(sp.csc_matrix((data, self._indices.copy(), self._indptr.copy()),
                                      shape=(size, size)))
-        if self._self is not None:
-            i, j = self._self.pairs(x)
-            if i.size:
-                blocks = self._self.evaluate("jac", x, v, i, j, jit=self.jit)
-                if with_df_dx:
-                    blocks += self._self.evaluate("df_dx", x, v, i, j, jit=self.jit)
-                out = [a + b for a, b in zip(out, pair_block_matrices(i, j, self.n, *blocks))]
+        contacts = self._contacts(x, interactions)
+        if contacts is not None:
+            columns = self._self.inputs(x, v, *contacts)
+            blocks = self._pairs["jac"](*columns)
+            if with_df_dx:
+                blocks += self._pairs["df_dx"](*columns)
+            out = [a + b for a, b in zip(out, pair_block_matrices(*contacts, self.n, *blocks))]
         return tuple(out)
 
-    def linearization_vjp(self, x, v, t: float, lam, w, q, dt: float):
+    def linearization_vjp(self, x, v, t: float, lam, w, q, dt: float, interactions=None):
         """Gradients ``(gx, gv)``, each ``(n, 3)``, of ``lam . (dt f + dt^2 K w + dt D q)`` in
         x and v at time t: what the exact adjoint of a linearized implicit step needs,
         second derivatives of every force law contracted per interaction (``lam, w, q``
@@ -515,23 +539,46 @@ class ClothModel:
         s = self.springs
         inputs = self._spring_inputs(x, v)
         pair_vectors = [pair_difference(a, s.i, s.j) for a in (-lam, w, q)]
-        dts = np.full((s.i.size, 1), dt)
-        gd, gdv = self._vjp(*inputs, *pair_vectors, dts)
+        gd, gdv = self._springs["vjp"](*inputs, *pair_vectors, np.full((s.i.size, 1), dt))
         gx = -scatter_pairs(gd, s.i, s.j, self.n)  # d = x_j - x_i
         gv = -scatter_pairs(gdv, s.i, s.j, self.n) - dt * self.params.air_drag * (
             self.masses[:, None] * lam)
         dts = np.full((self.n, 1), dt)
-        for body in self.colliders:
-            bx, bv = body.evaluate("vjp", x, v, t, lam, w, q, dts, jit=self.jit)
+        for body, kernels in zip(self.colliders, self._bodies):
+            bx, bv = kernels["vjp"](x, v, *body.inputs(self.n, t), lam, w, q, dts)
             gx, gv = gx + bx, gv + bv
-        if self._self is not None:
-            i, j = self._self.pairs(x)
-            if i.size:
-                vectors = [pair_difference(a, i, j) for a in (-lam, w, q)]
-                px, pv = self._self.evaluate("vjp", x, v, i, j, *vectors,
-                                             np.full((i.size, 1), dt), jit=self.jit)
-                gx, gv = gx - scatter_pairs(px, i, j, self.n), gv - scatter_pairs(pv, i, j, self.n)
+        contacts = self._contacts(x, interactions)
+        if contacts is not None:
+            i, j = contacts
+            vectors = [pair_difference(a, i, j) for a in (-lam, w, q)]
+            px, pv = self._pairs["vjp"](*self._self.inputs(x, v, i, j), *vectors,
+                                        np.full((i.size, 1), dt))
+            gx, gv = gx - scatter_pairs(px, i, j, self.n), gv - scatter_pairs(pv, i, j, self.n)
         return gx, gv
+
+    def linearization_jvp(self, x, v, t: float, w, q, dt: float, dx, dv, interactions=None):
+        """The other side of :meth:`linearization_vjp`: the derivative of
+        ``dt f + dt^2 K w + dt D q`` at time t along ``(dx, dv)``, ``(n, 3)``; what the
+        tangent of a linearized implicit step needs, second derivatives contracted per
+        interaction."""
+        s = self.springs
+        inputs = self._spring_inputs(x, v)
+        pair_vectors = [pair_difference(a, s.i, s.j) for a in (w, q)]
+        deltas = [pair_difference(a, s.i, s.j) for a in (dx, dv)]
+        (dg,) = self._springs["jvp"](*inputs, *pair_vectors, np.full((s.i.size, 1), dt), *deltas)
+        out = scatter_pairs(dg, s.i, s.j, self.n) - dt * self.params.air_drag * (
+            self.masses[:, None] * dv)
+        dts = np.full((self.n, 1), dt)
+        for body, kernels in zip(self.colliders, self._bodies):
+            out += kernels["jvp"](x, v, *body.inputs(self.n, t), w, q, dts, dx, dv)[0]
+        contacts = self._contacts(x, interactions)
+        if contacts is not None:
+            i, j = contacts
+            vectors = [pair_difference(a, i, j) for a in (w, q, dx, dv)]
+            (dp,) = self._pairs["jvp"](*self._self.inputs(x, v, i, j), *vectors[:2],
+                                       np.full((i.size, 1), dt), *vectors[2:])
+            out += scatter_pairs(dp, i, j, self.n)
+        return out
 
     # -- symbolic ------------------------------------------------------------------------
     def symbolic_forces(self, X, V, S=None):
@@ -547,7 +594,7 @@ class ClothModel:
             out += body.symbolic("force", X, V, part)[0]
         if self._self is not None:
             i, j, gains = self._symbolic_pairs()
-            fp = self._self.kernels["force"].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i],
+            fp = SelfContact.kernels["force"].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i],
                                                           gains)
             out += ca.mtimes(fp, pair_incidence(i, j, self.n))
         return out
@@ -568,7 +615,7 @@ class ClothModel:
         D = _symbolic_csc(pattern, ca.vertcat(ca.vec(dp), ca.vec(d_blocks)), self.n)
         if self._self is not None:
             i, j, gains = self._symbolic_pairs()
-            kc, dc = self._self.kernels["jac"].map(i.size)(X[:, j] - X[:, i],
+            kc, dc = SelfContact.kernels["jac"].map(i.size)(X[:, j] - X[:, i],
                                                            V[:, j] - V[:, i], gains)
             pattern = _block_pattern(i, j, self.n, particle_blocks=False)
             K += _symbolic_csc(pattern, ca.vec(kc), self.n)

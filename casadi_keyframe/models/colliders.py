@@ -29,7 +29,7 @@ import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..kernels import MappedKernel, interaction_kernels, pair_difference
+from ..kernels import interaction_kernels, pair_difference
 
 
 @dataclass(frozen=True)
@@ -104,26 +104,26 @@ def _at(point, t: float, h: float = 1e-5):
 
 
 class Body:
-    """A rigid analytic collider; subclasses give the geometry and its signed distance."""
+    """A rigid analytic collider; subclasses give the geometry and its signed distance.
+
+    ``kernels`` are the body's per-particle SX kernels; the model that holds the body maps
+    and evaluates them (:meth:`inputs` gives their inputs after ``x, v``).
+    """
 
     kernels: dict
 
     def __init__(self, contact: Contact | None):
         self.contact = Contact() if contact is None else contact
-        self._mapped = {}
 
     def geometry(self, t: float) -> list[np.ndarray]:
         """The kernels' geometry inputs at time t (positions, sizes, velocities)."""
         raise NotImplementedError
 
-    def evaluate(self, kind: str, x, v, t: float, *extra, jit=None):
-        """Kernel ``kind`` ("force", "jac", "df_dx" or "vjp") on every particle at time t."""
-        if (kind, jit) not in self._mapped:
-            self._mapped[kind, jit] = MappedKernel(self.kernels[kind], jit=jit)
-        n = len(x)
+    def inputs(self, n: int, t: float) -> list[np.ndarray]:
+        """The kernels' inputs after ``x, v`` for ``n`` particles at time t: the geometry
+        and the contact gains, one row per particle."""
         columns = [np.broadcast_to(g, (n, np.size(g))) for g in self.geometry(t)]
-        gains = np.broadcast_to(self.contact.gains, (n, 4))
-        return self._mapped[kind, jit](x, v, *columns, gains, *extra)
+        return columns + [np.broadcast_to(self.contact.gains, (n, 4))]
 
     def symbolic(self, kind: str, X, V, S) -> list:
         """Kernel ``kind`` ("force" or "jac") mapped over the ``3 x n`` particles X, V given
@@ -240,20 +240,9 @@ class SelfContact:
         e = np.sort(np.asarray(excluded, dtype=np.int64), axis=1)
         self._excluded = np.unique(e[:, 0] * n + e[:, 1])
         self._n = n
-        self._mapped = {}
-        self._last = (None, None)
 
     def pairs(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Index arrays ``(i, j)``, i < j, of unjoined particles within the thickness.
-
-        The last answer is kept: a step asks for the forces and the Jacobians at one x."""
-        if self._last[0] is not None and np.array_equal(self._last[0], x):
-            return self._last[1]
-        found = self._search(x)
-        self._last = (np.array(x, dtype=float), found)
-        return found
-
-    def _search(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Index arrays ``(i, j)``, i < j, of unjoined particles within the thickness."""
         found = cKDTree(x).query_pairs(self.contact.thickness, output_type="ndarray")
         if found.size == 0:
             return np.zeros(0, np.intp), np.zeros(0, np.intp)
@@ -261,13 +250,10 @@ class SelfContact:
         keep = ~np.isin(found[:, 0].astype(np.int64) * self._n + found[:, 1], self._excluded)
         return found[keep, 0].astype(np.intp), found[keep, 1].astype(np.intp)
 
-    def evaluate(self, kind: str, x, v, i, j, *extra, jit=None):
-        """Kernel ``kind`` ("force", "jac", "df_dx" or "vjp") on the pairs ``(i, j)``."""
-        if (kind, jit) not in self._mapped:
-            self._mapped[kind, jit] = MappedKernel(self.kernels[kind], jit=jit)
+    def inputs(self, x, v, i, j) -> list[np.ndarray]:
+        """The kernels' inputs for the pairs ``(i, j)``: differences and contact gains."""
         gains = np.broadcast_to(self.contact.gains, (i.size, 4))
-        return self._mapped[kind, jit](pair_difference(x, i, j), pair_difference(v, i, j),
-                                       gains, *extra)
+        return [pair_difference(x, i, j), pair_difference(v, i, j), gains]
 
     def all_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         """Every unjoined pair (for the symbolic, small-system route)."""

@@ -86,19 +86,23 @@ def pair_force_expr(d, dv, p: FlockParams):
     return f
 
 
-def pair_kernels(dim: int, p: FlockParams) -> tuple[ca.Function, ca.Function]:
-    """The pair force kernel and its vector-Jacobian product kernel.
+def pair_kernels(dim: int, p: FlockParams) -> dict[str, ca.Function]:
+    """The pair force kernel and its derivative kernels, ``{"force", "vjp", "jvp"}``:
 
-    ``force(d, dv) -> f`` and ``vjp(d, dv, lam) -> (d(lam.f)/dd, d(lam.f)/d dv)``.
+    ``force(d, dv) -> f``, ``vjp(d, dv, lam) -> (d(lam.f)/dd, d(lam.f)/d dv)`` and
+    ``jvp(d, dv, dd, ddv) -> df`` (the derivative of f along ``(dd, ddv)``).
     """
-    d = ca.SX.sym("d", dim)
-    dv = ca.SX.sym("dv", dim)
-    lam = ca.SX.sym("lam", dim)
+    d, dv = ca.SX.sym("d", dim), ca.SX.sym("dv", dim)
+    lam, dd, ddv = (ca.SX.sym(s, dim) for s in ("lam", "dd", "ddv"))
     f = pair_force_expr(d, dv, p)
     s = ca.dot(lam, f)
-    force = ca.Function("flock_pair", [d, dv], [f])
-    vjp = ca.Function("flock_pair_vjp", [d, dv, lam], [ca.gradient(s, d), ca.gradient(s, dv)])
-    return force, vjp
+    return {
+        "force": ca.Function("flock_pair", [d, dv], [f]),
+        "vjp": ca.Function("flock_pair_vjp", [d, dv, lam],
+                           [ca.gradient(s, d), ca.gradient(s, dv)]),
+        "jvp": ca.Function("flock_pair_jvp", [d, dv, dd, ddv],
+                           [ca.jtimes(f, ca.vertcat(d, dv), ca.vertcat(dd, ddv))]),
+    }
 
 
 def wander_forces(steps: int, n: int, dim: int, *, strength: float, seed: int,
@@ -159,13 +163,21 @@ class FlockModel:
         if self.dim not in (2, 3):
             raise ValueError(f"a flock lives in 2 or 3 dimensions, got dim={self.dim}")
         self.masses = m
-        self._force_k, self._vjp_k = pair_kernels(self.dim, self.params)
-        self._force = MappedKernel(self._force_k, jit=self.jit)
-        self._vjp = MappedKernel(self._vjp_k, jit=self.jit)
+        self._kernels = pair_kernels(self.dim, self.params)
+        self._force, self._vjp, self._jvp = (MappedKernel(self._kernels[k], jit=self.jit)
+                                             for k in ("force", "vjp", "jvp"))
 
     @property
     def n(self) -> int:
         return self.masses.size
+
+    def free_mask(self) -> np.ndarray:
+        """Every velocity component is free: a flock has no pinned agents."""
+        return np.ones(self.n * self.dim, bool)
+
+    def scene_parameters(self, t: float) -> np.ndarray:
+        """Nothing in a flock's forces depends on time: an empty vector."""
+        return np.zeros(0)
 
     # -- numeric -----------------------------------------------------------------------
     def neighbour_pairs(self, x: np.ndarray) -> PairTape:
@@ -173,33 +185,50 @@ class FlockModel:
         pairs = cKDTree(x).query_pairs(self.params.max_radius, output_type="ndarray")
         return PairTape.compact(pairs[:, 0], pairs[:, 1], self.n)
 
+    interactions = neighbour_pairs  # the Model protocol's name: what one state's forces use
+
     def all_pairs(self) -> PairTape:
         """Every pair (i < j): the slow reference the neighbour list must reproduce."""
         i, j = np.triu_indices(self.n, k=1)
         return PairTape(i, j)
 
-    def forces(self, x: np.ndarray, v: np.ndarray, tape: PairTape | None = None):
-        """Internal force on every agent, ``(n, dim)``, and the pair tape used."""
-        tape = self.neighbour_pairs(x) if tape is None else tape
-        (fp,) = self._force(pair_difference(x, tape.i, tape.j), pair_difference(v, tape.i, tape.j))
-        out = scatter_pairs(fp, tape.i, tape.j, self.n) - self.params.drag * v
-        return out, tape
+    def _pairs(self, a, tape):
+        return pair_difference(a, tape.i, tape.j)
 
-    def forces_vjp(self, x: np.ndarray, v: np.ndarray, tape: PairTape, mu: np.ndarray):
+    def forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
+               interactions: PairTape | None = None) -> np.ndarray:
+        """Internal force on every agent, ``(n, dim)``, over the pairs ``interactions``
+        (default: the neighbour pairs of x)."""
+        tape = self.neighbour_pairs(x) if interactions is None else interactions
+        (fp,) = self._force(self._pairs(x, tape), self._pairs(v, tape))
+        return scatter_pairs(fp, tape.i, tape.j, self.n) - self.params.drag * v
+
+    def forces_vjp(self, x: np.ndarray, v: np.ndarray, t: float, interactions: PairTape,
+                   mu: np.ndarray):
         """``((df/dx)^T mu, (df/dv)^T mu)`` at (x, v), each ``(n, dim)``."""
-        lam = -pair_difference(mu, tape.i, tape.j)
-        gd, gdv = self._vjp(pair_difference(x, tape.i, tape.j), pair_difference(v, tape.i, tape.j), lam)
+        tape = interactions
+        lam = -self._pairs(mu, tape)
+        gd, gdv = self._vjp(self._pairs(x, tape), self._pairs(v, tape), lam)
         gx = scatter_pairs(-gd, tape.i, tape.j, self.n)
         gv = scatter_pairs(-gdv, tape.i, tape.j, self.n) - self.params.drag * mu
         return gx, gv
 
+    def forces_jvp(self, x: np.ndarray, v: np.ndarray, t: float, interactions: PairTape,
+                   dx: np.ndarray, dv: np.ndarray) -> np.ndarray:
+        """``(df/dx) dx + (df/dv) dv`` at (x, v), ``(n, dim)``."""
+        tape = interactions
+        (dfp,) = self._jvp(self._pairs(x, tape), self._pairs(v, tape), self._pairs(dx, tape),
+                           self._pairs(dv, tape))
+        return scatter_pairs(dfp, tape.i, tape.j, self.n) - self.params.drag * dv
+
     # -- symbolic ----------------------------------------------------------------------
-    def symbolic_forces(self, X, V):
-        """All-pairs internal forces as a CasADi expression; X, V are ``dim x n``."""
+    def symbolic_forces(self, X, V, S=None):
+        """All-pairs internal forces as a CasADi expression; X, V are ``dim x n`` (S, the
+        scene parameters, is empty for a flock)."""
         tape = self.all_pairs()
         if tape.i.size == 0:
             return -self.params.drag * V
-        forces = self._force_k.map(tape.i.size)(X[:, tape.j] - X[:, tape.i],
+        forces = self._kernels["force"].map(tape.i.size)(X[:, tape.j] - X[:, tape.i],
                                                  V[:, tape.j] - V[:, tape.i])
         return ca.mtimes(forces, pair_incidence(tape.i, tape.j, self.n)) - self.params.drag * V
 

@@ -1,0 +1,161 @@
+"""Gradient strategies, passed as ``gradient=`` (an object or its name); each owns its
+backward pass and is called as ``strategy(problem, u) -> (phi, dphi/du)``.
+
+* :class:`Adjoint` ("adjoint"): exact; the discrete adjoint of the scheme simulated, eq. (5)
+  with the integrator's hand-written backward step (symplectic Euler's eq. 8; the exact
+  adjoint of linearized backward Euler; full backward Euler's adjoint).
+* :class:`Swapped` ("swapped"): APPROXIMATE; the paper's integrator-swapping adjoint of
+  linearized backward Euler (eqs. 13-15).
+* :class:`CasADiReverse` ("casadi"): exact, the reference; CasADi reverse mode through the
+  unrolled symbolic simulation (all pairs, every step in the graph); for small systems.
+* :class:`FiniteDifference` ("fd"): central differences, one coordinate at a time; a slow,
+  independent witness for tests.
+
+"exact" is a deprecated name of "casadi".
+"""
+from __future__ import annotations
+
+import warnings
+import weakref
+
+import casadi as ca
+import numpy as np
+
+from .simulate import backward
+
+
+class Adjoint:
+    """Exact: the discrete adjoint of the simulated scheme, by its hand-written backward step."""
+
+    name = "adjoint"
+
+    def backward_step(self, integrator):
+        """The integrator's backward step this strategy runs in eq. (5)."""
+        return integrator.step_vjp
+
+    def __call__(self, problem, u):
+        traj = problem.simulate(u)
+        value, gx, gv = problem.state_cost(traj)
+        g_ext, g0 = backward(problem.integrator, problem.model, traj, gx, gv,
+                             step_vjp=self.backward_step(problem.integrator))
+        c_val, c_grad = problem.control_cost(u)
+        return value + c_val, problem.controls.pullback(g_ext, g0.v) + c_grad
+
+
+class Swapped(Adjoint):
+    """APPROXIMATE: the paper's integrator-swapping adjoint (eqs. 13-15), the adjoint of full
+    backward Euler run on a linearized backward Euler trajectory; its error is measured
+    against "adjoint" or "casadi" in the gradient-accuracy study."""
+
+    name = "swapped"
+
+    def backward_step(self, integrator):
+        step = getattr(integrator, "swapped_step_vjp", None)
+        if step is None:
+            raise ValueError(
+                f"gradient='swapped' is the paper's approximate adjoint of linearized backward "
+                f"Euler (cloth); {integrator.name} has none: use gradient='adjoint', its "
+                "exact adjoint")
+        return step
+
+
+def unrolled_objective(problem, U):
+    """The whole objective as an MX expression of the controls U, through the unrolled
+    symbolic simulation (the integrator's ``symbolic_step`` at every step)."""
+    forces, dv0 = problem.controls.symbolic(U)
+    X = ca.DM(problem.x0.T)
+    V = ca.DM(problem.v0.T) + (dv0 if dv0 is not None else 0)
+    step = problem.integrator.symbolic_step(problem.model)
+    by_frame: dict[int, list] = {}
+    for t in problem.objective_terms.state_terms:
+        by_frame.setdefault(t.frame, []).append(t)
+    J = 0
+    for n in range(problem.steps + 1):
+        for t in by_frame.get(n, []):
+            J += t.symbolic(X, V)
+        if n < problem.steps:
+            E = ca.DM(problem.external[n].T)
+            if forces is not None:
+                E = E + forces[n]
+            S = problem.integrator.step_parameters(problem.model, n * problem.dt, problem.dt)
+            X, V = step(X, V, E, problem.dt, S)
+    for term in problem.objective_terms.control_terms:
+        J += term.symbolic(U, problem.controls, problem.dt)
+    return J
+
+
+class CasADiReverse:
+    """Exact, the reference: CasADi reverse mode through the unrolled simulation; its
+    Function is built once per problem and kept while the problem lives."""
+
+    name = "casadi"
+    _functions: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+
+    def function(self, problem) -> ca.Function:
+        fn = self._functions.get(problem)
+        if fn is None:
+            U = ca.MX.sym("U", problem.size)
+            J = unrolled_objective(problem, U)
+            fn = self._functions[problem] = ca.Function("casadi_gradient", [U],
+                                                        [J, ca.gradient(J, U)])
+        return fn
+
+    def __call__(self, problem, u):
+        val, grad = self.function(problem)(u)
+        return float(val), np.asarray(grad).ravel()
+
+
+class Exact(CasADiReverse):
+    """Deprecated name of :class:`CasADiReverse` ("casadi")."""
+
+    def __init__(self):
+        warnings.warn(DEPRECATED_EXACT, DeprecationWarning, stacklevel=2)
+
+
+DEPRECATED_EXACT = ("gradient 'exact' is deprecated: it is CasADi reverse mode, now named "
+                    "'casadi' (the hand-written exact adjoint is 'adjoint')")
+
+
+class FiniteDifference:
+    """Central differences with step ``h``: ``(phi(u + h e_i) - phi(u - h e_i)) / 2h``."""
+
+    name = "fd"
+
+    def __init__(self, h: float = 1e-6):
+        self.h = h
+
+    def __call__(self, problem, u):
+        grad = np.empty_like(u)
+        for i in range(u.size):
+            grad[i] = self.directional(problem, u, _unit(u.size, i))
+        return problem.objective(u), grad
+
+    def directional(self, problem, u, direction) -> float:
+        """Central difference of phi along ``direction``."""
+        h = self.h
+        return (problem.objective(u + h * direction) - problem.objective(u - h * direction)) / (2 * h)
+
+
+def _unit(n, i):
+    e = np.zeros(n)
+    e[i] = 1.0
+    return e
+
+
+GRADIENTS = {"adjoint": Adjoint, "swapped": Swapped, "casadi": CasADiReverse,
+             "fd": FiniteDifference}
+ROUTES = (*GRADIENTS, "exact")  # every name get_gradient takes ("exact": deprecated)
+
+
+def get_gradient(gradient):
+    """A strategy object from a name or an object."""
+    if isinstance(gradient, str):
+        if gradient == "exact":
+            warnings.warn(DEPRECATED_EXACT, DeprecationWarning, stacklevel=3)
+            return CasADiReverse()
+        if gradient not in GRADIENTS:
+            raise ValueError(f"unknown gradient {gradient!r}; choose one of {sorted(GRADIENTS)}")
+        return GRADIENTS[gradient]()
+    if not callable(gradient):
+        raise TypeError("gradient must be a name or a callable strategy")
+    return gradient

@@ -1,0 +1,86 @@
+r"""The contract of a time-stepping scheme: one step, its backward step and its tangent step.
+
+A scheme maps the state ``s_n = (x_n, v_n)`` and the external force ``e_n`` of step n (stored
+forces such as a flock's wander, plus the controls) to ``s_{n+1} = S_n(s_n, e_n)``.  It never loops over
+time: :mod:`casadi_keyframe.simulate` owns the forward loop and the backward loop (eq. 5),
+and the gradient strategies (:mod:`casadi_keyframe.adjoints`) choose which backward step
+runs.  Its three numeric methods share their arguments:
+
+Arguments:
+    model: the particle system (the :class:`~casadi_keyframe.models.Model` protocol).
+    state / start, end: :class:`~casadi_keyframe.state.State` at frames n and n+1.
+    external: the external force of step n, ``(particles, dim)`` newtons.
+    n, dt: the step's index (it starts at ``t = n dt``) and its size in seconds.
+    record: what :meth:`step` returned for this step beside the new state.
+    work: the pass's :class:`Workspace` from :meth:`init` (a fresh one if None).
+
+* ``step(model, state, external, n, dt, work) -> (State, record)``: the step; raises
+  :class:`~casadi_keyframe.state.SimulationError` if it fails.
+* ``step_vjp(model, start, end, record, n, dt, cotangent, work) -> (State, g_external)``:
+  the cotangent ``a_{n+1}`` of the end state pulled back through the step,
+  ``((dS_n/ds_n)^T a_{n+1}, (dS_n/de_n)^T a_{n+1})``; eq. (5) adds ``dphi/ds_n``.
+* ``step_jvp(model, start, end, record, n, dt, tangent, d_external, work) -> State``: the
+  tangent of the end state, ``(dS_n/ds_n) tangent + (dS_n/de_n) d_external``.
+
+Both derivative steps are exact for the scheme unless the method's name says otherwise
+(``swapped_step_vjp``: the paper's approximation).  Pinned and attached components follow
+prescribed motion that no control changes: the derivative steps drop their parts (zero in
+what they return).  ``symbolic_step`` and ``step_parameters`` give the same step as a CasADi
+function for the reverse-mode reference.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class Workspace:
+    """One pass's scratch: the linear solver's plan for the model (analysed once per pass)
+    and the last solution, a warm start for the next iterative solve.  Made by
+    :meth:`Integrator.init` for each forward, backward or tangent pass and dropped after."""
+
+    def __init__(self, plan=None):
+        self.plan = plan
+        self.warm = None
+
+    def factor(self, A):
+        return self.plan.factor(A)
+
+
+class Integrator:
+    """Base of the schemes: the shared contract (module docstring) and a default ``init``."""
+
+    name = "integrator"
+
+    def init(self, model) -> Workspace:
+        """A fresh :class:`Workspace` for one pass over ``model``."""
+        return Workspace()
+
+    def step(self, model, state, external, n: int, dt: float, work: Workspace | None = None):
+        raise NotImplementedError
+
+    def step_vjp(self, model, start, end, record, n: int, dt: float, cotangent,
+                 work: Workspace | None = None):
+        raise NotImplementedError
+
+    def step_jvp(self, model, start, end, record, n: int, dt: float, tangent, d_external,
+                 work: Workspace | None = None):
+        raise NotImplementedError
+
+    @staticmethod
+    def step_parameters(model, t: float, dt: float) -> np.ndarray:
+        """The symbolic step's time-dependent inputs S for the step from t."""
+        raise NotImplementedError
+
+    def symbolic_step(self, model):
+        """``(X, V, E, dt, S) -> (X+, V+)`` as a CasADi Function on ``dim x n`` matrices."""
+        raise NotImplementedError
+
+
+def mass_diagonal(model) -> np.ndarray:
+    """The diagonal of the mass matrix M over the flat ``particles * dim`` components."""
+    return np.repeat(model.masses, model.dim)
+
+
+def free_components(model, shape) -> np.ndarray:
+    """The model's free-component mask as floats of ``shape`` (1 free, 0 constrained)."""
+    return model.free_mask().astype(float).reshape(shape)

@@ -1,0 +1,67 @@
+r"""The one forward loop and the one backward loop; integrators only step.
+
+Forward: ``s_{n+1} = S_n(s_n, e_n)`` for n = 0 .. N-1 (:func:`simulate`), optionally carrying
+a tangent along (:func:`simulate` with ``tangent=``: forward sensitivities in the same pass).
+
+Backward, eq. (5) of the paper: with ``s_n = (x_n, v_n)`` and ``a_n = dphi/ds_n`` (total),
+
+    a_N = dphi/ds_N,    a_n = (dS_n/ds_n)^T a_{n+1} + dphi/ds_n,    dphi/de_n = (dS_n/de_n)^T a_{n+1}
+
+(:func:`backward`); the product with the transposed step Jacobians is the integrator's
+backward step, chosen by the gradient strategy (exact or the paper's swapped one).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .state import State, Trajectory
+
+
+def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = True,
+             tangent=None):
+    """Run ``len(external)`` steps from ``(x0, v0)``; ``external`` is ``(steps, n, dim)``.
+
+    ``records=False`` keeps no per-step record (values only: on a large flock the records are
+    most of the memory).  ``tangent=(dx0, dv0, d_external)`` also carries a tangent through
+    every step (the integrator's ``step_jvp``) and returns ``(trajectory, dx, dv)``, the
+    tangent per frame, ``(steps + 1, n, dim)`` each.
+    """
+    steps = external.shape[0]
+    x = np.empty((steps + 1,) + np.shape(x0))
+    v = np.empty_like(x)
+    x[0], v[0] = x0, v0
+    traj = Trajectory(x, v, dt)
+    work = integrator.init(model)
+    if tangent is not None:
+        dx, dv = np.empty_like(x), np.empty_like(x)
+        (dx[0], dv[0]), d_external = tangent[:2], tangent[2]
+        tangent_work = integrator.init(model)
+    for n in range(steps):
+        start = traj.state(n)
+        end, record = integrator.step(model, start, external[n], n, dt, work)
+        x[n + 1], v[n + 1] = end.x, end.v
+        if records:
+            traj.records.append(record)
+        if tangent is not None:
+            out = integrator.step_jvp(model, start, end, record, n, dt, State(dx[n], dv[n]),
+                                      d_external[n], tangent_work)
+            dx[n + 1], dv[n + 1] = out.x, out.v
+    return traj if tangent is None else (traj, dx, dv)
+
+
+def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None):
+    """Eq. (5): the frame gradients ``gx, gv`` ``(steps + 1, n, dim)`` pulled back to
+    ``(dphi/d external (steps, n, dim), dphi/ds_0 as a State)``.
+
+    ``step_vjp`` is the backward step (default: the integrator's exact one).
+    """
+    step_vjp = integrator.step_vjp if step_vjp is None else step_vjp
+    steps, dt = traj.steps, traj.dt
+    work = integrator.init(model)
+    g_external = np.empty((steps,) + traj.x.shape[1:])
+    a = State(gx[steps], gv[steps])
+    for n in range(steps - 1, -1, -1):
+        a, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1), traj.record(n),
+                                    n, dt, a, work)
+        a = State(a.x + gx[n], a.v + gv[n])
+    return g_external, a

@@ -7,9 +7,10 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from casadi_keyframe import load_problem, render, render_blend  # noqa: E402
+from casadi_keyframe import load_problem, render  # noqa: E402
+from casadi_keyframe.render import blend as render_blend  # noqa: E402
 from casadi_keyframe.render import select_frames, write_gif  # noqa: E402
-from casadi_keyframe.render_cloth import CLOTH, face_colors  # noqa: E402
+from casadi_keyframe.render.cloth import CLOTH, face_colors  # noqa: E402
 
 TITLES = ("fall (source clip)", "blend (optimised)", "walk (source clip)")
 
@@ -56,7 +57,7 @@ def test_blend_highlighted_sources_plain(blend):
     p, traj = blend
     fig = plt.figure()
     try:
-        panels = render_blend._panels(fig, p, traj, render_blend.blend_frames(p))
+        panels = render_blend.side_by_side(fig, p, traj, render_blend.blend_frames(p))
         for k in (-3, 0, p.steps // 2, p.steps):
             for panel in panels:
                 panel.draw(k)

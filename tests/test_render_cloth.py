@@ -1,13 +1,14 @@
-"""Cloth rendering: render.animate / render.snapshot hand a cloth over to render_cloth (3-D)."""
+"""Cloth rendering: render.animate / render.snapshot hand a cloth over to render.cloth (3-D)."""
 import numpy as np
 import pytest
 from PIL import Image
 
 from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, ParticleKeyframe, StateKeyframe,
-                             StepForces, render, render_cloth)
+                             StepForces, render)
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Capsule, Plane, Sphere
+from casadi_keyframe.render import cloth as render_cloth
 
 STEPS = 6
 
@@ -89,7 +90,7 @@ def test_moving_sphere_and_other_terms(tmp_path):
 
 def test_limits_hold_cloth_colliders_and_ring(cloth):
     p, traj = cloth
-    box = render_cloth._Box(p, traj)
+    box = render_cloth.Box.of(p, traj)
     inside = [traj.x.reshape(-1, 3), [[0.5, 0.5, -0.7], [0.5, 0.5, -0.1]],  # sphere
               [[-0.1, 0, -0.5], [1.1, 0, -0.5]], [[0.7, 0.5, -0.5]], [[0.5, 0.5, -1.0]]]
     for pts in inside:

@@ -7,6 +7,7 @@ import numpy as np
 from .controls import Controls, resample_steps
 from .objectives import Objective, StateTerm
 from .trajectory import Trajectory
+from .views import View, checked_view
 
 
 class ControlProblem:
@@ -14,13 +15,13 @@ class ControlProblem:
 
     ``x0, v0`` are ``(particles, dim)``; ``external`` is an optional stored force per step
     ``(steps, particles, dim)`` that is not optimised (the flock's wander, gravity).
-    ``scene`` carries anything a renderer may want (paths, colliders, highlighted agents).
+    ``view`` says what pictures show beyond the model and keyframes (:mod:`.views`).
     ``guess`` is an optional starting point for the optimizer (flat controls).
     """
 
     def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
                  controls: Controls, objective, external=None, name: str = "problem",
-                 scene: dict | None = None, guess=None):
+                 view: View | None = None, guess=None, scene=None):
         if not (isinstance(steps, (int, np.integer)) and steps >= 1):
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -45,7 +46,7 @@ class ControlProblem:
         for term in self.objective_terms.state_terms:
             term.bind(model, self.steps)
         self._control_fn = self._compile_control_terms()
-        self.scene = dict(scene or {})
+        self.view = checked_view(view, scene)
         self._guess = None if guess is None else controls.check(guess).copy()
         self._exact = None
 
@@ -106,7 +107,7 @@ class ControlProblem:
         args = dict(model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0,
                     steps=steps, dt=self.dt, controls=self.controls.for_steps(steps),
                     objective=self.objective_terms, external=self.external, name=self.name,
-                    scene=self.scene, guess=self._guess)
+                    view=self.view, guess=self._guess)
         return ControlProblem(**{**args, **changes})
 
     def _steps_for(self, dt: float) -> int:

@@ -10,6 +10,7 @@ All draw with the Agg backend, close their figures and write each file whole or 
 import matplotlib
 
 matplotlib.use("Agg")  # before any submodule imports pyplot
+from ..views import BlendView  # noqa: E402
 from . import blend, cloth, flock  # noqa: E402
 from .convergence import convergence  # noqa: E402
 from .frames import keyframes, select_frames, write_gif  # noqa: E402
@@ -20,7 +21,7 @@ __all__ = ["animate", "blend", "cloth", "convergence", "flock", "keyframes", "se
 
 def _renderer(problem):
     """The module that draws ``problem``: blend, cloth or flock."""
-    if "clips" in problem.scene:
+    if isinstance(problem.view, BlendView):
         return blend
     if hasattr(problem.model, "faces"):
         return cloth

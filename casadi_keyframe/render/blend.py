@@ -1,6 +1,6 @@
 """Fig. 6 side by side: the fall clip, the optimised blend and the walk clip, in 3-D.
 
-For a problem whose ``scene`` has ``clips`` (``problems/cape_blend.py``): ``animate`` writes
+For a problem with a :class:`..views.BlendView` (``problems/cape_blend.py``): ``animate`` writes
 a GIF and ``snapshot`` a PNG with three panels per time, left the fall source clip, middle
 the blend, right the walk source clip, each with its cape and its character's capsules.
 Blend frame ``k`` (time ``k dt`` after the blend starts) goes with the fall clip's frame
@@ -24,7 +24,8 @@ import numpy as np
 from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
-from .cloth import CLOTH, VIEW, Box, ClothPanel, body_geometry, legend, save_grid, targets
+from ..views import BlendView, view_of
+from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, save_grid, targets
 from .flock import HIGHLIGHT
 from .frames import mass_centers, select_frames, write_gif
 
@@ -47,7 +48,7 @@ class Shown(NamedTuple):
 def clip_frame(problem, kind: str, k: int) -> int:
     """The frame of source clip ``kind`` ("fall" or "walk") that goes with blend frame ``k``:
     ``t_a / dt + k`` or ``t_b / dt + k``."""
-    start = problem.scene["t_a" if kind == "fall" else "t_b"]
+    start = view_of(problem, BlendView).start(kind)
     return int(round(start / problem.dt)) + int(k)
 
 
@@ -63,11 +64,11 @@ def shown(problem, trajectory, panel: str, k: int) -> Shown:
     if panel == "blend" and k >= 0:
         return Shown(problem.model, np.asarray(trajectory.x[k]), k * trajectory.dt, BLEND)
     kind = "fall" if panel == "blend" else panel
-    model, clip = problem.scene["clips"][kind]
-    n = clip_frame(problem, kind, k)
-    if not 0 <= n <= clip.steps:
-        raise ValueError(f"blend frame {k} needs {kind} clip frame {n}, outside 0..{clip.steps}")
-    return Shown(model, np.asarray(clip.x[n]), n * clip.dt, CLOTH)
+    clip = view_of(problem, BlendView).clip(kind)
+    n, traj = clip_frame(problem, kind, k), clip.trajectory
+    if not 0 <= n <= traj.steps:
+        raise ValueError(f"blend frame {k} needs {kind} clip frame {n}, outside 0..{traj.steps}")
+    return Shown(clip.model, np.asarray(traj.x[n]), n * traj.dt, CLOTH)
 
 
 def panel_box(problem, trajectory, panel: str, ks) -> Box:
@@ -88,9 +89,8 @@ class BlendPanel(ClothPanel):
 
     def __init__(self, ax, problem, trajectory, panel: str, ks, box: Box):
         xs = np.array([shown(problem, trajectory, panel, k).x for k in ks])
-        super().__init__(ax, problem.model, box, camera=problem.scene.get("view", VIEW),
+        super().__init__(ax, problem.model, box, view_of(problem, BlendView),
                          path=mass_centers(problem.model.masses, xs),
-                         ring=problem.scene.get("ring"),
                          terms=targets(problem) if panel == "blend" else ())
         self.problem, self.trajectory, self.panel = problem, trajectory, panel
         self.name = PANELS[panel]

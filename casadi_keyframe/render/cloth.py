@@ -2,9 +2,9 @@
 
 The cloth is a Lambert-shaded triangle surface, pinned and attached particles dark dots,
 colliders translucent grey, keyframe targets red (a wireframe for a whole-cloth target), the
-centre-of-mass path a thin line and the view's ring (:class:`..views.ClothView`) a thick
-circle.  Axis limits (equal aspect, :class:`Box`) and the camera are fixed for a whole
-animation.  :class:`ClothPanel` draws the cloth at given positions, so that a picture of
+centre-of-mass path a thin line and the view's ring a thick circle.  Axis limits (equal
+aspect, :class:`Box`) and the view's camera (:class:`..views.ClothView`) are fixed for a
+whole animation.  :class:`ClothPanel` draws the cloth at given positions, so that a picture of
 something other than one trajectory (the blend's panels, :mod:`.blend`) draws alike;
 :class:`TrajectoryPanel` draws a cloth problem's trajectory frame by frame.
 """
@@ -20,12 +20,12 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from ..models.colliders import Plane, Sphere
 from ..objectives import StateKeyframe
+from ..views import ClothView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
 LIGHT = np.array([0.5, -0.6, 0.65]) / np.linalg.norm([0.5, -0.6, 0.65])  # the camera's side
-VIEW = (20.0, -60.0)
 
 
 def face_colors(vertices, faces, color=CLOTH, light=LIGHT) -> np.ndarray:
@@ -115,9 +115,9 @@ class Box:
         ring and its colliders."""
         pts = [np.asarray(trajectory.x).reshape(-1, 3)]
         pts += [np.atleast_2d(t.position_target)[:, :3] for t in targets(problem)]
-        ring = problem.scene.get("ring")
+        ring = view_of(problem, ClothView).ring
         if ring:
-            pts.append(_circle(ring["center"], ring["normal"], ring["radius"]))
+            pts.append(_circle(ring.center, ring.normal, ring.radius))
         bodies = [[body_geometry(b, n * trajectory.dt) for b in problem.model.colliders]
                   for n in range(trajectory.steps + 1)]
         return cls(pts, bodies)
@@ -129,23 +129,24 @@ def targets(problem) -> list:
 
 
 class ClothPanel:
-    """One 3-D axes over fixed limits ``box`` seen from ``camera``, with a centre-of-mass
-    ``path`` and a ``ring`` drawn once; :meth:`show` draws one frame's cloth and colliders,
-    :meth:`show_targets` the keyframe ``terms`` due next."""
+    """One 3-D axes over fixed limits ``box`` seen from ``view``'s camera, with a
+    centre-of-mass ``path`` and the view's ring drawn once; :meth:`show` draws one frame's
+    cloth and colliders, :meth:`show_targets` the keyframe ``terms`` due next."""
 
-    def __init__(self, ax, model, box: Box, *, camera=VIEW, path=None, ring=None, terms=()):
-        self.ax, self.model, self.box, self.ring = ax, model, box, ring
+    def __init__(self, ax, model, box: Box, view: ClothView, *, path=None, terms=()):
+        self.ax, self.model, self.box, self.ring = ax, model, box, view.ring
         self.terms = list(terms)
         self.dynamic = []
         ax.set(xlim=(box.lo[0], box.hi[0]), ylim=(box.lo[1], box.hi[1]),
                zlim=(box.lo[2], box.hi[2]))
         ax.set_box_aspect(box.hi - box.lo)
-        ax.view_init(*camera)
+        ax.view_init(*view.camera)
         ax.tick_params(labelsize=6, pad=0)
         if path is not None:
             ax.plot(*np.asarray(path).T, color=COM, lw=0.8, alpha=0.8)
-        if ring:
-            ax.plot(*_circle(ring["center"], ring["normal"], ring["radius"]).T, color=RING, lw=3)
+        if self.ring:
+            ax.plot(*_circle(self.ring.center, self.ring.normal, self.ring.radius).T, color=RING,
+                    lw=3)
 
     @property
     def marked(self) -> np.ndarray:
@@ -220,7 +221,7 @@ class TrajectoryPanel(ClothPanel):
 
     def __init__(self, ax, problem, trajectory, *, name=None, box=None):
         super().__init__(ax, problem.model, Box.of(problem, trajectory) if box is None else box,
-                         camera=problem.scene.get("view", VIEW), ring=problem.scene.get("ring"),
+                         view_of(problem, ClothView),
                          path=mass_centers(problem.model.masses, trajectory.x),
                          terms=targets(problem))
         self.trajectory = trajectory

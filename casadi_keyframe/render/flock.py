@@ -18,6 +18,7 @@ from matplotlib.collections import LineCollection
 from matplotlib.patches import Polygon
 
 from ..objectives import CenterOfMassKeyframe, RegionTarget, StateKeyframe
+from ..views import FlockView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
 
@@ -40,7 +41,7 @@ class FlockPanel:
         self.states = [t for t in terms if isinstance(t, StateKeyframe) and t.position_target is not None]
         self.com = mass_centers(problem.model.masses, self.xy)
         self.hl = np.zeros(self.xy.shape[1], bool)
-        self.hl[list(problem.scene.get("highlight", []))] = True
+        self.hl[list(view_of(problem, FlockView).highlight)] = True
         self.trail_rgb = np.where(self.hl[:, None], _rgb(HIGHLIGHT), _rgb(AGENT))
         self._limits()
         self._build()

@@ -75,9 +75,9 @@ def run(name, build, maxiter, rounds=3, growth=10.0):
                               multipliers=name != "schedule", maxiter=per_round, quiet=True)
     seconds = time.perf_counter() - start
     score = build(guess="passive") if name == "tracking+soft" else prob  # default weights
-    scene = prob.scene
-    report = clip_report(prob.model, res.trajectory, scene["character"],
-                         scene["animation"].shifted(-scene["t_a"]))
+    view = prob.view
+    report = clip_report(prob.model, res.trajectory, view.character,
+                         view.animation.shifted(-view.t_a))
     return {**report, "strategy": name, "nit": res.nit, "nfev": res.nfev, "seconds": seconds,
             "objective": score.objective(res.x), "control": res.breakdown["control_cost"],
             **free_misses(prob, res.trajectory), "start": start_misses}

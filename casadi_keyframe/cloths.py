@@ -9,7 +9,7 @@ from .problem import ControlProblem
 
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
-                  controls=None, scene=None, solver: str = "cg", guess=None) -> ControlProblem:
+                  controls=None, view=None, solver: str = "cg", guess=None) -> ControlProblem:
     """A cloth control problem integrated by linearized backward Euler (rest shape and rest
     velocities by default, per-step force controls on the free particles by default)."""
     x0 = model.rest_positions if x0 is None else x0
@@ -18,7 +18,7 @@ def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None
         controls = StepForces(agents=np.flatnonzero(model.free_mask()[::3]))
     return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver),
                           x0=x0, v0=v0, steps=steps, dt=dt, controls=controls,
-                          objective=objective, name=name, scene=scene, guess=guess)
+                          objective=objective, name=name, view=view, guess=guess)
 
 
 def weight_support(model, controls, steps: int) -> np.ndarray:

@@ -22,7 +22,7 @@ def blob(n: int, center, spacing: float, dim: int, rng) -> np.ndarray:
 
 def flock_problem(*, agents: int, steps: int, dt: float, seed: int, dim: int, objective,
                   x0, v0, params: FlockParams | None = None, masses=None, wander: float = 0.3,
-                  controls=None, name: str, scene=None, jit=None) -> ControlProblem:
+                  controls=None, name: str, view=None, jit=None) -> ControlProblem:
     """A flock control problem with stored wander forces and per-step force controls."""
     if not (isinstance(agents, (int, np.integer)) and agents >= 1):
         raise ValueError(f"agents must be a positive integer, got {agents!r}")
@@ -31,4 +31,4 @@ def flock_problem(*, agents: int, steps: int, dt: float, seed: int, dim: int, ob
     ext = wander_forces(steps, agents, dim, strength=wander, seed=seed + 1)
     return ControlProblem(model=model, integrator=SymplecticEuler(), x0=x0, v0=v0, steps=steps,
                           dt=dt, controls=controls or StepForces(), objective=objective,
-                          external=ext, name=name, scene=scene)
+                          external=ext, name=name, view=view)

@@ -10,6 +10,7 @@ from .controls import Controls, resample_steps
 from .objectives import Objective
 from .simulate import simulate
 from .state import Trajectory
+from .views import View, checked_view
 
 
 class ControlProblem:
@@ -17,13 +18,13 @@ class ControlProblem:
 
     ``x0, v0`` are ``(particles, dim)``; ``external`` is an optional stored force per step
     ``(steps, particles, dim)`` that is not optimised (the flock's wander, gravity).
-    ``scene`` carries anything a renderer may want (paths, colliders, highlighted agents).
+    ``view`` says what pictures show beyond the model and keyframes (:mod:`.views`).
     ``guess`` is an optional starting point for the optimizer (flat controls).
     """
 
     def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
                  controls: Controls, objective, external=None, name: str = "problem",
-                 scene: dict | None = None, guess=None):
+                 view: View | None = None, guess=None, scene=None):
         if not (isinstance(steps, (int, np.integer)) and steps >= 1):
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -47,7 +48,7 @@ class ControlProblem:
         if not self.objective_terms.state_terms:
             raise ValueError("the objective has no keyframe term: nothing to aim for")
         self._control_fn = self._compile_control_terms()
-        self.scene = dict(scene or {})
+        self.view = checked_view(view, scene)
         self._guess = None if guess is None else self.controls.check(guess).copy()
 
     # -- the simulation ------------------------------------------------------------------
@@ -64,7 +65,7 @@ class ControlProblem:
         """The same problem at time step ``dt``: the same horizon in ``horizon / dt`` steps,
         every keyframe at the same time, the stored external forces and the guess carried as
         force-versus-time (:func:`~casadi_keyframe.controls.resample_steps`), the controls
-        rebound to the new step count.  Model, integrator, x0, v0 and scene are shared; at
+        rebound to the new step count.  Model, integrator, x0, v0 and view are shared; at
         the problem's own dt the problem itself is returned.
 
         Raises ValueError if ``dt`` does not divide the horizon into whole steps or a keyframe
@@ -91,7 +92,7 @@ class ControlProblem:
                              external=resample_steps(self.external, steps), guess=guess)
 
     def with_objective(self, objective) -> "ControlProblem":
-        """The same problem (model, integrator, start, controls, scene, guess shared) with
+        """The same problem (model, integrator, start, controls, view, guess shared) with
         another objective, e.g. a keyframe with a shifted target or a stiffer weight."""
         return self._rebuilt(objective=objective)
 
@@ -107,7 +108,7 @@ class ControlProblem:
         args = dict(model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0,
                     steps=steps, dt=self.dt, controls=self.controls.for_steps(steps),
                     objective=self.objective_terms, external=self.external, name=self.name,
-                    scene=self.scene, guess=self._guess)
+                    view=self.view, guess=self._guess)
         return ControlProblem(**{**args, **changes})
 
     def _steps_for(self, dt: float) -> int:

@@ -8,10 +8,11 @@ window)``; per-step forces on the free (not sewn-on) particles must bring the ca
 ``window`` s later, onto the walk clip's cape at its time ``t_b + window``, positions and
 velocities, the positions moved by the transition's horizontal ``offset`` (which lines the
 walk up with where the body lands).  Minimal, smooth forces: :class:`Smoothness` with a
-temporal term.  ``scene`` refers to the character, the transition (``animation``, on the
-fall clip's clock: the blend's frame k is at ``t_a + k dt``) and both clips (``clips[kind] =
-(model, trajectory)``, shared, not copies: the fall's frame ``t_a / dt + k`` and the walk's
-``t_b / dt + k`` go with the blend's frame k), for drawing the three side by side.
+temporal term.  The problem's ``view`` (:class:`casadi_keyframe.views.BlendView`) refers to
+the character, the transition (``animation``, on the fall clip's clock: the blend's frame k
+is at ``t_a + k dt``) and both clips (model and trajectory, shared, not copies: the fall's
+frame ``t_a / dt + k`` and the walk's ``t_b / dt + k`` go with the blend's frame k), for
+drawing the three side by side.
 
 Defaults.  ``t_a = 0.8`` s: the body is landing (its root 11 cm above where it comes to
 rest) and the cape, flung up by the fall, streams straight out of its back, the hem about
@@ -92,6 +93,7 @@ from casadi_keyframe.characters import Character, fall, smoothstep, transition
 from casadi_keyframe.cloths import cloth_problem
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
 from casadi_keyframe.state import State
+from casadi_keyframe.views import BlendView, Clip
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint"}
 GUESSES = ("tracking", "passive")
@@ -128,11 +130,10 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
                                position_weight=position_weight / model.n,
                                velocity_weight=velocity_weight / model.n)
                  + Smoothness(alpha / m, temporal=temporal / m))
-    scene = {"character": character, "animation": motion, "t_a": t_a, "t_b": t_b,
-             "window": window, "view": (15, -60),
-             "clips": {"fall": (fall_model, fall_traj), "walk": (walk_model, walk_traj)}}
+    view = BlendView(camera=(15, -60), character=character, animation=motion, t_a=t_a, t_b=t_b,
+                     fall=Clip(fall_model, fall_traj), walk=Clip(walk_model, walk_traj))
     prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cape_blend",
-                         x0=x0, v0=v0, scene=scene)  # forces on free particles
+                         x0=x0, v0=v0, view=view)  # forces on free particles
     if guess == "passive":
         return prob
     path = reference_path(character, motion, x0, (walk_traj, walk_motion, walk_start), steps,

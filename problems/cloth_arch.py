@@ -20,6 +20,7 @@ from casadi_keyframe.controls import StepForces
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
+from casadi_keyframe.views import ClothView
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
@@ -38,5 +39,5 @@ def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,
     controls = StepForces()
     controls.bind(model.n, 3, steps)
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cloth_arch",
-                         controls=controls, scene={"view": (20, -70)},
+                         controls=controls, view=ClothView(camera=(20, -70)),
                          guess=weight_support(model, controls, steps))

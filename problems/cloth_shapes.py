@@ -15,6 +15,7 @@ import numpy as np
 from casadi_keyframe.cloths import cloth_problem, rotate_about
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
+from casadi_keyframe.views import ClothView
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
@@ -42,4 +43,4 @@ def build(rows: int = 12, cols: int = 12, steps: int = 120, dt: float = 1 / 60,
                      for f, x in zip(frames, shapes(model.rest_positions, size))),
                     Smoothness(alpha))
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
-                         name="cloth_shapes", scene={"view": (15, -30)})
+                         name="cloth_shapes", view=ClothView(camera=(15, -30)))

@@ -27,6 +27,7 @@ from casadi_keyframe.controls import InitialVelocity
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import CenterOfMassKeyframe, ParticleKeyframe, Smoothness
+from casadi_keyframe.views import ClothView, Ring
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
@@ -60,9 +61,9 @@ def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
     objective = (CenterOfMassKeyframe(ring_frame, x=ring, position_weight=ring_weight)
                  + ParticleKeyframe(flip_frame, corners, x=flipped, position_weight=corner_weight)
                  + Smoothness(alpha / model.n))
-    scene = {"ring": {"center": ring, "radius": ring_radius,
-                      "normal": throw / np.linalg.norm(throw)}, "view": (15, -80)}
+    view = ClothView(camera=(15, -80), ring=Ring(center=ring, radius=ring_radius,
+                                                 normal=throw / np.linalg.norm(throw)))
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cloth_toss",
                          v0=np.tile(throw, (model.n, 1)),
                          controls=InitialVelocity(lower=-max_speed, upper=max_speed),
-                         scene=scene)
+                         view=view)

@@ -31,8 +31,7 @@ def build(agents: int = 100, steps: int = 200, dt: float = 0.05, seed: int = 0, 
     v0[:, :2] = 0.5 * v_start
     return flock_problem(agents=agents, steps=steps, dt=dt, seed=seed, dim=dim,
                          objective=objective, x0=blob(agents, start, 1.0, dim, rng), v0=v0,
-                         params=FlockParams(cutoff=cutoff), wander=wander, name="flock_path",
-                         scene={"path": np.array([path_point(s) for s in np.linspace(0, 1, 100)])})
+                         params=FlockParams(cutoff=cutoff), wander=wander, name="flock_path")
 
 
 def _pad(p, dim):

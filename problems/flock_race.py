@@ -11,6 +11,7 @@ from casadi_keyframe.models import FlockParams
 from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, RegionTarget,
                                        Smoothness)
 from casadi_keyframe.shapes import Disc
+from casadi_keyframe.views import FlockView
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200}
 RANGES = {"agents": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "seed": "[0, inf)",
@@ -50,4 +51,4 @@ def build(agents: int = 30, steps: int = 160, dt: float = 0.05, seed: int = 0, d
     return flock_problem(agents=agents, steps=steps, dt=dt, seed=seed, dim=dim,
                          objective=objective, x0=x0, v0=v0, params=FlockParams(cutoff=cutoff),
                          wander=wander, name="flock_race",
-                         scene={"highlight": [runner], "runner": runner})
+                         view=FlockView(highlight=[runner]))

@@ -51,8 +51,8 @@ def test_the_solve_lands_on_the_walk_clip(prob, result):
 def test_the_blend_is_physical(prob, result):
     """No deeper into the body than the passive blend allows (contact layer 1.2 cm), not
     overstretched, and the forces stay those of a few g, not of a snap."""
-    motion = prob.scene["animation"].shifted(-T_A)
-    report = clip_report(prob.model, result.trajectory, prob.scene["character"], motion)
+    motion = prob.view.animation.shifted(-T_A)
+    report = clip_report(prob.model, result.trajectory, prob.view.character, motion)
     assert report["penetration"] < 0.015 and report["below_ground"] < 0.02, report
     assert report["max_stretch"] < 1.3, report
     free = prob.controls.idx
@@ -88,13 +88,13 @@ def test_the_blend_starts_on_the_fall_clip_at_t_a(prob):
 
 
 def test_the_target_is_the_walk_clip_moved_by_the_offset(prob):
-    motion = prob.scene["animation"]
+    motion = prob.view.animation
     _, traj, _ = simulate_clip("walk", ROWS, COLS, seconds=T_B + WINDOW, dt=DT)
     target = prob.objective_terms.state_terms[0]
     assert target.frame == prob.steps == round(WINDOW / DT)
     offset = motion.offset
     assert offset[2] == 0 and np.linalg.norm(offset) > 0.1  # horizontal, and not trivial
-    lined_up = fall(prob.scene["character"]).pose(T_A).position - walk().pose(T_B).position
+    lined_up = fall(prob.view.character).pose(T_A).position - walk().pose(T_B).position
     np.testing.assert_allclose(offset[:2], lined_up[:2], atol=1e-12)
     np.testing.assert_allclose(target.position_target, traj.x[-1] + offset, atol=1e-12)
     np.testing.assert_allclose(target.v, traj.v[-1], atol=1e-12)
@@ -102,8 +102,8 @@ def test_the_target_is_the_walk_clip_moved_by_the_offset(prob):
 
 def test_the_sewn_on_particles_follow_the_transition(prob):
     (sewn,) = prob.model.attachments
-    line = prob.scene["character"].shoulder_points(
-        prob.scene["animation"], prob.model.rest_positions[sewn.particles, 0])
+    line = prob.view.character.shoulder_points(
+        prob.view.animation, prob.model.rest_positions[sewn.particles, 0])
     for t in (0.0, 0.25, WINDOW):
         np.testing.assert_allclose(sewn.positions(t), line(T_A + t), atol=1e-12)
     np.testing.assert_allclose(prob.x0[sewn.particles], line(T_A), atol=1e-9)
@@ -114,7 +114,7 @@ def test_the_sewn_on_particles_follow_the_transition(prob):
 def test_the_source_clips_are_simulated_once(prob):
     again = load_problem("cape_blend", rows=ROWS, cols=COLS, window=WINDOW, guess="passive")
     for kind in ("fall", "walk"):
-        assert again.scene["clips"][kind][1] is prob.scene["clips"][kind][1]
+        assert again.view.clip(kind).trajectory is prob.view.clip(kind).trajectory
     assert cached_clip.cache_info().hits >= 2
 
 

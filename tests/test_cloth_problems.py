@@ -28,9 +28,9 @@ def test_cloth_shapes_swings_through_its_shapes():
 def test_cloth_toss_flies_through_the_ring_and_turns_over():
     prob = load_problem("cloth_toss", rows=5, cols=5)
     result = solve(prob, maxiter=150, quiet=True)
-    ring = prob.scene["ring"]
+    ring = prob.view.ring
     com, corners = result.breakdown["misses"][:2]
-    assert com["position_error"] < 0.5 * ring["radius"]  # through the ring, near its centre
+    assert com["position_error"] < 0.5 * ring.radius  # through the ring, near its centre
     assert corners["rms_position_error"] < 0.3  # upside down (a 1 m sheet turned over)
     frame = prob.objective_terms.state_terms[1].frame
     x = result.trajectory.x[frame]

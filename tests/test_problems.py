@@ -20,7 +20,7 @@ def test_flock_path_follows_the_path():
 
 def test_flock_race_runner_finishes_in_front():
     prob = load_problem("flock_race", agents=12, steps=80)
-    runner = prob.scene["runner"]
+    (runner,) = prob.view.highlight
     x0 = prob.x0[:, 0]
     assert x0[runner] == x0.min()  # starts at the very back
     result = solve(prob, maxiter=200, quiet=True)

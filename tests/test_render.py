@@ -14,6 +14,7 @@ from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, 
 from casadi_keyframe.optimize import solve
 from casadi_keyframe.problem import ControlProblem
 from casadi_keyframe.shapes import cross, square
+from casadi_keyframe.views import FlockView
 
 KEYS = (13, 27, 33, 40)
 
@@ -30,7 +31,7 @@ def _problem(dim=2, highlight=(0,)):
                           integrator=SymplecticEuler(), x0=rng.uniform(0, 2, (n, dim)),
                           v0=np.zeros((n, dim)), steps=40, dt=0.1, controls=StepForces(),
                           objective=objective, name=f"render-{dim}d",
-                          scene={"highlight": list(highlight)})
+                          view=FlockView(highlight=highlight))
 
 
 @pytest.fixture(scope="module")

@@ -7,9 +7,10 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from PIL import Image  # noqa: E402
 
-from casadi_keyframe import load_problem, render, render_blend  # noqa: E402
+from casadi_keyframe import load_problem, render  # noqa: E402
+from casadi_keyframe.render import blend as render_blend  # noqa: E402
 from casadi_keyframe.render import select_frames, write_gif  # noqa: E402
-from casadi_keyframe.render_cloth import CLOTH, face_colors  # noqa: E402
+from casadi_keyframe.render.cloth import CLOTH, face_colors  # noqa: E402
 
 TITLES = ("fall (source clip)", "blend (optimised)", "walk (source clip)")
 
@@ -22,8 +23,8 @@ def blend():
 
 def test_clip_frames_follow_the_blend(blend):
     p, traj = blend
-    fall, walk = (p.scene["clips"][k][1] for k in ("fall", "walk"))
-    a, b = round(p.scene["t_a"] / p.dt), round(p.scene["t_b"] / p.dt)
+    fall, walk = p.view.fall.trajectory, p.view.walk.trajectory
+    a, b = round(p.view.t_a / p.dt), round(p.view.t_b / p.dt)
     for k in (-render_blend.lead_in(p), -1, 0, 7, p.steps):
         assert render_blend.clip_frame(p, "fall", k) == a + k
         assert render_blend.clip_frame(p, "walk", k) == b + k
@@ -32,7 +33,7 @@ def test_clip_frames_follow_the_blend(blend):
         assert render_blend.shown(p, traj, "walk", k).t == pytest.approx((b + k) * walk.dt)
         middle = render_blend.shown(p, traj, "blend", k)
         np.testing.assert_array_equal(middle.x, traj.x[k] if k >= 0 else fall.x[a + k])
-        assert middle.model is (p.model if k >= 0 else p.scene["clips"]["fall"][0])
+        assert middle.model is (p.model if k >= 0 else p.view.fall.model)
     np.testing.assert_array_equal(traj.x[0], fall.x[a])  # the blend starts on the fall
     with pytest.raises(ValueError):
         render_blend.shown(p, traj, "walk", -b - 1)
@@ -41,7 +42,7 @@ def test_clip_frames_follow_the_blend(blend):
 def test_lead_in_fits_both_clips(blend):
     p, _ = blend
     assert render_blend.lead_in(p) == round(render_blend.LEAD_IN / p.dt)
-    assert render_blend.lead_in(p, 10.0) == round(p.scene["t_b"] / p.dt)  # walk starts sooner
+    assert render_blend.lead_in(p, 10.0) == round(p.view.t_b / p.dt)  # walk starts sooner
     ks = render_blend.blend_frames(p)
     assert ks[0] == -render_blend.lead_in(p) and ks[-1] == p.steps
 
@@ -56,7 +57,7 @@ def test_blend_highlighted_sources_plain(blend):
     p, traj = blend
     fig = plt.figure()
     try:
-        panels = render_blend._panels(fig, p, traj, render_blend.blend_frames(p))
+        panels = render_blend.side_by_side(fig, p, traj, render_blend.blend_frames(p))
         for k in (-3, 0, p.steps // 2, p.steps):
             for panel in panels:
                 panel.draw(k)

@@ -1,18 +1,20 @@
-"""Cloth rendering: render.animate / render.snapshot hand a cloth over to render_cloth (3-D)."""
+"""Cloth rendering: render.animate / render.snapshot hand a cloth over to render.cloth (3-D)."""
 import numpy as np
 import pytest
 from PIL import Image
 
 from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, ParticleKeyframe, StateKeyframe,
-                             StepForces, render, render_cloth)
+                             StepForces, render)
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Capsule, Plane, Sphere
+from casadi_keyframe.render import cloth as render_cloth
+from casadi_keyframe.views import ClothView, Ring
 
 STEPS = 6
 
 
-def _problem(colliders=None, scene=None, objective=None):
+def _problem(colliders=None, view=None, objective=None):
     """A 4 x 4 sheet lying flat, pinned at one corner, above a sphere, a capsule and a floor."""
     if colliders is None:
         colliders = [Sphere((0.5, 0.5, -0.4), 0.3), Plane((0, 0, -1.0)),
@@ -22,11 +24,11 @@ def _problem(colliders=None, scene=None, objective=None):
     if objective is None:
         objective = (StateKeyframe(STEPS, x=x0 + [0, 0, -0.2])
                      + CenterOfMassKeyframe(3, x=x0.mean(0)))
-    if scene is None:
-        scene = {"ring": {"center": (0.5, 0.5, -0.5), "normal": (0, 0, 1), "radius": 0.2}}
+    if view is None:
+        view = ClothView(ring=Ring(center=(0.5, 0.5, -0.5), normal=(0, 0, 1), radius=0.2))
     return ControlProblem(model=model, integrator=LinearizedBackwardEuler(), x0=x0,
                           v0=np.zeros_like(x0), steps=STEPS, dt=1 / 30, controls=StepForces(),
-                          objective=objective, name="cloth-render", scene=scene)
+                          objective=objective, name="cloth-render", view=view)
 
 
 @pytest.fixture(scope="module")
@@ -79,7 +81,7 @@ def test_moving_sphere_and_other_terms(tmp_path):
     """A sphere moving with t, a single-particle keyframe, no ring, a custom camera."""
     model_terms = ParticleKeyframe(4, [15], x=[[1.0, 1.0, -0.3]])
     p = _problem(colliders=[Sphere(lambda t: (0.5, 0.5 - t, -0.4), 0.3)],
-                 scene={"view": (35, -120)},
+                 view=ClothView(camera=(35, -120)),
                  objective=model_terms + CenterOfMassKeyframe(STEPS, v=[0, 0, 0]))
     traj = p.simulate()
     assert render.snapshot(p, traj, tmp_path / "moving.png").stat().st_size > 0
@@ -89,7 +91,7 @@ def test_moving_sphere_and_other_terms(tmp_path):
 
 def test_limits_hold_cloth_colliders_and_ring(cloth):
     p, traj = cloth
-    box = render_cloth._Box(p, traj)
+    box = render_cloth.Box.of(p, traj)
     inside = [traj.x.reshape(-1, 3), [[0.5, 0.5, -0.7], [0.5, 0.5, -0.1]],  # sphere
               [[-0.1, 0, -0.5], [1.1, 0, -0.5]], [[0.7, 0.5, -0.5]], [[0.5, 0.5, -1.0]]]
     for pts in inside:

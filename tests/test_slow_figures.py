@@ -47,7 +47,7 @@ def test_flock_path_follows_the_path():
 
 def test_flock_race_runner_finishes_in_front():
     prob, result = solve_figure("flock_race")
-    runner = prob.scene["runner"]
+    (runner,) = prob.view.highlight
     x = result.trajectory.x[-1, :, 0]
     assert x[runner] - np.delete(x, runner).max() > 1.0  # ahead of every other agent
     assert max(misses(result, "position_error")[:-1]) < 0.1  # the pack on its course
@@ -74,6 +74,6 @@ def test_cape_blend_lands_on_the_walk_clip_and_stays_physical():
     prob, result = solve_figure("cape_blend")
     (miss,) = result.breakdown["misses"]
     assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 2e-2
-    motion = prob.scene["animation"].shifted(-prob.scene["t_a"])
-    report = clip_report(prob.model, result.trajectory, prob.scene["character"], motion)
+    motion = prob.view.animation.shifted(-prob.view.t_a)
+    report = clip_report(prob.model, result.trajectory, prob.view.character, motion)
     assert report["max_stretch"] < 1.3 and report["penetration"] < 0.015, report

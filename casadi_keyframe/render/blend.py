@@ -1,6 +1,6 @@
 """Fig. 6 side by side: the fall clip, the optimised blend and the walk clip, in 3-D.
 
-For a problem whose ``scene`` has ``clips`` (``problems/cape_blend.py``): ``animate`` writes
+For a problem with a :class:`..views.BlendView` (``problems/cape_blend.py``): ``animate`` writes
 a GIF and ``snapshot`` a PNG with three panels per time, left the fall source clip, middle
 the blend, right the walk source clip, each with its cape and its character's capsules.
 Blend frame ``k`` (time ``k dt`` after the blend starts) goes with the fall clip's frame
@@ -11,13 +11,12 @@ shorter if a clip starts sooner, so that both source panels still play along), d
 which the middle panel shows the fall clip itself in the cloth colour: the blend takes
 over from it.  From ``k = 0`` the middle panel's cape is orange (:data:`BLEND`) and the
 walk target, the problem's keyframe, is a red wireframe, faded until the last frame.  Each
-panel keeps its own limits (equal aspect) over all its frames.  Drawing reuses
-:mod:`.render_cloth`'s view.
+panel keeps its own limits (equal aspect) over all its frames.  Each panel is a
+:class:`.cloth.ClothPanel` shown the positions of its clip's frame.
 """
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 from typing import NamedTuple
 
 import matplotlib.pyplot as plt
@@ -25,8 +24,10 @@ import numpy as np
 from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
-from .render import HIGHLIGHT, select_frames, write_gif
-from .render_cloth import CLOTH, _body, _Box, _ClothView, _legend, save_grid
+from ..views import BlendView, view_of
+from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, save_grid, targets
+from .flock import HIGHLIGHT
+from .frames import mass_centers, select_frames, write_gif
 
 BLEND = HIGHLIGHT  # orange, as highlighted agents in the flock figures
 LEAD_IN = 0.3  # s of the fall shown before the blend starts
@@ -47,7 +48,7 @@ class Shown(NamedTuple):
 def clip_frame(problem, kind: str, k: int) -> int:
     """The frame of source clip ``kind`` ("fall" or "walk") that goes with blend frame ``k``:
     ``t_a / dt + k`` or ``t_b / dt + k``."""
-    start = problem.scene["t_a" if kind == "fall" else "t_b"]
+    start = view_of(problem, BlendView).start(kind)
     return int(round(start / problem.dt)) + int(k)
 
 
@@ -63,50 +64,45 @@ def shown(problem, trajectory, panel: str, k: int) -> Shown:
     if panel == "blend" and k >= 0:
         return Shown(problem.model, np.asarray(trajectory.x[k]), k * trajectory.dt, BLEND)
     kind = "fall" if panel == "blend" else panel
-    model, clip = problem.scene["clips"][kind]
-    n = clip_frame(problem, kind, k)
-    if not 0 <= n <= clip.steps:
-        raise ValueError(f"blend frame {k} needs {kind} clip frame {n}, outside 0..{clip.steps}")
-    return Shown(model, np.asarray(clip.x[n]), n * clip.dt, CLOTH)
+    clip = view_of(problem, BlendView).clip(kind)
+    n, traj = clip_frame(problem, kind, k), clip.trajectory
+    if not 0 <= n <= traj.steps:
+        raise ValueError(f"blend frame {k} needs {kind} clip frame {n}, outside 0..{traj.steps}")
+    return Shown(clip.model, np.asarray(traj.x[n]), n * traj.dt, CLOTH)
 
 
-def panel_box(problem, trajectory, panel: str, ks) -> _Box:
+def panel_box(problem, trajectory, panel: str, ks) -> Box:
     """Limits holding the panel's capes and capsules at every blend frame in ``ks`` (and
     the keyframe target in the blend panel)."""
     frames = [shown(problem, trajectory, panel, k) for k in ks]
     points = [s.x for s in frames]
     if panel == "blend":
-        points += [np.atleast_2d(t.position_target) for t in _targets(problem)]
-    bodies = [[_body(b, s.t) for b in s.model.colliders] for s in frames]
-    return _Box.around(points, bodies)
+        points += [np.atleast_2d(t.position_target) for t in targets(problem)]
+    bodies = [[body_geometry(b, s.t) for b in s.model.colliders] for s in frames]
+    return Box(points, bodies)
 
 
-def _targets(problem):
-    return [t for t in problem.objective_terms.state_terms if t.position_target is not None]
+class BlendPanel(ClothPanel):
+    """One of the three panels ("fall", "blend" or "walk") over blend frames ``ks``;
+    ``draw(k)`` shows blend frame k, each frame with its own model (the blend panel's
+    lead-in is the fall clip's)."""
 
-
-class _Panel(_ClothView):
-    """One of the three views over blend frames ``ks``; ``draw(k)`` shows blend frame k,
-    each frame with its own model (the blend panel's lead-in is the fall clip's)."""
-
-    def __init__(self, ax, problem, trajectory, panel: str, ks, box: _Box):
-        self.panel, self.trajectory = panel, trajectory
+    def __init__(self, ax, problem, trajectory, panel: str, ks, box: Box):
         xs = np.array([shown(problem, trajectory, panel, k).x for k in ks])
-        super().__init__(ax, problem, SimpleNamespace(x=xs), name=PANELS[panel], box=box)
-        if panel != "blend":
-            self.terms = []
+        super().__init__(ax, problem.model, box, view_of(problem, BlendView),
+                         path=mass_centers(problem.model.masses, xs),
+                         terms=targets(problem) if panel == "blend" else ())
+        self.problem, self.trajectory, self.panel = problem, trajectory, panel
+        self.name = PANELS[panel]
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             axis.set_major_locator(MaxNLocator(4))
 
     def draw(self, k: int, full_title: bool = True):
         s = shown(self.problem, self.trajectory, self.panel, k)
-        self.model = s.model
-        self._clear()
-        self._cloth(s.x, s.color)
-        self._colliders(s.t)
+        self.show(s.model, s.x, s.t, s.color)
         if k >= 0:
-            self._targets(k)
-        self.ax.set_title(self.title(k, s.t, full_title), fontsize=9 if full_title else 8)
+            self.show_targets(k)
+        self.set_title(self.title(k, s.t, full_title), full_title)
 
     def title(self, k: int, t: float, full: bool = True) -> str:
         """The panel's name and its clip's time (the blend's own clock in the middle)."""
@@ -126,9 +122,9 @@ def blend_frames(problem) -> np.ndarray:
     return np.arange(-lead_in(problem), problem.steps + 1)
 
 
-def _panels(fig, problem, trajectory, ks) -> list[_Panel]:
-    """The fall, blend and walk views side by side in ``fig``, over blend frames ``ks``."""
-    return [_Panel(fig.add_subplot(1, 3, i + 1, projection="3d"), problem, trajectory, p, ks,
+def side_by_side(fig, problem, trajectory, ks) -> list[BlendPanel]:
+    """The fall, blend and walk panels side by side in ``fig``, over blend frames ``ks``."""
+    return [BlendPanel(fig.add_subplot(1, 3, i + 1, projection="3d"), problem, trajectory, p, ks,
                    panel_box(problem, trajectory, p, ks)) for i, p in enumerate(PANELS)]
 
 
@@ -140,8 +136,8 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     name = problem.name if title is None else title
     fig = plt.figure(figsize=(12.0, 4.8))
     try:
-        panels = _panels(fig, problem, trajectory, ks)
-        _legend(fig, panels[1], _handles())
+        panels = side_by_side(fig, problem, trajectory, ks)
+        legend(fig, panels[1], _handles())
         fig.subplots_adjust(left=0, right=1, bottom=0.08, top=0.85, wspace=0.02)
 
         def draw(i):
@@ -174,9 +170,9 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
             box = panel_box(problem, trajectory, p, range(steps + 1))
             for c, k in enumerate(ks):
                 ax = fig.add_subplot(rows, cols, r * cols + c + 1, projection="3d")
-                view = _Panel(ax, problem, trajectory, p, range(steps + 1), box)
-                view.draw(k, full_title=False)
-                middle = view if p == "blend" else middle
+                panel = BlendPanel(ax, problem, trajectory, p, range(steps + 1), box)
+                panel.draw(k, full_title=False)
+                middle = panel if p == "blend" else middle
         save_grid(fig, path, problem.name, middle, _handles())
     finally:
         plt.close(fig)

@@ -1,33 +1,31 @@
-"""Matplotlib 3-D figures and animations of cloth trajectories.
+"""A cloth in 3-D: a GIF (``animate``) or small multiples at the keyframes (``snapshot``).
 
-``animate`` writes a GIF and ``snapshot`` a PNG of small multiples at the keyframes;
-:func:`.render.animate` and :func:`.render.snapshot` hand over to them when the model has
-``faces``.  The cloth is a Lambert-shaded triangle surface, pinned and attached particles
-dark dots, colliders translucent grey, keyframe targets red (a wireframe for a whole-cloth
-target), the centre-of-mass path a thin line and ``scene["ring"]`` (``center``, ``normal``,
-``radius``) a thick circle.  Axis limits (equal aspect) and the camera (``scene["view"] =
-(elev, azim)``) are fixed for the whole animation.  Agg backend; figures are closed.
+The cloth is a Lambert-shaded triangle surface, pinned and attached particles dark dots,
+colliders translucent grey, keyframe targets red (a wireframe for a whole-cloth target), the
+centre-of-mass path a thin line and the view's ring a thick circle.  Axis limits (equal
+aspect, :class:`Box`) and the view's camera (:class:`..views.ClothView`) are fixed for a
+whole animation.  :class:`ClothPanel` draws the cloth at given positions, so that a picture of
+something other than one trajectory (the blend's panels, :mod:`.blend`) draws alike;
+:class:`TrajectoryPanel` draws a cloth problem's trajectory frame by frame.
 """
 from __future__ import annotations
 
 from pathlib import Path
 
 import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Patch
+from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Patch  # noqa: E402
-from mpl_toolkits.mplot3d.art3d import Poly3DCollection  # noqa: E402
-
-from .models.colliders import Plane, Sphere  # noqa: E402
-from .objectives import StateKeyframe  # noqa: E402
-from .render import (frame_title, keyframes, save_figure, select_frames,  # noqa: E402
+from ..models.colliders import Plane, Sphere
+from ..objectives import StateKeyframe
+from ..views import ClothView, view_of
+from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
 LIGHT = np.array([0.5, -0.6, 0.65]) / np.linalg.norm([0.5, -0.6, 0.65])  # the camera's side
-VIEW = (20.0, -60.0)
 
 
 def face_colors(vertices, faces, color=CLOTH, light=LIGHT) -> np.ndarray:
@@ -71,7 +69,7 @@ def _capsule_mesh(a, b, radius, k: int = 12) -> np.ndarray:
                                       + np.sin(theta)[:, None, None] * n))
 
 
-def _body(body, t: float):
+def body_geometry(body, t: float):
     """``("plane", point, normal)`` or ``("round", a, b, radius)`` from ``body.geometry(t)``."""
     g = [np.asarray(p, dtype=float) for p in body.geometry(t)]
     if isinstance(body, Plane):
@@ -92,29 +90,12 @@ def _extent(points) -> tuple[np.ndarray, np.ndarray]:
     return np.min([p.min(0) for p in points], 0), np.max([p.max(0) for p in points], 0)
 
 
-class _Box:
-    """Fixed limits over all frames, targets, ring and colliders (planes sized to the rest)."""
+class Box:
+    """Fixed limits holding ``points`` (a list of ``(k, 3)`` arrays) and ``bodies`` (per
+    frame, a list of :func:`body_geometry`); planes are sized to the rest."""
 
-    def __init__(self, problem, traj):
-        pts = [np.asarray(traj.x).reshape(-1, 3)]
-        pts += [np.atleast_2d(t.position_target)[:, :3] for t in problem.objective_terms.state_terms
-                if t.position_target is not None]
-        ring = problem.scene.get("ring")
-        if ring:
-            pts.append(_circle(ring["center"], ring["normal"], ring["radius"]))
-        bodies = [[_body(b, n * traj.dt) for b in problem.model.colliders]
-                  for n in range(traj.steps + 1)]
-        self._fit(pts, bodies)
-
-    @classmethod
-    def around(cls, points, bodies) -> "_Box":
-        """The box around ``points`` (a list of ``(k, 3)`` arrays) and ``bodies`` (per frame,
-        a list of :func:`_body` geometries): for views that are not one problem's frames."""
-        box = cls.__new__(cls)
-        box._fit(list(points), bodies)
-        return box
-
-    def _fit(self, pts, bodies):
+    def __init__(self, points, bodies):
+        pts = list(points)
         for kind, a, b, *r in (g for frame in bodies for g in frame):
             if kind == "round":
                 pts.append(np.array([a - r[0], a + r[0], b - r[0], b + r[0]]))
@@ -128,64 +109,76 @@ class _Box:
         half = np.maximum(hi - lo, 0.3 * span) / 2 + 0.03 * span
         self.lo, self.hi = (lo + hi) / 2 - half, (lo + hi) / 2 + half
 
+    @classmethod
+    def of(cls, problem, trajectory) -> "Box":
+        """The box over all frames of a cloth problem's ``trajectory``, its targets, its
+        ring and its colliders."""
+        pts = [np.asarray(trajectory.x).reshape(-1, 3)]
+        pts += [np.atleast_2d(t.position_target)[:, :3] for t in targets(problem)]
+        ring = view_of(problem, ClothView).ring
+        if ring:
+            pts.append(_circle(ring.center, ring.normal, ring.radius))
+        bodies = [[body_geometry(b, n * trajectory.dt) for b in problem.model.colliders]
+                  for n in range(trajectory.steps + 1)]
+        return cls(pts, bodies)
 
-class _ClothView:
-    """The artists of one 3-D view; ``draw(n)`` shows frame ``n``."""
 
-    def __init__(self, ax, problem, traj, *, name=None, box=None):
-        self.ax, self.problem, self.traj, self.model = ax, problem, traj, problem.model
-        self.name = problem.name if name is None else name
-        self.box = _Box(problem, traj) if box is None else box
-        self.terms = [t for t in problem.objective_terms.state_terms
-                      if t.position_target is not None]  # RegionTarget (2-D) has none
-        self.marked = np.concatenate([np.asarray(self.model.pinned, int)]
-                                     + [a.particles for a in self.model.attachments]).astype(int)
+def targets(problem) -> list:
+    """The problem's terms with a position target (a RegionTarget, 2-D, has none)."""
+    return [t for t in problem.objective_terms.state_terms if t.position_target is not None]
+
+
+class ClothPanel:
+    """One 3-D axes over fixed limits ``box`` seen from ``view``'s camera, with a
+    centre-of-mass ``path`` and the view's ring drawn once; :meth:`show` draws one frame's
+    cloth and colliders, :meth:`show_targets` the keyframe ``terms`` due next."""
+
+    def __init__(self, ax, model, box: Box, view: ClothView, *, path=None, terms=()):
+        self.ax, self.model, self.box, self.ring = ax, model, box, view.ring
+        self.terms = list(terms)
         self.dynamic = []
-        self._static()
-
-    def _static(self):
-        ax, box = self.ax, self.box
         ax.set(xlim=(box.lo[0], box.hi[0]), ylim=(box.lo[1], box.hi[1]),
                zlim=(box.lo[2], box.hi[2]))
         ax.set_box_aspect(box.hi - box.lo)
-        ax.view_init(*self.problem.scene.get("view", VIEW))
+        ax.view_init(*view.camera)
         ax.tick_params(labelsize=6, pad=0)
-        w = np.asarray(self.model.masses, dtype=float)
-        com = np.einsum("i,nij->nj", w / w.sum(), np.asarray(self.traj.x))
-        ax.plot(*com.T, color=COM, lw=0.8, alpha=0.8)
-        ring = self.problem.scene.get("ring")
-        if ring:
-            ax.plot(*_circle(ring["center"], ring["normal"], ring["radius"]).T, color=RING, lw=3)
+        if path is not None:
+            ax.plot(*np.asarray(path).T, color=COM, lw=0.8, alpha=0.8)
+        if self.ring:
+            ax.plot(*_circle(self.ring.center, self.ring.normal, self.ring.radius).T, color=RING,
+                    lw=3)
+
+    @property
+    def marked(self) -> np.ndarray:
+        """The model's pinned and attached particles, drawn as dots."""
+        return np.concatenate([np.asarray(self.model.pinned, int)]
+                              + [a.particles for a in self.model.attachments]).astype(int)
+
+    def show(self, model, x, t: float, color=CLOTH):
+        """Replace the frame's artists with ``model``'s cloth at positions ``x`` shaded
+        ``color``, its pinned and attached particles, and its colliders at time ``t``."""
+        for artist in self.dynamic:
+            artist.remove()
+        self.dynamic, self.model = [], model
+        self._cloth(np.asarray(x), color)
+        self._colliders(t)
+
+    def set_title(self, text: str, full: bool = True):
+        self.ax.set_title(text, fontsize=9 if full else 8)
 
     def _add(self, collection):
         self.ax.add_collection3d(collection)
         self.dynamic.append(collection)
 
-    def draw(self, n: int, full_title: bool = True):
-        """Replace the frame-dependent artists with those of frame ``n``."""
-        self._clear()
-        self._cloth(np.asarray(self.traj.x[n]))
-        self._colliders(n * self.traj.dt)
-        self._targets(n)
-        self.ax.set_title(frame_title(self.name, n, self.traj, full_title),
-                          fontsize=9 if full_title else 8)
-
-    def _clear(self):
-        for artist in self.dynamic:
-            artist.remove()
-        self.dynamic = []
-
-    def _cloth(self, x, color=CLOTH):
-        """The cloth at positions ``x``, shaded ``color``, and its pinned / attached particles."""
-        faces = self.model.faces
+    def _cloth(self, x, color):
+        faces, marked = self.model.faces, self.marked
         self._add(Poly3DCollection(x[faces], facecolors=face_colors(x, faces, color),
                                    edgecolors=(0, 0, 0, 0.12), lw=0.2))
-        if self.marked.size:
-            self.dynamic.append(self.ax.scatter(*x[self.marked].T, s=10, c=MARK,
-                                                depthshade=False))
+        if marked.size:
+            self.dynamic.append(self.ax.scatter(*x[marked].T, s=10, c=MARK, depthshade=False))
 
     def _colliders(self, t: float):
-        for kind, a, b, *r in (_body(body, t) for body in self.model.colliders):
+        for kind, a, b, *r in (body_geometry(body, t) for body in self.model.colliders):
             if kind == "plane":
                 patch = _plane_patch(a, b, self.box.mid, self.box.half)
                 self._add(Poly3DCollection([patch], facecolors=(0.5, 0.5, 0.5, 0.12),
@@ -202,8 +195,8 @@ class _ClothView:
         return (isinstance(term, StateKeyframe)
                 and np.unique(term.particles).size == self.model.n)
 
-    def _targets(self, n: int):
-        """Targets of the terms at the current or next keyframe (faded before it)."""
+    def show_targets(self, n: int):
+        """Add the targets of the terms at the current or next keyframe (faded before it)."""
         if not self.terms:
             return
         ahead = [t.frame for t in self.terms if t.frame >= n]
@@ -223,20 +216,38 @@ class _ClothView:
                                                     alpha=alpha, depthshade=False))
 
 
-def _legend(fig, view: _ClothView, extra=()):
-    """A figure legend listing only what the view draws (and the ``extra`` handles)."""
+class TrajectoryPanel(ClothPanel):
+    """A cloth problem's ``trajectory`` in one 3-D axes; ``draw(n)`` shows frame ``n``."""
+
+    def __init__(self, ax, problem, trajectory, *, name=None, box=None):
+        super().__init__(ax, problem.model, Box.of(problem, trajectory) if box is None else box,
+                         view_of(problem, ClothView),
+                         path=mass_centers(problem.model.masses, trajectory.x),
+                         terms=targets(problem))
+        self.trajectory = trajectory
+        self.name = problem.name if name is None else name
+
+    def draw(self, n: int, full_title: bool = True):
+        """Replace the frame-dependent artists with those of frame ``n``."""
+        self.show(self.model, self.trajectory.x[n], n * self.trajectory.dt)
+        self.show_targets(n)
+        self.set_title(frame_title(self.name, n, self.trajectory, full_title), full_title)
+
+
+def legend(fig, panel: ClothPanel, extra=()):
+    """A figure legend listing only what ``panel`` draws (and the ``extra`` handles)."""
     line = plt.Line2D
     h = [Patch(fc=CLOTH, label="cloth"), *extra,
          line([], [], color=COM, lw=0.8, label="centre of mass")]
-    if view.marked.size:
+    if panel.marked.size:
         h.append(line([], [], ls="", marker="o", ms=3, color=MARK, label="pinned / attached"))
-    if any(view.is_shape(t) for t in view.terms):
+    if any(panel.is_shape(t) for t in panel.terms):
         h.append(line([], [], color=TARGET, lw=0.8, label="keyframe shape"))
-    if not all(view.is_shape(t) for t in view.terms):
+    if not all(panel.is_shape(t) for t in panel.terms):
         h.append(line([], [], ls="", marker="x", color=TARGET, label="keyframe target"))
-    if view.model.colliders:
+    if panel.model.colliders:
         h.append(Patch(fc=(0.5, 0.5, 0.5, 0.3), ec=BODY, label="colliders"))
-    if view.problem.scene.get("ring"):
+    if panel.ring:
         h.append(line([], [], color=RING, lw=3, label="ring"))
     ncol = min(len(h), max(3, int(fig.get_figwidth() / 1.6)))
     fig.legend(handles=h, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
@@ -252,11 +263,12 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     path = Path(path)
     fig = plt.figure(figsize=(6.0, 5.4))
     try:
-        view = _ClothView(fig.add_subplot(projection="3d"), problem, trajectory, name=title)
-        _legend(fig, view)
+        panel = TrajectoryPanel(fig.add_subplot(projection="3d"), problem, trajectory,
+                                name=title)
+        legend(fig, panel)
         fig.subplots_adjust(left=0, right=1, bottom=0.08, top=0.95)
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
-        write_gif(fig, view.draw, frames, path, fps)
+        write_gif(fig, panel.draw, frames, path, fps)
     finally:
         plt.close(fig)
     return path
@@ -271,22 +283,22 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
     rows = -(-len(frames) // cols)
     fig = plt.figure(figsize=(3.4 * cols, 3.2 * rows + 0.6))
     try:
-        box = _Box(problem, trajectory)
+        box = Box.of(problem, trajectory)
         for i, n in enumerate(frames):
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
-            view = _ClothView(ax, problem, trajectory, box=box)
-            view.draw(n, full_title=False)
-        save_grid(fig, path, problem.name, view)
+            panel = TrajectoryPanel(ax, problem, trajectory, box=box)
+            panel.draw(n, full_title=False)
+        save_grid(fig, path, problem.name, panel)
     finally:
         plt.close(fig)
     return path
 
 
-def save_grid(fig, path, title: str, view: _ClothView, extra=()) -> None:
-    """Save a grid of 3-D panels as a PNG: ``title`` on top, the legend of ``view`` (and
+def save_grid(fig, path, title: str, panel: ClothPanel, extra=()) -> None:
+    """Save a grid of 3-D panels as a PNG: ``title`` on top, the legend of ``panel`` (and
     ``extra`` handles) below, narrow margins."""
     fig.suptitle(title, fontsize=11)
-    _legend(fig, view, extra)
+    legend(fig, panel, extra)
     fig.subplots_adjust(left=0.02, right=0.98, bottom=0.08, top=1 - 0.55 / fig.get_figheight(),
                         wspace=0.05, hspace=0.1)
     save_figure(fig, path, dpi=110)

@@ -1,7 +1,7 @@
 """Fig. 6: a cape blended from a fall into a walk, a boundary-value problem.
 
-Two passive clips of the same cape (:func:`casadi_keyframe.capes.simulate_clip`): a stunt
-double falls 2 m and lands face down (``fall``), an actor walks (``walk``).  The blend
+Two passive clips of the same cape (:func:`casadi_keyframe.scenes.capes.simulate_clip`): a
+stunt double falls 2 m and lands face down (``fall``), an actor walks (``walk``).  The blend
 starts from the fall clip's cape at its time ``t_a`` (position AND velocity of every
 particle) while the character moves through ``characters.transition(fall, walk, t_a, t_b,
 window)``; per-step forces on the free (not sewn-on) particles must bring the cape,
@@ -87,10 +87,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from casadi_keyframe.capes import cached_clip, cape_model
 from casadi_keyframe.characters import Character, fall, smoothstep, transition
-from casadi_keyframe.cloths import cloth_problem
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
+from casadi_keyframe.scenes.capes import cached_clip, cape_model
+from casadi_keyframe.scenes.cloths import cloth_problem
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300}
 GUESSES = ("tracking", "passive")

@@ -1,8 +1,8 @@
 """Fig. 3: a flock of 100 agents follows a curved path set by centre-of-mass keyframes."""
 import numpy as np
 
-from casadi_keyframe.flocks import blob, flock_problem
 from casadi_keyframe.objectives import CenterOfMassKeyframe, Smoothness
+from casadi_keyframe.scenes.flocks import blob, flock_problem
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200}
 RANGES = {"agents": "[1, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "seed": "[0, inf)",

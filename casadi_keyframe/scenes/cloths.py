@@ -3,9 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .controls import StepForces
-from .integrators import LinearizedBackwardEuler
-from .problem import ControlProblem
+from ..controls import StepForces
+from ..integrators import LinearizedBackwardEuler
+from ..problem import ControlProblem
 
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,

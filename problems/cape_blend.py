@@ -3,7 +3,7 @@
 Two passive clips of the same cape (:func:`casadi_keyframe.scenes.capes.simulate_clip`): a
 stunt double falls 2 m and lands face down (``fall``), an actor walks (``walk``).  The blend
 starts from the fall clip's cape at its time ``t_a`` (position AND velocity of every
-particle) while the character moves through ``characters.transition(fall, walk, t_a, t_b,
+particle) while the character moves through ``animations.transition(fall, walk, t_a, t_b,
 window)``; per-step forces on the free (not sewn-on) particles must bring the cape,
 ``window`` s later, onto the walk clip's cape at its time ``t_b + window``, positions and
 velocities, the positions moved by the transition's horizontal ``offset`` (which lines the
@@ -87,10 +87,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from casadi_keyframe.characters import Character, fall, smoothstep, transition
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
+from casadi_keyframe.scenes.animations import fall, transition
 from casadi_keyframe.scenes.capes import cached_clip, cape_model
 from casadi_keyframe.scenes.cloths import cloth_problem
+from casadi_keyframe.scenes.maths import smoothstep
+from casadi_keyframe.scenes.skeleton import Character
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300}
 GUESSES = ("tracking", "passive")

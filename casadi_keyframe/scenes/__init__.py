@@ -6,6 +6,7 @@ they work from an installed copy.
 * :mod:`.skeleton`: a character of capsules, its poses and their geometry;
 * :mod:`.animations`: the character's walk, fall and transitions, a pose at any time;
 * :mod:`.capes`: a cape sewn to an animated character and its passive source clips (fig. 6);
+* :mod:`.cape_tracking`: the cape blend's warm start, a PD tracking controller that lands;
 * :mod:`.maths`: rotations and smooth ramps the scenes share.
 
 Import from the modules; this face imports nothing, so loading one scene loads no other.

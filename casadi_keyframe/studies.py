@@ -22,6 +22,7 @@ from .models import ClothModel, ClothParams
 from .models.colliders import Plane
 from .objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from .problem import ControlProblem
+from .scenes.flocks import flock_path_problem
 
 
 def quick_mode() -> bool:
@@ -86,8 +87,7 @@ def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
 def flock_control_case(steps: int = 30, dt: float = 0.1, seed: int = 0) -> dict:
     """The control case: a 10-agent flock's hand adjoint (symplectic Euler, eq. 8) against
     CasADi reverse mode; exact, so its error is round-off."""
-    from .loading import load_problem
-    prob = load_problem("flock_path", agents=10, steps=steps, dt=dt, seed=seed)
+    prob = flock_path_problem(agents=10, steps=steps, dt=dt, seed=seed)
     u = 0.5 * np.random.default_rng(seed).standard_normal(prob.size)
     rel, cos = compare(prob.objective_and_gradient(u, "adjoint")[1],
                        prob.objective_and_gradient(u, "exact")[1])

@@ -16,13 +16,9 @@ import os
 
 import numpy as np
 
-from .controls import StepForces
 from .integrators import BackwardEuler, LinearizedBackwardEuler
-from .models import ClothModel, ClothParams
-from .models.colliders import Plane
-from .objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
-from .problem import ControlProblem
 from .scenes.flocks import flock_path_problem
+from .scenes.sheets import contact_problem, hanging_sheet
 
 
 def quick_mode() -> bool:
@@ -33,32 +29,6 @@ def quick_mode() -> bool:
 def fitted_order(h, errors) -> float:
     """Slope of ``log(error)`` against ``log(h)`` by least squares."""
     return float(np.polyfit(np.log(np.asarray(h, float)), np.log(np.asarray(errors, float)), 1)[0])
-
-
-def hanging_sheet(rows: int = 5, stretch: float = 500.0, ground: bool = True) -> ClothModel:
-    """A 1 m, 1 kg sheet pinned at its top corners, its lower edge resting on the ground."""
-    colliders = [Plane((0, 0, -1.007))] if ground else []
-    return ClothModel.grid(rows, rows, pinned=[0, rows - 1], colliders=colliders,
-                           params=ClothParams(stretch=stretch, shear=stretch / 10))
-
-
-def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float = 500.0,
-                    adjoint: str = "swapped", rows: int = 5, solver: str = "direct",
-                    controls=None) -> ControlProblem:
-    """The gradient-accuracy case: :func:`hanging_sheet` swung forward (step forces on every
-    particle unless ``controls`` says otherwise)."""
-    steps = int(round(horizon / dt))
-    if steps < 2 or abs(steps * dt - horizon) > 1e-9 * horizon:
-        raise ValueError(f"dt = {dt} must divide the horizon {horizon} s into >= 2 steps")
-    model = hanging_sheet(rows, stretch)
-    x0 = model.rest_positions
-    objective = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05])
-                 + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0])
-                 + Smoothness(1e-4))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver, adjoint=adjoint),
-                          x0=x0, v0=np.zeros_like(x0), steps=steps, dt=dt,
-                          controls=controls or StepForces(), objective=objective,
-                          name="contact_sheet")
 
 
 def compare(g, reference) -> tuple[float, float]:

@@ -9,16 +9,12 @@ from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, Smoothness, St
 from casadi_keyframe.gradients import FiniteDifference
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
+from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
 
 
 def cloth_problem(solver="cg", steps=12, dt=1 / 30):
-    model = ClothModel.grid(4, 4, pinned=[0, 3])
-    x0 = model.rest_positions
-    obj = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05])
-           + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0]) + Smoothness(1e-4))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver), x0=x0,
-                          v0=np.zeros_like(x0), steps=steps, dt=dt, controls=StepForces(),
-                          objective=obj, name="tiny_cloth")
+    return swing_problem(hanging_sheet(4, ground=False), steps, dt,
+                         LinearizedBackwardEuler(solver), name="tiny_cloth")
 
 
 def test_cg_and_direct_simulations_agree():
@@ -117,7 +113,7 @@ def test_swapped_adjoint_is_exact_for_linear_forces(pinned):
 def contact_problem(dt=1 / 60, horizon=1 / 3, adjoint="swapped", controls=None, solver="cg"):
     """5 x 5 sheet hanging from two corners, its lower edge resting on the ground (the issue's
     accuracy case, shared with the studies), default dt 1/60."""
-    from casadi_keyframe.studies import contact_problem as sheet
+    from casadi_keyframe.scenes.sheets import contact_problem as sheet
     return sheet(dt, horizon, adjoint=adjoint, solver=solver, controls=controls)
 
 

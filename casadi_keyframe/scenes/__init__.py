@@ -3,6 +3,7 @@ they work from an installed copy.
 
 * :mod:`.flocks`: a flock control problem in a few lines (start blobs, stored wander);
 * :mod:`.cloths`: a cloth control problem and target shapes of a sheet;
+* :mod:`.sheets`: the hanging test sheet swung forward (studies, tests, benchmarks);
 * :mod:`.skeleton`: a character of capsules, its poses and their geometry;
 * :mod:`.animations`: the character's walk, fall and transitions, a pose at any time;
 * :mod:`.capes`: a cape sewn to an animated character and its passive source clips (fig. 6);

@@ -14,7 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
-from .maths import bump, rot, smoothstep, soft_max, soft_min
+from .maths import bump, rotation, smoothstep, soft_max, soft_min
 from .skeleton import J, JOINTS, Character, Pose, angles, blend
 
 GRAVITY = 9.81
@@ -98,7 +98,7 @@ class Walk(Animation):
         c = self.character
         local = np.array([0.02 * sin, self.speed * t,
                           c.standing_height - 0.04 * (1 - np.cos(2 * ph)) / 2])
-        turn = rot(2, self.heading)
+        turn = rotation(2, self.heading)
         position = np.array([*self.origin, 0.0]) + turn @ local
         a = np.zeros(len(JOINTS))
         a[J["spine"]], a[J["neck"]] = 0.06, -0.06
@@ -110,7 +110,7 @@ class Walk(Animation):
             a[J[f"shoulder_swing_{side}"]] = -s * self.arm_swing * sin
             a[J[f"shoulder_raise_{side}"]] = 0.12
             a[J[f"elbow_{side}"]] = 0.3 + 0.25 * (1 - s * sin) / 2
-        return Pose(position, turn @ rot(2, -0.08 * sin), a)
+        return Pose(position, turn @ rotation(2, -0.08 * sin), a)
 
 
 @dataclass(frozen=True)
@@ -170,7 +170,8 @@ class Fall(Animation):
         return self.spin_time * np.sqrt(2 * max(start - lying, 1e-3) / GRAVITY)
 
     def _orientation(self, s: float) -> np.ndarray:
-        return rot(2, self.heading + self.yaw * s) @ rot(0, -self.pitch * s) @ rot(2, self.roll * s)
+        return (rotation(2, self.heading + self.yaw * s) @ rotation(0, -self.pitch * s)
+                @ rotation(2, self.roll * s))
 
     def _support(self, R: np.ndarray, angles: np.ndarray) -> float:
         """Centre-of-mass height at which the body (orientation R, ``angles``) touches z = 0."""
@@ -187,7 +188,7 @@ class Fall(Animation):
         start = self.height + self.character.standing_height + self.COM
         ballistic = start - 0.5 * GRAVITY * max(float(t), 0.0) ** 2
         z = soft_max(ballistic, self._support(R, a), self.cushion)
-        turn = rot(2, self.heading)
+        turn = rotation(2, self.heading)
         com = np.array([*self.origin, 0.0]) + turn @ [self.drift[0] * s, self.drift[1] * s, 0.0]
         com[2] = z
         return Pose(com - R @ [0, 0, self.COM], R, a)

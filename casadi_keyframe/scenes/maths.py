@@ -2,15 +2,30 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 
-def rot(axis: int, angle: float) -> np.ndarray:
-    """3x3 rotation by ``angle`` (rad) about coordinate axis 0, 1 or 2."""
-    c, s = np.cos(angle), np.sin(angle)
-    i, j = [(1, 2), (2, 0), (0, 1)][axis]
-    m = np.eye(3)
-    m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
-    return m
+def rotation(axis, angle: float) -> np.ndarray:
+    """3x3 rotation by ``angle`` radians about ``axis``: a coordinate axis 0, 1 or 2 (its
+    entries exactly cos and sin), or any 3-vector (Rodrigues' formula)."""
+    if np.ndim(axis) == 0:
+        if axis not in (0, 1, 2):
+            raise ValueError(f"a coordinate axis is 0, 1 or 2, got {axis!r}")
+        c, s = np.cos(angle), np.sin(angle)
+        i, j = [(1, 2), (2, 0), (0, 1)][axis]
+        m = np.eye(3)
+        m[i, i], m[i, j], m[j, i], m[j, j] = c, -s, s, c
+        return m
+    k = np.asarray(axis, float) / np.linalg.norm(axis)
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
+
+
+def slerp(start: np.ndarray, end: np.ndarray, s: float) -> np.ndarray:
+    """The orientation a fraction ``s`` of the way from rotation matrix ``start`` to ``end``
+    along the geodesic (the shortest turn between them)."""
+    turn = Rotation.from_matrix(start.T @ end).as_rotvec()
+    return start @ Rotation.from_rotvec(s * turn).as_matrix()
 
 
 def smoothstep(u):

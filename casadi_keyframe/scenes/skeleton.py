@@ -17,10 +17,9 @@ from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from ..models.colliders import Capsule, Contact
-from .maths import rot
+from .maths import rotation, slerp
 
 JOINTS = ("spine", "neck",
           "shoulder_swing_l", "shoulder_raise_l", "elbow_l",
@@ -45,9 +44,7 @@ class Pose:
 def blend(p: Pose, q: Pose, s: float) -> Pose:
     """``(1 - s) p + s q``: positions and angles linearly, the orientation along the
     geodesic (so a blend of two rigid motions stays a rigid motion)."""
-    turn = Rotation.from_matrix(p.rotation.T @ q.rotation).as_rotvec()
-    rotation = p.rotation @ Rotation.from_rotvec(s * turn).as_matrix()
-    return Pose((1 - s) * p.position + s * q.position, rotation,
+    return Pose((1 - s) * p.position + s * q.position, slerp(p.rotation, q.rotation, s),
                 (1 - s) * p.angles + s * q.angles)
 
 
@@ -98,7 +95,7 @@ class Character:
 
     def torso_frame(self, pose: Pose) -> tuple[np.ndarray, np.ndarray]:
         """Origin (the root) and orientation of the torso (the root bent by the spine)."""
-        return pose.position, pose.rotation @ rot(0, -pose.angles[J["spine"]])
+        return pose.position, pose.rotation @ rotation(0, -pose.angles[J["spine"]])
 
     def segments(self, pose: Pose) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         """Forward kinematics: each capsule's end points ``(a, b)`` in world coordinates."""
@@ -109,7 +106,7 @@ class Character:
         out = {"pelvis": (root + R @ [-self.hip_width, 0, 0], root + R @ [self.hip_width, 0, 0]),
                "torso": (root + S @ (self.torso[0] * up), root + S @ (self.torso[1] * up))}
         neck = root + S @ (self.neck_height * up)
-        H = S @ rot(0, -a[J["neck"]])
+        H = S @ rotation(0, -a[J["neck"]])
         out["head"] = (neck + H @ (self.head[0] * up), neck + H @ (self.head[1] * up))
         for side, sign in (("l", -1.0), ("r", 1.0)):
             shoulder = root + S @ [sign * self.shoulder_width, 0, self.shoulder_height]
@@ -128,9 +125,9 @@ class Character:
         """Upper and lower segments of a limb hanging down from ``joint`` at rest: raised
         outward about the forward axis, swung forward, the lower part flexed forward."""
         down = np.array([0.0, 0.0, -1.0])
-        U = parent @ rot(1, -sign * raise_) @ rot(0, swing)
+        U = parent @ rotation(1, -sign * raise_) @ rotation(0, swing)
         middle = joint + upper * (U @ down)
-        return (joint, middle), (middle, middle + lower * (U @ rot(0, flex) @ down))
+        return (joint, middle), (middle, middle + lower * (U @ rotation(0, flex) @ down))
 
     def lowest_point(self, pose: Pose) -> float:
         """Height of the body's lowest surface point (min over capsules of end z - radius)."""

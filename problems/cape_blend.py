@@ -85,10 +85,11 @@ throughout and 60 steps.  ``adjoint="swapped"`` runs the paper's method.
 """
 from __future__ import annotations
 
+from casadi_keyframe.checks import frame_at
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
 from casadi_keyframe.scenes.animations import fall, transition
-from casadi_keyframe.scenes.cape_tracking import (blend_steps, check_attached, frame_of,
-                                                  reference_path, tracking_guess)
+from casadi_keyframe.scenes.cape_tracking import (blend_steps, check_attached, reference_path,
+                                                  tracking_guess)
 from casadi_keyframe.scenes.capes import cached_clip, cape_model
 from casadi_keyframe.scenes.cloths import cloth_problem
 from casadi_keyframe.scenes.skeleton import Character
@@ -106,7 +107,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
           temporal: float = 1e-7, guess: str = "tracking", adjoint: str = "exact"):
     steps = blend_steps(steps, window, dt)
-    fall_start, walk_start = frame_of(t_a, dt, "t_a"), frame_of(t_b, dt, "t_b")
+    fall_start = frame_at(t_a, dt, "cape_blend: t_a")
+    walk_start = frame_at(t_b, dt, "cape_blend: t_b")
     character = Character()
     fall_end = fall(character).end
     window = steps * dt

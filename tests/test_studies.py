@@ -26,7 +26,7 @@ def test_swapped_error_shrinks_with_dt_and_the_flock_control_is_exact():
 
 
 def test_contact_problem_refuses_a_dt_that_does_not_divide_the_horizon():
-    with pytest.raises(ValueError, match="must divide the horizon"):
+    with pytest.raises(ValueError, match="whole number of steps"):
         contact_problem(dt=0.07)
 
 

@@ -14,6 +14,7 @@ from functools import cached_property
 
 import numpy as np
 
+from ..checks import check_fields, check_number
 from .maths import bump, rotation, smoothstep, soft_max, soft_min
 from .skeleton import J, JOINTS, Character, Pose, angles, blend
 
@@ -56,22 +57,6 @@ STAND = angles(shoulder_raise=0.12, elbow=0.2)
 LIE = angles(neck=0.15, shoulder_raise=0.6, elbow=0.4, hip_raise=0.12, hip_swing=0.08, knee=0.1)
 
 
-def _finite(name: str, value, positive: bool = False) -> float:
-    if not np.isfinite(value) or (positive and value <= 0):
-        kind = "positive and finite" if positive else "finite"
-        raise ValueError(f"{name} must be {kind}, got {value}")
-    return float(value)
-
-
-def _check(clip, finite=(), positive=()):
-    """ValueError naming the first option of ``clip`` that is not finite (or positive)."""
-    label = type(clip).__name__.lower()
-    for name in finite:
-        _finite(f"{label} {name}", getattr(clip, name))
-    for name in positive:
-        _finite(f"{label} {name}", getattr(clip, name), positive=True)
-
-
 @dataclass(frozen=True)
 class Walk(Animation):
     """A periodic walk along ``heading`` (rad from +y, counter-clockwise) at ``speed`` m/s,
@@ -90,7 +75,8 @@ class Walk(Animation):
     origin: tuple = (0.0, 0.0)
 
     def __post_init__(self):
-        _check(self, ("speed", "stride", "arm_swing", "knee_lift", "heading"), ("period",))
+        check_fields(self, finite=("speed", "stride", "arm_swing", "knee_lift", "heading"),
+                     positive=("period",))
 
     def pose(self, t: float) -> Pose:
         ph = 2 * np.pi * t / self.period
@@ -152,8 +138,9 @@ class Fall(Animation):
     end: float = 3.0
 
     def __post_init__(self):
-        _check(self, ("height", "pitch", "roll", "yaw", "flail", "clearance", "heading"),
-               ("spin_time", "cushion", "softness", "end"))
+        check_fields(self, finite=("height", "pitch", "roll", "yaw", "flail", "clearance",
+                                    "heading"),
+                     positive=("spin_time", "cushion", "softness", "end"))
         if self.height < 0:
             raise ValueError(f"fall height must be >= 0 (feet above the ground), got {self.height}")
         rng = np.random.default_rng(self.seed)
@@ -238,9 +225,9 @@ def transition(first: Animation, second: Animation, t_a: float, t_b: float, wind
     ``offset`` (3,) m moves ``second``; by default horizontally so that its root at ``t_b``
     stands where ``first``'s is at ``t_a`` (the two clips line up where the blend begins).
     """
-    t_a = _finite("transition t_a", t_a)
-    t_b = _finite("transition t_b", t_b)
-    window = _finite("transition window", window, positive=True)
+    t_a = check_number("transition t_a", t_a)
+    t_b = check_number("transition t_b", t_b)
+    window = check_number("transition window", window, positive=True)
     for name, clip, t in (("first", first, t_a), ("second", second, t_b)):
         if not isinstance(clip, Animation):
             raise ValueError(f"transition: {name} must be an Animation, got {clip!r}")

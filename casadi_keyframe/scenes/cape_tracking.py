@@ -4,13 +4,14 @@ crossfade of the two clips' shapes and lands it on the target state by inverse s
 From zero forces no optimizer here brings the blend onto its keyframe without tearing the
 cape (``problems/cape_blend.py`` says what was tried); from :func:`tracking_guess` it starts
 on the keyframe.  :func:`reference_path` is the crossfade, :func:`tracking_forces` the
-controller, :func:`landing_path` the last steps' cubic.  :func:`blend_steps`,
-:func:`frame_of` and :func:`check_attached` check the blend's arguments and states.
+controller, :func:`landing_path` the last steps' cubic.  :func:`blend_steps` and
+:func:`check_attached` check the blend's arguments and states.
 """
 from __future__ import annotations
 
 import numpy as np
 
+from ..checks import frame_at
 from .maths import smoothstep
 
 
@@ -18,25 +19,14 @@ def blend_steps(steps, window, dt: float) -> int:
     """The blend's length in steps: ``steps``, or ``window`` s (default 1 s) on the time
     grid; both given, they must agree."""
     if steps is None:
-        steps = frame_of(1.0 if window is None else window, dt, "window")
-    elif window is not None and frame_of(window, dt, "window") != steps:
+        steps = frame_at(1.0 if window is None else window, dt, "cape_blend: window")
+    elif window is not None and frame_at(window, dt, "cape_blend: window") != steps:
         raise ValueError(f"cape_blend: steps = {steps} and window = {window:.6g} s disagree at "
                          f"dt = {dt:.6g} s; give one of them")
     if int(steps) != steps or steps < 2:
         raise ValueError(f"cape_blend: the blend needs a whole number of steps, at least 2 (the "
                          f"tracking guess lands by two steps), got {steps} (window / dt)")
     return int(steps)
-
-
-def frame_of(t: float, dt: float, what: str) -> int:
-    """The frame at time ``t`` on a grid of step ``dt``, or a ValueError if t is off it."""
-    if not np.isfinite(t):
-        raise ValueError(f"cape_blend: {what} must be a finite time in s, got {t}")
-    k = int(round(t / dt))
-    if abs(t - k * dt) > 1e-9 * max(1.0, abs(t)):
-        raise ValueError(f"cape_blend: {what} = {t:.6g} s is not a whole number of steps of "
-                         f"dt = {dt:.6g} s ({t / dt:.6g} steps); choose {what} on the time grid")
-    return k
 
 
 def check_attached(model, x, t: float, clock: float, what: str) -> None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..checks import frame_at
 from ..controls import StepForces
 from ..integrators import LinearizedBackwardEuler
 from ..models import ClothModel, ClothParams
@@ -41,9 +42,10 @@ def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float =
                     controls=None) -> ControlProblem:
     """The gradient-accuracy case: :func:`hanging_sheet`, resting on the ground, swung
     forward (:func:`swing_problem`) over ``horizon`` s."""
-    steps = int(round(horizon / dt))
-    if steps < 2 or abs(steps * dt - horizon) > 1e-9 * horizon:
-        raise ValueError(f"dt = {dt} must divide the horizon {horizon} s into >= 2 steps")
+    steps = frame_at(horizon, dt, "contact_problem: the horizon")
+    if steps < 2:
+        raise ValueError(f"contact_problem: dt = {dt} must divide the horizon {horizon} s into "
+                         ">= 2 steps")
     return swing_problem(hanging_sheet(rows, stretch), steps, dt,
                          LinearizedBackwardEuler(solver, adjoint=adjoint), controls=controls,
                          name="contact_sheet")

@@ -12,12 +12,13 @@ The ground is the plane z = 0.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import lru_cache
 from typing import Protocol
 
 import numpy as np
 
+from ..checks import check_fields
 from ..models.colliders import Capsule, Contact
 from .maths import rotation, slerp
 
@@ -76,9 +77,7 @@ class Character:
     leg_radii: tuple = (0.07, 0.055)
 
     def __post_init__(self):
-        for name, value in self.__dict__.items():
-            if not np.all(np.isfinite(value)) or np.any(np.asarray(value) <= 0):
-                raise ValueError(f"Character.{name} must be positive and finite, got {value}")
+        check_fields(self, positive=[f.name for f in fields(self)])
 
     @property
     def radii(self) -> dict[str, float]:

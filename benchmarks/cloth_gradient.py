@@ -29,6 +29,7 @@ from casadi_keyframe import ControlProblem
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models.colliders import Sphere
 from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
+from casadi_keyframe.studies import relative_error_and_cosine
 from timing import best_of, traced_peak_mb
 
 RSS_UNIT = 2 ** 20 if sys.platform == "darwin" else 2 ** 10  # ru_maxrss: bytes or KiB
@@ -61,8 +62,7 @@ def exact_columns(prob, u, g_swapped, repeats: int) -> str:
     build_s = time.perf_counter() - t
     rss_mb = (resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - rss) * RSS_UNIT / 2 ** 20
     call_s = best_of(lambda: prob.objective_and_gradient(u, "exact"), repeats)
-    cos = g_swapped @ g / (np.linalg.norm(g_swapped) * np.linalg.norm(g))
-    rel = np.linalg.norm(g_swapped - g) / np.linalg.norm(g)
+    rel, cos = relative_error_and_cosine(g_swapped, g)
     return f"{build_s:9.2f} {call_s:7.3f} {rss_mb:7.0f} {cos:7.4f} {rel:7.3f}"
 
 

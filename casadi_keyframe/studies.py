@@ -31,11 +31,12 @@ def fitted_order(h, errors) -> float:
     return float(np.polyfit(np.log(np.asarray(h, float)), np.log(np.asarray(errors, float)), 1)[0])
 
 
-def compare(g, reference) -> tuple[float, float]:
-    """``(relative error, cosine)`` of a gradient against a reference."""
+def relative_error_and_cosine(g, reference) -> tuple[float, float]:
+    """``(|g - reference| / |reference|, cosine of the angle between them)``: how far a
+    gradient is from a reference gradient, in size and in direction."""
     norm = np.linalg.norm(reference)
-    return (float(np.linalg.norm(g - reference) / norm),
-            float(g @ reference / (np.linalg.norm(g) * norm)))
+    return (float(np.linalg.norm(g - reference) / max(norm, 1e-300)),
+            float(g @ reference / max(np.linalg.norm(g) * norm, 1e-300)))
 
 
 def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
@@ -49,7 +50,7 @@ def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
         forces = amplitude * rng.standard_normal((prob.steps, prob.model.n, 3))
         u = (forces * prob.model.masses[:, None]).ravel()
         grads[adjoint] = prob.objective_and_gradient(u, "adjoint")[1]
-    rel, cos = compare(grads["swapped"], grads["exact"])
+    rel, cos = relative_error_and_cosine(grads["swapped"], grads["exact"])
     return {"system": "cloth 5x5", "dt": dt, "steps": prob.steps, "stretch": stretch,
             "relative_error": rel, "cosine": cos}
 
@@ -59,7 +60,7 @@ def flock_control_case(steps: int = 30, dt: float = 0.1, seed: int = 0) -> dict:
     CasADi reverse mode; exact, so its error is round-off."""
     prob = flock_path_problem(agents=10, steps=steps, dt=dt, seed=seed)
     u = 0.5 * np.random.default_rng(seed).standard_normal(prob.size)
-    rel, cos = compare(prob.objective_and_gradient(u, "adjoint")[1],
+    rel, cos = relative_error_and_cosine(prob.objective_and_gradient(u, "adjoint")[1],
                        prob.objective_and_gradient(u, "exact")[1])
     return {"system": "flock 10", "dt": dt, "steps": steps, "stretch": float("nan"),
             "relative_error": rel, "cosine": cos}

@@ -78,6 +78,14 @@ every case).  Do not add ``continuation``: the guess resampled to 2 dt no longer
 the solve ends 18 cm off (13 x 8).  ``guess="passive"`` starts from zero forces, as the
 paper did.
 
+The tracking guess's choices, measured on the 26 x 16 cape: crossfading to the fall clip's
+own cape, which topples over the head, instead of holding its shape at ``t_a`` pulls the
+hem through the head (tracking forces of 220 m/s^2 rms and stretch 1.9, against 24 m/s^2
+and 1.16); landing over 2 steps takes at most 286 m/s^2 on one particle, over 10 steps
+929; over 1 s the control cost is 0.014 with the gain ramped up from 0.5 Hz and 0.080 with
+it held at 8 Hz, but over 0.5 s (8 x 6) 0.12 held, 0.066 from 4 Hz and 0.52 from 0.5 Hz,
+so :func:`~casadi_keyframe.scenes.cape_tracking.tracking_guess` tries several ramps.
+
 The gradient is the exact hand adjoint of the linearized scheme: the paper's swapped adjoint
 is poor in resting contact and over long horizons (notebooks/gradient_accuracy.ipynb;
 cloth_arch and cloth_toss measure what it costs there), and this problem has contact

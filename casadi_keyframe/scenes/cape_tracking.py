@@ -51,8 +51,7 @@ def reference_path(character, motion, x0, walk_clip, steps: int, dt: float) -> n
     end); in between it is not a simulation, so no force makes the cape follow it exactly.
 
     The fall clip's own cape after ``t_a`` is not followed: it topples over the head, and a
-    crossfade with it pulls the hem through the head (26 x 16 cape: tracking forces of 220
-    m/s^2 rms and stretch 1.9, against 24 m/s^2 and 1.16 with the shape held)."""
+    crossfade with it pulls the hem through the head."""
     def torso(t):
         return character.torso_frame(motion.pose(motion.t_a + t))
 
@@ -81,11 +80,10 @@ def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
     so the cape yields where the path runs into the body.  With ``end = (x1, v1)`` the last
     ``landing_steps`` instead follow a cubic from the state the controller reached to exactly
     that state (:func:`landing_path`), by inverse steps (the integrator's ``force_for``).
-    Two steps is the least that sets positions and velocities, and the best measured: an
-    inverse step also cancels the contact forces along the cubic, so a longer landing costs
-    more, not less (26 x 16 cape: at most 286 m/s^2 on one particle over 2 steps, 929 over
-    10).  Run closed-loop through the problem's integrator; replayed open-loop, the forces give the
-    same motion.  (Exact inverse dynamics along the whole path does not yield: it cancels the
+    Two steps is the least that sets positions and velocities, and the best: an inverse step
+    also cancels the contact forces along the cubic, so a longer landing costs more, not
+    less.  Run closed-loop through the problem's integrator; replayed open-loop, the forces
+    give the same motion.  (Exact inverse dynamics along the whole path does not yield: it cancels the
     contacts and the stretch the path asks for with forces of thousands of g.)"""
     model, integrator, dt, steps = prob.model, prob.integrator, prob.dt, prob.steps
     top = min(frequency, 0.125 / dt)
@@ -131,8 +129,7 @@ def tracking_guess(prob, path, end, start_frequencies=(8.0, 4.0, 2.0, 0.5)) -> n
     of the gain ramps from ``start_frequencies`` Hz up to 8 Hz, the one with the least
     control cost (each lands on the keyframe).  A tight hold all the way is cheapest over
     short, violent windows; over a second a loose start lets the cape fall down the back by
-    itself (26 x 16 cape: control cost 0.080 held at 8 Hz, 0.014 ramped up from 0.5 Hz;
-    8 x 6 over 0.5 s: 0.12 held, 0.066 from 4 Hz, 0.52 from 0.5 Hz)."""
+    itself."""
     free = prob.controls.idx
     candidates = [tracking_forces(prob, path, end, start_frequency=f)[:, free].ravel()
                   for f in start_frequencies]

@@ -17,7 +17,7 @@ import os
 import numpy as np
 
 from .integrators import BackwardEuler, LinearizedBackwardEuler
-from .scenes.flocks import flock_path_problem
+from .scenes.flock_path import flock_path_problem
 from .scenes.sheets import contact_problem, hanging_sheet
 
 

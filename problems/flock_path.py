@@ -1,5 +1,5 @@
 """Fig. 3: a flock of 100 agents follows a curved path set by centre-of-mass keyframes."""
-from casadi_keyframe.scenes.flocks import flock_path_problem
+from casadi_keyframe.scenes.flock_path import flock_path_problem
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200}
 RANGES = {"agents": "[1, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "seed": "[0, inf)",

@@ -2,6 +2,7 @@
 they work from an installed copy.
 
 * :mod:`.flocks`: a flock control problem in a few lines (start blobs, stored wander);
+* :mod:`.flock_path`: fig. 3's flock, which follows a path (also the studies' control case);
 * :mod:`.cloths`: a cloth control problem and target shapes of a sheet;
 * :mod:`.sheets`: the hanging test sheet swung forward (studies, tests, benchmarks);
 * :mod:`.skeleton`: a character of capsules, its poses and their geometry;

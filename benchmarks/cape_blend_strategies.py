@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from casadi_keyframe import load_problem, solve  # noqa: E402
 from casadi_keyframe.augmented_lagrangian import solve_augmented  # noqa: E402
-from casadi_keyframe.capes import clip_report  # noqa: E402
+from casadi_keyframe.scenes.capes import clip_report  # noqa: E402
 
 WIDTH = 0.6  # m, the cape's width (cape_model's default)
 

@@ -19,7 +19,7 @@ import numpy as np
 
 from .adjoints import get_gradient
 from .objectives import Objective, StateKeyframe
-from .optimize import CONVERGED, INTERRUPTED, LIMIT, Result, _evaluate_final, solve
+from .optimize import CONVERGED, INTERRUPTED, LIMIT, Result, evaluate_final, solve
 
 
 def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
@@ -73,7 +73,7 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
                 # lambda += w_k c  =>  lambda / w_{k+1} = (shift + c) / growth
                 shifts[id(t)] = tuple((s + c) / weight_growth for s, c in zip(
                     (sx, sv), _residual(t, traj)))
-    f, g = _evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
+    f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
     if len(stages) < rounds and status != INTERRUPTED:
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "

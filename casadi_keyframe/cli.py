@@ -168,6 +168,7 @@ def cmd_render(args) -> int:
 
 def cmd_gradcheck(args) -> int:
     from .adjoints import FiniteDifference, get_gradient
+    from .studies import relative_error_and_cosine
 
     prob = load_problem(args.problem, **parse_overrides(args.set))
     rng = np.random.default_rng(args.seed)
@@ -186,8 +187,7 @@ def cmd_gradcheck(args) -> int:
     ref = routes[ref_name][0]
     print(f"{prob.name}: {prob.size} controls; reference route '{ref_name}'")
     for name, (g, sec) in routes.items():
-        rel = np.linalg.norm(g - ref) / max(np.linalg.norm(ref), 1e-300)
-        cos = g @ ref / max(np.linalg.norm(g) * np.linalg.norm(ref), 1e-300)
+        rel, cos = relative_error_and_cosine(g, ref)
         print(f"  {name:8s} {sec:8.3f} s   relative error {rel:.3e}   cosine {cos:.12f}")
     fd = FiniteDifference(args.h)
     for k in range(args.directions):

@@ -101,12 +101,6 @@ def _or_nan(value) -> float:
     return np.nan if value is None else float(value)
 
 
-def load_result(out_dir) -> dict:
-    """The arrays of a saved ``result.npz`` as a dict."""
-    with np.load(Path(out_dir) / RESULT) as data:
-        return {k: data[k] for k in data.files}
-
-
 def run_file(source) -> Path:
     """The file a run is resumed or drawn from: ``source`` if it is a file, else the newer of
     ``checkpoint.npz`` and ``result.npz`` in the folder ``source``."""

@@ -197,7 +197,7 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
     else:
         u = _carry(p, ev.best_u, problem)
-        fun, jac = _evaluate_final(problem, strategy, u)
+        fun, jac = evaluate_final(problem, strategy, u)
         if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
             status = LIMIT
             message = f"time limit reached ({search.time_limit:g} s) before converging"
@@ -304,9 +304,10 @@ def _carry(source, u, target):
     return u if source is target else source.controls.resample(u, target.steps)
 
 
-def _evaluate_final(problem, strategy, u):
-    """Objective and gradient of the final problem at ``u`` after a stage that stopped the
-    continuation; if that is interrupted too, the objective alone (gradient NaN)."""
+def evaluate_final(problem, strategy, u):
+    """Objective and gradient of ``problem`` at the controls ``u`` a search ends on (after a
+    continuation stage stopped early, or the last augmented-Lagrangian round); if that is
+    interrupted too, the objective alone (gradient NaN)."""
     try:
         f, g = strategy(problem, u)
         return float(f), g

@@ -16,12 +16,9 @@ import os
 
 import numpy as np
 
-from .controls import StepForces
 from .integrators import BackwardEuler, LinearizedBackwardEuler
-from .models import ClothModel, ClothParams
-from .models.colliders import Plane
-from .objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
-from .problem import ControlProblem
+from .scenes.flock_path import flock_path_problem
+from .scenes.sheets import contact_problem, hanging_sheet
 from .simulate import simulate
 
 
@@ -35,37 +32,12 @@ def fitted_order(h, errors) -> float:
     return float(np.polyfit(np.log(np.asarray(h, float)), np.log(np.asarray(errors, float)), 1)[0])
 
 
-def hanging_sheet(rows: int = 5, stretch: float = 500.0, ground: bool = True) -> ClothModel:
-    """A 1 m, 1 kg sheet pinned at its top corners, its lower edge resting on the ground."""
-    colliders = [Plane((0, 0, -1.007))] if ground else []
-    return ClothModel.grid(rows, rows, pinned=[0, rows - 1], colliders=colliders,
-                           params=ClothParams(stretch=stretch, shear=stretch / 10))
-
-
-def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float = 500.0,
-                    rows: int = 5, solver: str = "direct",
-                    controls=None) -> ControlProblem:
-    """The gradient-accuracy case: :func:`hanging_sheet` swung forward (step forces on every
-    particle unless ``controls`` says otherwise)."""
-    steps = int(round(horizon / dt))
-    if steps < 2 or abs(steps * dt - horizon) > 1e-9 * horizon:
-        raise ValueError(f"dt = {dt} must divide the horizon {horizon} s into >= 2 steps")
-    model = hanging_sheet(rows, stretch)
-    x0 = model.rest_positions
-    objective = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05])
-                 + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0])
-                 + Smoothness(1e-4))
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver),
-                          x0=x0, v0=np.zeros_like(x0), steps=steps, dt=dt,
-                          controls=controls or StepForces(), objective=objective,
-                          name="contact_sheet")
-
-
-def compare(g, reference) -> tuple[float, float]:
-    """``(relative error, cosine)`` of a gradient against a reference."""
+def relative_error_and_cosine(g, reference) -> tuple[float, float]:
+    """``(|g - reference| / |reference|, cosine of the angle between them)``: how far a
+    gradient is from a reference gradient, in size and in direction."""
     norm = np.linalg.norm(reference)
-    return (float(np.linalg.norm(g - reference) / norm),
-            float(g @ reference / (np.linalg.norm(g) * norm)))
+    return (float(np.linalg.norm(g - reference) / max(norm, 1e-300)),
+            float(g @ reference / max(np.linalg.norm(g) * norm, 1e-300)))
 
 
 def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
@@ -76,8 +48,8 @@ def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
     rng = np.random.default_rng(seed)
     forces = amplitude * rng.standard_normal((prob.steps, prob.model.n, 3))
     u = (forces * prob.model.masses[:, None]).ravel()
-    rel, cos = compare(prob.objective_and_gradient(u, "swapped")[1],
-                       prob.objective_and_gradient(u, "adjoint")[1])
+    rel, cos = relative_error_and_cosine(prob.objective_and_gradient(u, "swapped")[1],
+                                         prob.objective_and_gradient(u, "adjoint")[1])
     return {"system": "cloth 5x5", "dt": dt, "steps": prob.steps, "stretch": stretch,
             "relative_error": rel, "cosine": cos}
 
@@ -85,11 +57,10 @@ def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
 def flock_control_case(steps: int = 30, dt: float = 0.1, seed: int = 0) -> dict:
     """The control case: a 10-agent flock's hand adjoint (symplectic Euler, eq. 8) against
     CasADi reverse mode; exact, so its error is round-off."""
-    from .loading import load_problem
-    prob = load_problem("flock_path", agents=10, steps=steps, dt=dt, seed=seed)
+    prob = flock_path_problem(agents=10, steps=steps, dt=dt, seed=seed)
     u = 0.5 * np.random.default_rng(seed).standard_normal(prob.size)
-    rel, cos = compare(prob.objective_and_gradient(u, "adjoint")[1],
-                       prob.objective_and_gradient(u, "casadi")[1])
+    rel, cos = relative_error_and_cosine(prob.objective_and_gradient(u, "adjoint")[1],
+                                         prob.objective_and_gradient(u, "casadi")[1])
     return {"system": "flock 10", "dt": dt, "steps": steps, "stretch": float("nan"),
             "relative_error": rel, "cosine": cos}
 

@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, TypeVar
 import numpy as np
 
 if TYPE_CHECKING:
-    from .trajectory import Trajectory
+    from .state import Trajectory
 
 
 @dataclass(frozen=True)

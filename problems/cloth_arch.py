@@ -15,11 +15,11 @@ failing at an 8.0 cm root-mean-square miss, against 1.3 cm with the exact adjoin
 """
 import numpy as np
 
-from casadi_keyframe.cloths import bend_into_arch, cloth_problem, weight_support
 from casadi_keyframe.controls import StepForces
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
+from casadi_keyframe.scenes.cloths import bend_into_arch, cloth_problem, weight_support
 from casadi_keyframe.views import ClothView
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}

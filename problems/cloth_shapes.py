@@ -12,9 +12,9 @@ the 1 m sheet (``tests/test_slow_figures.py`` holds it to 5 cm rms, springs stre
 """
 import numpy as np
 
-from casadi_keyframe.cloths import cloth_problem, rotate_about
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import StateKeyframe, Smoothness
+from casadi_keyframe.scenes.cloths import cloth_problem, rotate_about
 from casadi_keyframe.views import ClothView
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}

@@ -22,11 +22,11 @@ runs the paper's method.
 """
 import numpy as np
 
-from casadi_keyframe.cloths import cloth_problem, rotate_about
 from casadi_keyframe.controls import InitialVelocity
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import CenterOfMassKeyframe, ParticleKeyframe, Smoothness
+from casadi_keyframe.scenes.cloths import cloth_problem, rotate_about
 from casadi_keyframe.views import ClothView, Ring
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}

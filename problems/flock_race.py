@@ -6,10 +6,10 @@ radius around the finish, so "in front" means in front of every other agent.
 """
 import numpy as np
 
-from casadi_keyframe.flocks import blob, flock_problem
 from casadi_keyframe.models import FlockParams
 from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, RegionTarget,
                                        Smoothness)
+from casadi_keyframe.scenes.flocks import blob, flock_problem
 from casadi_keyframe.shapes import Disc
 from casadi_keyframe.views import FlockView
 

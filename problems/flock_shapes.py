@@ -1,9 +1,9 @@
 """Fig. 1 (its flock half): 200 agents form a square, then a cross, by region keyframes."""
 import numpy as np
 
-from casadi_keyframe.flocks import blob, flock_problem
 from casadi_keyframe.models import FlockParams
 from casadi_keyframe.objectives import RegionTarget, Smoothness
+from casadi_keyframe.scenes.flocks import blob, flock_problem
 from casadi_keyframe.shapes import cross, square
 
 SOLVE = {"method": "lbfgsb", "maxiter": 300}

@@ -6,8 +6,8 @@ from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, Smoothness, St
 from casadi_keyframe.augmented_lagrangian import solve_augmented
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.optimize import solve
+from casadi_keyframe.scenes.sheets import hanging_sheet
 from casadi_keyframe.simulate import simulate
-from casadi_keyframe.studies import hanging_sheet
 
 OPTIONS = {"maxiter": 60, "quiet": True}
 

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import load_problem, solve
-from casadi_keyframe.capes import cached_clip, clip_report, simulate_clip
-from casadi_keyframe.characters import fall, walk
 from casadi_keyframe.adjoints import Adjoint, FiniteDifference
+from casadi_keyframe.scenes.animations import fall, walk
+from casadi_keyframe.scenes.capes import cached_clip, clip_report, simulate_clip
 
 ROWS, COLS, DT, WINDOW = 8, 6, 1 / 60, 0.5
 T_A, T_B = 0.8, 0.6  # the problem's defaults

@@ -3,10 +3,11 @@ never inside the body, not overstretched, and the walk and fall clips tell apart
 import numpy as np
 import pytest
 
-from casadi_keyframe.capes import (CAPE_PARAMS, cape_contacts, cape_model, clip_report,
-                                   hanging_state, simulate_clip)
-from casadi_keyframe.characters import Character, fall, walk
 from casadi_keyframe.integrators import LinearizedBackwardEuler
+from casadi_keyframe.scenes.animations import fall, walk
+from casadi_keyframe.scenes.capes import (CAPE_PARAMS, cape_contacts, cape_model, clip_report,
+                                          hanging_state, simulate_clip)
+from casadi_keyframe.scenes.skeleton import Character
 from casadi_keyframe.simulate import simulate
 
 ROWS, COLS, DT = 8, 6, 1 / 60

@@ -3,8 +3,8 @@ lands on the ground, transitions that hand one clip over to another, clear error
 import numpy as np
 import pytest
 
-from casadi_keyframe.characters import (CAPSULES, Character, Fall, Pose, Walk, capsule_clearance,
-                                        fall, transition, walk)
+from casadi_keyframe.scenes.animations import Fall, Walk, fall, transition, walk
+from casadi_keyframe.scenes.skeleton import CAPSULES, Character, Pose, capsule_clearance
 
 CHARACTER = Character()
 WALK = walk(CHARACTER)

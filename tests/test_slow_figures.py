@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import solve
-from casadi_keyframe.capes import clip_report
 from casadi_keyframe.loading import build_problem, load_module, solve_defaults
 from casadi_keyframe.optimize import CONVERGED, LIMIT
+from casadi_keyframe.scenes.capes import clip_report
 
 pytestmark = pytest.mark.slow
 

@@ -3,10 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .controls import StepForces
-from .integrators import SymplecticEuler
-from .models import FlockModel, FlockParams, wander_forces
-from .problem import ControlProblem
+from ..controls import StepForces
+from ..integrators import SymplecticEuler
+from ..models import FlockModel, FlockParams, wander_forces
+from ..problem import ControlProblem
 
 
 def blob(n: int, center, spacing: float, dim: int, rng) -> np.ndarray:

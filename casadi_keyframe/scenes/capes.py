@@ -3,7 +3,7 @@ r"""A cape on an animated character (fig. 6 of Wojtan et al. 2006) and its two s
 The cape is a rows x cols Choi-Ko sheet (26 x 16 by default, as in the paper: 1 m long,
 0.6 m wide, 0.4 kg) whose top edge's middle part is sewn to the shoulder line of the
 character's torso (an :class:`~.models.cloth.Attachment` following
-:meth:`.characters.Character.shoulder_points`); the rest hangs down the back.  It collides
+:meth:`.skeleton.Character.shoulder_points`); the rest hangs down the back.  It collides
 with every capsule of the body, the ground plane z = 0 and itself.
 
 :func:`simulate_clip` makes the two passive source clips (zero control forces) that the
@@ -17,11 +17,12 @@ from functools import lru_cache
 
 import numpy as np
 
-from .characters import Animation, Character, Walk, capsule_clearance, fall, walk
-from .integrators import LinearizedBackwardEuler
-from .models.cloth import Attachment, ClothModel, ClothParams
-from .models.colliders import Contact, Plane
-from .simulate import simulate
+from ..integrators import LinearizedBackwardEuler
+from ..models.cloth import Attachment, ClothModel, ClothParams
+from ..models.colliders import Contact, Plane
+from ..simulate import simulate
+from .animations import Animation, Walk, fall, walk
+from .skeleton import Character, capsule_clearance
 
 CAPE_PARAMS = ClothParams(stretch=500.0, shear=50.0, bend=2e-5, damping=0.5, air_drag=2.0)
 """Fabric at dt = 1/60: the default sheet's stiffnesses (about 1 % strain hanging) with

@@ -3,9 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .controls import StepForces
-from .integrators import LinearizedBackwardEuler
-from .problem import ControlProblem
+from ..controls import StepForces
+from ..integrators import LinearizedBackwardEuler
+from ..problem import ControlProblem
+from .maths import rotation
 
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
@@ -26,13 +27,6 @@ def weight_support(model, controls, steps: int) -> np.ndarray:
     lifts a sheet off the ground, where resting contact leaves almost no gradient."""
     support = -model.masses[controls.idx, None] * np.asarray(model.params.gravity)
     return np.tile(support, (steps, 1, 1)).ravel()
-
-
-def rotation(axis, angle: float) -> np.ndarray:
-    """3x3 rotation by ``angle`` radians about ``axis`` (Rodrigues)."""
-    k = np.asarray(axis, float) / np.linalg.norm(axis)
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * K @ K
 
 
 def rotate_about(points, pivot, axis, angle: float) -> np.ndarray:

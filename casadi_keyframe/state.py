@@ -26,19 +26,6 @@ class State:
     x: np.ndarray
     v: np.ndarray
 
-    def __add__(self, other: "State") -> "State":
-        return State(self.x + other.x, self.v + other.v)
-
-    def scaled(self, mask: np.ndarray) -> "State":
-        """The state with both parts multiplied by ``mask`` (``(particles, dim)`` or a flat
-        ``particles * dim`` mask), e.g. the free-component mask of a constrained model."""
-        m = np.reshape(mask, self.x.shape)
-        return State(m * self.x, m * self.v)
-
-    @classmethod
-    def zeros_like(cls, x: np.ndarray) -> "State":
-        return cls(np.zeros_like(x), np.zeros_like(x))
-
 
 @dataclass
 class Trajectory:

@@ -10,7 +10,7 @@ import pytest
 
 from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, FiniteDifference,
                              Smoothness, State, StateKeyframe, StepForces)
-from casadi_keyframe.integrators import BackwardEuler, LinearizedBackwardEuler, SymplecticEuler
+from casadi_keyframe.integrators import BackwardEuler, LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.cloth import Attachment
 from casadi_keyframe.models.colliders import Contact, Plane, Sphere

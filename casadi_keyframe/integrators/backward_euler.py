@@ -37,7 +37,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..linear import ModifiedPCG, SolveError, SolveInfo, SparseLU
+from ..linear import SOLVERS, ModifiedPCG, SolveError, SolveInfo, SparseLU
 from ..state import SimulationError, State, check_state
 from .base import Integrator, Workspace, free_components, mass_diagonal
 from .linearized_backward_euler import (check_stretch, prescribed_velocity_symbolic,
@@ -72,8 +72,8 @@ class BackwardEuler(Integrator):
 
     def __init__(self, solver: str = "direct", tol: float = 1e-12, newton_tol: float = 1e-10,
                  max_newton: int = 50):
-        if solver not in ("direct", "cg"):
-            raise ValueError(f"solver must be one of ['cg', 'direct'], got {solver!r}")
+        if solver not in SOLVERS:
+            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
         if not (0 < newton_tol < 1) or int(max_newton) < 1:
             raise ValueError("newton_tol must be in (0, 1) and max_newton at least 1, got "
                              f"{newton_tol}, {max_newton}")

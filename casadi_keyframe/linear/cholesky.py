@@ -6,7 +6,9 @@ The analysis (fill-reducing ordering, elimination tree, supernodes) depends only
 sparsity pattern: a plan keeps one per :attr:`System.structure` and refactorises numerically
 for every new matrix of that pattern.  A factorisation that must outlive the next one (kept
 for the adjoint pass) gets its own analysis (``factor(A, keep=True)``); the others share
-the plan's, and using one after a later factorisation has replaced it raises.
+the plan's, and using one after a later factorisation has replaced it raises.  A kept
+factor nothing refers to any more hands its analysis (and its memory) back to the solver
+object, so the next pass over the same pattern refactorises numerically only.
 """
 from __future__ import annotations
 
@@ -37,6 +39,19 @@ class SparseCholesky:
         if _cholmod is None:
             raise ImportError("solver 'cholmod' needs the cvxopt package (it bundles CHOLMOD): "
                               "pip install cvxopt, or use solver='direct' (SuperLU)")
+        self._spare = (None, [])  # (structure, analyses of dropped kept factors)
+
+    def _take_spare(self, structure):
+        held, spare = self._spare
+        return spare.pop() if structure is not None and held is structure and spare else None
+
+    def _give_back(self, structure, symbolic) -> None:
+        held, spare = self._spare
+        if structure is None:
+            return
+        if held is not structure:
+            self._spare = (structure, [])
+        self._spare[1].append(symbolic)
 
     def init(self, free: np.ndarray) -> "CholeskyPlan":
         return CholeskyPlan(np.asarray(free, bool), self)
@@ -86,11 +101,12 @@ class CholeskyPlan(Plan):
                 self.analyses.clear()  # a pattern that grew replaces the old one
                 self.analyses[system.structure] = analysis
         analysis.load(block)
-        if keep or analysis.shared is None:
-            symbolic = _cholmod.symbolic(analysis.matrix)
-            if not keep:
-                analysis.shared = symbolic
+        if keep:
+            symbolic = (self.solver._take_spare(system.structure)
+                        or _cholmod.symbolic(analysis.matrix))
         else:
+            if analysis.shared is None:
+                analysis.shared = _cholmod.symbolic(analysis.matrix)
             symbolic = analysis.shared
         try:
             _cholmod.numeric(analysis.matrix, symbolic)
@@ -110,6 +126,10 @@ class CholeskyFactor(Factored):
     def __init__(self, system, plan, factor, analysis, generation):
         super().__init__(system, plan)
         self.factor, self.analysis, self.generation = factor, analysis, generation
+
+    def __del__(self):
+        if self.generation is None:  # a kept factor: its analysis serves the next pass
+            self.plan.solver._give_back(self.system.structure, self.factor)
 
     @property
     def nbytes(self) -> int:

@@ -97,7 +97,7 @@ class Factored:
         free = self.plan.free
         x = np.zeros_like(b) if z is None else np.where(free, 0.0, z)
         rhs = b[free]
-        if z is not None and not np.all(free):
+        if z is not None and np.any(x):  # a prescribed motion to move to the right
             product = self.system.rmatvec if transpose else self.system.matvec
             rhs = rhs - product(x)[free]
         start = None if x0 is None else np.asarray(x0)[free]

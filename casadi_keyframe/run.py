@@ -16,9 +16,9 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from .interrupts import NAMES, catching, check
-from .io import CHECKPOINT, RESULT, Checkpoint, read_run, run_file, save_result
+from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from .state import SimulationError, Trajectory
+from .state import SimulationError
 
 EXIT_CODES = """\
 exit codes:
@@ -248,25 +248,12 @@ def run_render(source, *, animation: bool = True) -> int:
 
 
 def _render(source, animation: bool) -> int:
-    from .loading import load_problem
+    from .saved import load_saved
 
-    source = Path(source)
-    path = source / RESULT if (source / RESULT).is_file() else run_file(source)
-    run = read_run(path)
-    meta, arrays, out = run["meta"], run["arrays"], path.parent
-    name = meta.get("problem_file")
-    prob = load_problem(name if name and Path(name).is_file() else meta["problem"],
-                        **meta.get("overrides", {}))
-    if run["u"].size != prob.size:
-        raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
-                         f"{meta.get('overrides', {})} has {prob.size}")
-    if "x" in arrays:
-        traj = Trajectory(arrays["x"], arrays["v"], float(arrays["dt"]))
-    else:
-        print(f"{prob.name}: {path.name} holds controls only: simulating them")
-        traj = prob.simulate(run["u"])
-    draw(prob, traj, _history(meta, arrays), out, animation=animation)
-    print(f"{prob.name}: pictures drawn in {out}/ from {path.name}")
+    saved = load_saved(source)
+    prob, out = saved.problem, saved.path.parent
+    draw(prob, saved.trajectory, _history(saved.meta, saved.arrays), out, animation=animation)
+    print(f"{prob.name}: pictures drawn in {out}/ from {saved.path.name}")
     return 0
 
 

@@ -48,8 +48,7 @@ class Shown(NamedTuple):
 def clip_frame(problem, kind: str, k: int) -> int:
     """The frame of source clip ``kind`` ("fall" or "walk") that goes with blend frame ``k``:
     ``t_a / dt + k`` or ``t_b / dt + k``."""
-    start = view_of(problem, BlendView).start(kind)
-    return int(round(start / problem.dt)) + int(k)
+    return view_of(problem, BlendView).clip_frame(kind, k, problem.dt)
 
 
 def lead_in(problem, seconds: float = LEAD_IN) -> int:

@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from ..models.colliders import Plane, Sphere
+from ..geometry import body_geometry, capsule_grid, circle, plane_patch
 from ..objectives import StateKeyframe
 from ..views import ClothView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
@@ -41,51 +41,6 @@ def face_colors(vertices, faces, color=CLOTH, light=LIGHT) -> np.ndarray:
     return np.c_[shade[:, None] * matplotlib.colors.to_rgb(color), np.ones(len(shade))]
 
 
-def _basis(normal):
-    """Unit ``normal`` and two unit vectors spanning the plane orthogonal to it."""
-    n = np.asarray(normal, dtype=float)
-    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-12 else np.array([0.0, 0.0, 1.0])
-    e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    return n, e1, np.cross(n, e1)
-
-
-def _circle(center, normal, radius, k: int = 64) -> np.ndarray:
-    _, e1, e2 = _basis(normal)
-    phi = np.linspace(0, 2 * np.pi, k)
-    return np.asarray(center, float) + radius * (np.outer(np.cos(phi), e1)
-                                                 + np.outer(np.sin(phi), e2))
-
-
-def _capsule_mesh(a, b, radius, k: int = 12) -> np.ndarray:
-    """``(2k, 2k, 3)`` grid over a capsule's surface (a sphere when ``a == b``)."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    n, e1, e2 = _basis(b - a)
-    theta = np.r_[np.linspace(-np.pi / 2, 0, k), np.linspace(0, np.pi / 2, k)]
-    ends = np.r_[np.tile(a, (k, 1)), np.tile(b, (k, 1))]
-    phi = np.linspace(0, 2 * np.pi, 2 * k)
-    ring = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
-    return (ends[:, None] + radius * (np.cos(theta)[:, None, None] * ring[None]
-                                      + np.sin(theta)[:, None, None] * n))
-
-
-def body_geometry(body, t: float):
-    """``("plane", point, normal)`` or ``("round", a, b, radius)`` from ``body.geometry(t)``."""
-    g = [np.asarray(p, dtype=float) for p in body.geometry(t)]
-    if isinstance(body, Plane):
-        return "plane", g[0], g[1]
-    if isinstance(body, Sphere):  # center, radius, velocity
-        return "round", g[0], g[0], float(g[1][0])
-    return "round", g[0], g[1], float(g[2][0])  # Capsule: a, b, radius, va, vb
-
-
-def _plane_patch(point, normal, mid, half: float) -> np.ndarray:
-    """The 4 corners of a square of half-side ``half`` on the plane, centred below ``mid``."""
-    n, e1, e2 = _basis(normal)
-    c = mid - np.dot(mid - point, n) * n
-    return np.array([c + half * (s * e1 + r * e2) for s, r in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
-
-
 def _extent(points) -> tuple[np.ndarray, np.ndarray]:
     return np.min([p.min(0) for p in points], 0), np.max([p.max(0) for p in points], 0)
 
@@ -103,7 +58,7 @@ class Box:
         self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1e-3)
         for kind, a, b, *_ in (g for frame in bodies for g in frame):
             if kind == "plane":
-                pts.append(_plane_patch(a, b, self.mid, self.half))
+                pts.append(plane_patch(a, b, self.mid, self.half))
         lo, hi = _extent(pts)
         span = max((hi - lo).max(), 1e-3)
         half = np.maximum(hi - lo, 0.3 * span) / 2 + 0.03 * span
@@ -117,7 +72,7 @@ class Box:
         pts += [np.atleast_2d(t.position_target)[:, :3] for t in targets(problem)]
         ring = view_of(problem, ClothView).ring
         if ring:
-            pts.append(_circle(ring.center, ring.normal, ring.radius))
+            pts.append(circle(ring.center, ring.normal, ring.radius))
         bodies = [[body_geometry(b, n * trajectory.dt) for b in problem.model.colliders]
                   for n in range(trajectory.steps + 1)]
         return cls(pts, bodies)
@@ -145,7 +100,7 @@ class ClothPanel:
         if path is not None:
             ax.plot(*np.asarray(path).T, color=COM, lw=0.8, alpha=0.8)
         if self.ring:
-            ax.plot(*_circle(self.ring.center, self.ring.normal, self.ring.radius).T, color=RING,
+            ax.plot(*circle(self.ring.center, self.ring.normal, self.ring.radius).T, color=RING,
                     lw=3)
 
     @property
@@ -180,11 +135,11 @@ class ClothPanel:
     def _colliders(self, t: float):
         for kind, a, b, *r in (body_geometry(body, t) for body in self.model.colliders):
             if kind == "plane":
-                patch = _plane_patch(a, b, self.box.mid, self.box.half)
+                patch = plane_patch(a, b, self.box.mid, self.box.half)
                 self._add(Poly3DCollection([patch], facecolors=(0.5, 0.5, 0.5, 0.12),
                                            edgecolors=(0.4, 0.4, 0.4, 0.4)))
             else:
-                mesh = _capsule_mesh(a, b, r[0])
+                mesh = capsule_grid(a, b, r[0])
                 self.dynamic += [
                     self.ax.plot_surface(*mesh.T, color=BODY, alpha=0.15, lw=0, shade=False),
                     self.ax.plot_wireframe(*mesh.T, color=BODY, lw=0.3, alpha=0.5)]

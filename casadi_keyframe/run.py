@@ -60,6 +60,8 @@ class SolveRun:
     resume: str | None = None
     quiet: bool = False
     animation: bool = True
+    exports: tuple = ()  # export formats written beside the pictures (see .export)
+    viewer: bool = True  # the HTML viewer (skipped with a note when plotly is missing)
 
 
 def run_solve(spec: SolveRun) -> int:
@@ -114,9 +116,33 @@ def _solve(spec: SolveRun, caught, done) -> int:
     else:
         draw(prob, result.trajectory, result, out, animation=spec.animation)
         print(f"  pictures drawn in {out}/")
+        _write_outputs(spec, result.trajectory)
     _hint(result.status, spec)
     check()  # a signal after the last safe point still counts
     return exit_code(result.status, signum)
+
+
+def _write_outputs(spec: SolveRun, trajectory) -> None:
+    """The viewer and the ``--export`` formats, each file named as it is written."""
+    from .export import write_outputs
+
+    paths = write_outputs(spec.problem, trajectory, spec.out, spec.exports, viewer=spec.viewer)
+    if paths:
+        shown = [str(p) for p in paths[:3]] + ([f"... {len(paths) - 3} more"] if len(paths) > 3 else [])
+        print(f"  exported: {', '.join(shown)}")
+
+
+def run_export(source, formats, *, out=None) -> int:
+    """Export a saved run (``casadi-keyframe export``) in each of ``formats``; exit code 0."""
+    from .export import check_library, export
+
+    for fmt in formats:  # every format's library before any file is written
+        check_library(fmt)
+    for fmt in formats:
+        paths = export(source, fmt, out=out)
+        more = f" ... ({len(paths)} files)" if len(paths) > 2 else ""
+        print(f"{fmt}: {', '.join(str(p) for p in paths[:2])}{more}")
+    return 0
 
 
 def _search(spec: SolveRun, u0, checkpoint):

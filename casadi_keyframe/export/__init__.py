@@ -22,7 +22,8 @@ from .scene import Scene, scene_of
 FORMATS = ("usd", "pc2", "obj", "html")
 VIEWER = "viewer.html"
 
-__all__ = ["FORMATS", "Scene", "export", "export_scene", "scene_of"]
+__all__ = ["FORMATS", "Scene", "check_library", "export", "export_scene", "scene_of",
+           "write_outputs"]
 
 
 def check_format(fmt: str) -> str:
@@ -57,18 +58,32 @@ def export(source, fmt: str, *, out=None) -> list[Path]:
     ``html`` lacks its library."""
     from ..saved import load_saved
 
-    check_format(fmt)
-    _check_library(fmt)
+    check_library(fmt)
     saved = load_saved(source)
     return export_scene(scene_of(saved.problem, saved.trajectory), fmt,
                         saved.path.parent if out is None else out)
 
 
-def _check_library(fmt: str) -> None:
-    """Fail before reading the result if ``fmt`` needs a library that is missing."""
-    if fmt == "usd":
+def check_library(fmt: str) -> None:
+    """A ValueError for an unknown ``fmt``, an ImportError naming the extra to install if
+    it needs a library that is missing: checked before a result is read or a solve starts."""
+    if check_format(fmt) == "usd":
         from .usd import pxr_modules
         pxr_modules()
     elif fmt == "html":
         from .viewer import plotly_module
         plotly_module()
+
+
+def write_outputs(problem, trajectory, out, formats=(), *, viewer: bool = True) -> list[Path]:
+    """What ``solve`` writes beside its pictures: the viewer (skipped with a one-line note
+    when plotly is missing) and each of ``formats``; returns the files written."""
+    scene, written = scene_of(problem, trajectory), []
+    if viewer and "html" not in formats:
+        try:
+            written += export_scene(scene, "html", out)
+        except ImportError as err:
+            print(f"  viewer skipped: {err}")
+    for fmt in formats:
+        written += export_scene(scene, fmt, out)
+    return written

@@ -109,6 +109,7 @@ class Scene:
     dim: int = 3
     highlight: tuple = ()
     ring: object = None
+    camera: tuple = (20.0, -60.0)  # (elevation, azimuth) in degrees, the view's
     marked: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     clips: list = field(default_factory=list)
     misses: dict = field(default_factory=dict)  # frame -> one line of keyframe misses
@@ -133,7 +134,7 @@ def scene_of(problem, trajectory) -> Scene:
     if isinstance(view, FlockView):
         scene.highlight = view.highlight
     if isinstance(view, ClothView):
-        scene.ring = view.ring
+        scene.ring, scene.camera = view.ring, view.camera
     if hasattr(model, "attachments"):
         scene.marked = np.concatenate([np.asarray(model.pinned, int)]
                                       + [a.particles for a in model.attachments]).astype(int)

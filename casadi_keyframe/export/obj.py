@@ -61,4 +61,4 @@ def read_obj(path) -> tuple[np.ndarray, np.ndarray]:
         elif parts[0] == "f":
             faces.append([int(p.split("/")[0]) - 1 for p in parts[1:]])
     return (np.array(vertices, dtype=np.float32).reshape(-1, 3),
-            np.array(faces, dtype=int).reshape(len(faces), -1))
+            np.array(faces, dtype=int).reshape(len(faces), -1 if faces else 3))

@@ -75,7 +75,7 @@ def test_solve_skips_the_viewer_without_plotly(tmp_path, monkeypatch, capsys):
                                              "install chromium); the page-load check needs it")
 @pytest.mark.parametrize("frame", [0, 4])
 def test_the_page_loads_without_console_errors(solved, frame):
-    run = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu",
+    run = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--enable-unsafe-swiftshader",
                           "--enable-logging=stderr", "--v=0", "--virtual-time-budget=5000",
                           "--dump-dom", f"file://{solved / 'viewer.html'}#frame={frame}"],
                          capture_output=True, text=True, timeout=120)

@@ -220,6 +220,32 @@ def cmd_study(args) -> int:
     return 0
 
 
+def _output_options(s) -> None:
+    """``solve``'s options for what it writes."""
+    s.add_argument("--out", help="output folder (default results/PROBLEM)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    s.add_argument("--no-viewer", action="store_true",
+                   help="skip viewer.html, the interactive viewer (needs plotly)")
+    s.add_argument("--export", action="append", metavar="FORMAT", choices=EXPORT_FORMATS,
+                   help="also export the result: usd, pc2, obj or html (repeatable; see "
+                        "'casadi-keyframe export')")
+
+
+def _export_parser(sub) -> None:
+    """The ``export`` command."""
+    e = sub.add_parser("export", help="write a saved result as USD, a PC2 point cache, an OBJ "
+                                      "sequence or the HTML viewer")
+    e.add_argument("results", help="results folder (with result.npz), or the result.npz")
+    e.add_argument("--format", action="append", required=True, choices=EXPORT_FORMATS,
+                   help="usd: NAME.usd, one stage (needs casadi_keyframe[usd]); pc2: NAME.pc2 "
+                        "and its rest mesh NAME_rest.obj (Blender's Mesh Cache modifier); "
+                        "obj: obj/NAME_0000.obj ... one per frame; html: viewer.html (needs "
+                        "casadi_keyframe[viewer]); repeatable")
+    e.add_argument("--out", help="output folder (default: the results folder)")
+    e.set_defaults(func=cmd_export)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -248,14 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "target by the miss left (hard keyframes; --maxiter per round)")
     s.add_argument("--weight-growth", type=float, metavar="G",
                    help="multiply the keyframe weights by G per round (a penalty schedule)")
-    s.add_argument("--out", help="output folder (default results/PROBLEM)")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
-    s.add_argument("--no-animation", action="store_true", help="skip the GIF")
-    s.add_argument("--no-viewer", action="store_true",
-                   help="skip viewer.html, the interactive viewer (needs plotly)")
-    s.add_argument("--export", action="append", metavar="FORMAT", choices=EXPORT_FORMATS,
-                   help="also export the result: usd, pc2, obj or html (repeatable; see "
-                        "'casadi-keyframe export')")
+    _output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
                    help="stop the search after this wall time (over all stages and rounds); "
                         "the best result is written, exit code 3")
@@ -271,17 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-animation", action="store_true", help="skip the GIF")
     r.set_defaults(func=cmd_render)
 
-    e = sub.add_parser("export", help="write a saved result as USD, a PC2 point cache, an OBJ "
-                                      "sequence or the HTML viewer")
-    e.add_argument("results", help="results folder (with result.npz), or the result.npz")
-    e.add_argument("--format", action="append", required=True, choices=EXPORT_FORMATS,
-                   help="usd: NAME.usd, one stage (needs casadi_keyframe[usd]); pc2: NAME.pc2 "
-                        "and its rest mesh NAME_rest.obj (Blender's Mesh Cache modifier); "
-                        "obj: obj/NAME_0000.obj ... one per frame; html: viewer.html (needs "
-                        "casadi_keyframe[viewer]); repeatable")
-    e.add_argument("--out", help="output folder (default: the results folder)")
-    e.set_defaults(func=cmd_export)
-
+    _export_parser(sub)
     g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")

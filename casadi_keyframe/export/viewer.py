@@ -87,7 +87,8 @@ def build_3d(go, scene):
     groups = {"targets": [], "colliders": [], "trails": []}
     plist = panels(scene)
     el, az = np.radians(scene.camera)
-    eye = (1.45 if len(plist) == 1 else 1.8) * np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+    eye = (1.45 if len(plist) == 1 else 1.8) * np.array(
+        [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
     for i, (panel, (mid, half)) in enumerate(zip(plist, equal_boxes(plist))):
         sid = "scene" if i == 0 else f"scene{i + 1}"
 

@@ -1,5 +1,5 @@
-"""The ``casadi-keyframe`` command line: list, show, solve, render and gradcheck problems;
-print studies."""
+"""The ``casadi-keyframe`` command line: list, show, solve, render, export and gradcheck
+problems; print studies."""
 from __future__ import annotations
 
 import argparse
@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from .adjoints import ROUTES as GRADIENT_ROUTES
+from .export import FORMATS as EXPORT_FORMATS
 from .loading import (OverrideError, build_problem, check_overrides, list_problems,
                       load_module, load_problem, overrides_of, resolve, solve_defaults)
-from .run import EXIT_CODES, SolveRun, run_render, run_solve
+from .run import EXIT_CODES, SolveRun, run_export, run_render, run_solve
 from .state import SimulationError
 
 
@@ -140,6 +141,10 @@ def format_value(value) -> str:
 
 
 def cmd_solve(args) -> int:
+    from .export import check_library
+
+    for fmt in args.export or ():
+        check_library(fmt)  # before the solve, not after it
     module = load_module(args.problem)
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
@@ -159,11 +164,16 @@ def cmd_solve(args) -> int:
         overrides=overrides, method=method, gradient=gradient, maxiter=maxiter,
         continuation=continuation, rounds=rounds,
         time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
-        animation=not args.no_animation))
+        animation=not args.no_animation, exports=tuple(args.export or ()),
+        viewer=not args.no_viewer))
 
 
 def cmd_render(args) -> int:
     return run_render(args.results, animation=not args.no_animation)
+
+
+def cmd_export(args) -> int:
+    return run_export(args.results, args.format, out=args.out)
 
 
 def cmd_gradcheck(args) -> int:
@@ -210,6 +220,32 @@ def cmd_study(args) -> int:
     return 0
 
 
+def _output_options(s) -> None:
+    """``solve``'s options for what it writes."""
+    s.add_argument("--out", help="output folder (default results/PROBLEM)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    s.add_argument("--no-viewer", action="store_true",
+                   help="skip viewer.html, the interactive viewer (needs plotly)")
+    s.add_argument("--export", action="append", metavar="FORMAT", choices=EXPORT_FORMATS,
+                   help="also export the result: usd, pc2, obj or html (repeatable; see "
+                        "'casadi-keyframe export')")
+
+
+def _export_parser(sub) -> None:
+    """The ``export`` command."""
+    e = sub.add_parser("export", help="write a saved result as USD, a PC2 point cache, an OBJ "
+                                      "sequence or the HTML viewer")
+    e.add_argument("results", help="results folder (with result.npz), or the result.npz")
+    e.add_argument("--format", action="append", required=True, choices=EXPORT_FORMATS,
+                   help="usd: NAME.usd, one stage (needs casadi_keyframe[usd]); pc2: NAME.pc2 "
+                        "and its rest mesh NAME_rest.obj (Blender's Mesh Cache modifier); "
+                        "obj: obj/NAME_0000.obj ... one per frame; html: viewer.html (needs "
+                        "casadi_keyframe[viewer]); repeatable")
+    e.add_argument("--out", help="output folder (default: the results folder)")
+    e.set_defaults(func=cmd_export)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -238,9 +274,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "target by the miss left (hard keyframes; --maxiter per round)")
     s.add_argument("--weight-growth", type=float, metavar="G",
                    help="multiply the keyframe weights by G per round (a penalty schedule)")
-    s.add_argument("--out", help="output folder (default results/PROBLEM)")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
-    s.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    _output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
                    help="stop the search after this wall time (over all stages and rounds); "
                         "the best result is written, exit code 3")
@@ -256,6 +290,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-animation", action="store_true", help="skip the GIF")
     r.set_defaults(func=cmd_render)
 
+    _export_parser(sub)
     g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
@@ -290,7 +325,7 @@ def main(argv=None) -> int:
         fix = "" if "reduce" in text else "; reduce dt (--set dt=...) or the forces"
         print(f"error: {text}{fix}", file=sys.stderr)
         return 1
-    except (ValueError, TypeError, FileNotFoundError) as err:
+    except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
 

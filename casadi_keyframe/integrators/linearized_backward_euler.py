@@ -9,13 +9,16 @@ modified CG): pinned particles end the step at rest, attached ones at their path
 point.  The model supplies symmetric K and D (as Baraff and Witkin, the position derivative
 of spring damping is left out of K) with -K and -D positive semi-definite (the cloth clamps
 the destabilising parts of its stiffness: compressed springs' transverse term, contact
-curvature), so A is symmetric positive definite for every dt; CG refuses it otherwise.
+curvature), so A is symmetric positive definite for every dt; CG and Cholesky refuse it otherwise.
+The step gathers A's free block from the model's 3x3 blocks into the pass's fixed pattern
+(:meth:`LinearizedBackwardEuler.step_system`), so a sparse Cholesky analyses it once.
 
 Swapped backward step (:meth:`swapped_step_vjp`, the "swapped" gradient route, APPROXIMATE):
 the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D), a
-3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler, ``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the
-adjoint variables.  Its Jacobians belong to the step's end state n+1, so its matrix is the A
-the forward pass builds there (recomputed, not stored, to keep memory at O(particles x steps)):
+3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler,
+``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the adjoint variables.  Its Jacobians
+belong to the step's end state n+1, so its matrix is the A the forward pass factorised at
+step n+1 (its factor reused when the forward pass kept it, else made again):
 
     w   = a_v(n+1) + dt a_x(n+1)
     A^T mu = w            (free components; mu = 0 on pinned and attached ones)

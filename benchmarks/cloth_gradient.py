@@ -18,6 +18,7 @@ acceleration on every particle; 100 steps of 1/60 s.
 
     .venv/bin/python benchmarks/cloth_gradient.py [--sizes 20 50 100] [--steps 100]
         [--repeat 3] [--solvers cholmod direct cg] [--collider sphere|none]
+        [--max-factor-gb 2]
 """
 import argparse
 import json
@@ -38,14 +39,15 @@ def sphere_center(t):
     return np.array([0.5, 0.23 - 0.06 * t, -0.8])
 
 
-def build(k: int, steps: int, collider: str, solver: str):
+def build(k: int, steps: int, collider: str, solver: str, max_factor_gb: float = 2.0):
     """A k x k hanging sheet (1 m, 1 kg, no ground) swung forward and up."""
     from casadi_keyframe.integrators import LinearizedBackwardEuler
     from casadi_keyframe.models.colliders import Sphere
     from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
     colliders = [Sphere(sphere_center, 0.2)] if collider == "sphere" else []
     return swing_problem(hanging_sheet(k, ground=False, colliders=colliders), steps, 1 / 60,
-                         LinearizedBackwardEuler(solver=solver),
+                         LinearizedBackwardEuler(solver=solver,
+                                                 max_factor_memory=max_factor_gb * 2 ** 30),
                          reach=(0.0, 0.3, 0.1), midway=(0.0, 0.2, 0.0), name=f"cloth{k}")
 
 
@@ -61,9 +63,10 @@ def timed(fn) -> tuple[float, float]:
     return time.process_time() - cpu, time.perf_counter() - wall
 
 
-def measure(k: int, steps: int, collider: str, solver: str, repeat: int) -> dict:
+def measure(k: int, steps: int, collider: str, solver: str, repeat: int,
+            max_factor_gb: float) -> dict:
     """One (size, solver) in this process: medians of CPU and wall seconds per pass."""
-    prob = build(k, steps, collider, solver)
+    prob = build(k, steps, collider, solver, max_factor_gb)
     u = random_controls(prob)
     prob.simulate(u, records=False)  # compiles the kernels; a SimulationError propagates
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
@@ -88,7 +91,8 @@ def measure(k: int, steps: int, collider: str, solver: str, repeat: int) -> dict
 def run_child(k: int, solver: str, args) -> dict:
     """:func:`measure` in a fresh interpreter with one BLAS thread (its own peak RSS)."""
     cmd = [sys.executable, __file__, "--child", str(k), solver, "--steps", str(args.steps),
-           "--repeat", str(args.repeat), "--collider", args.collider]
+           "--repeat", str(args.repeat), "--collider", args.collider,
+           "--max-factor-gb", str(args.max_factor_gb)]
     done = subprocess.run(cmd, env={**os.environ, **SINGLE_THREAD}, capture_output=True,
                           text=True)
     if done.returncode:
@@ -125,13 +129,17 @@ def main():
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--solvers", nargs="+", default=["cholmod", "direct", "cg"])
     ap.add_argument("--collider", choices=["sphere", "none"], default="sphere")
+    ap.add_argument("--max-factor-gb", type=float, default=2.0,
+                    help="the integrator's max_factor_memory in GiB (default: its own, 2)")
     ap.add_argument("--child", nargs=2, metavar=("SIZE", "SOLVER"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         k, solver = int(args.child[0]), args.child[1]
-        print(json.dumps(measure(k, args.steps, args.collider, solver, args.repeat)))
+        print(json.dumps(measure(k, args.steps, args.collider, solver, args.repeat,
+                                 args.max_factor_gb)))
         return
-    print(f"Cloth, {args.steps} steps of 1/60 s, collider: {args.collider}; median of "
+    print(f"Cloth, {args.steps} steps of 1/60 s, collider: {args.collider}, factors kept up to "
+          f"{args.max_factor_gb:g} GiB; median of "
           f"{args.repeat} rounds, one process and one BLAS thread per row; CPU s = "
           "process_time; ratios = gradient CPU / forward CPU; peak MB = growth of peak RSS "
           "over the gradients; kept MB = factorisations the forward pass kept")

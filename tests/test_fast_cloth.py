@@ -77,7 +77,13 @@ def test_every_solver_follows_cg(solver, controls, reference):
         assert np.linalg.norm(g - g_cg) < 1e-6 * np.linalg.norm(g_cg), route
 
 
-@pytest.mark.parametrize("solver", SOLVERS + ["cg"])
+def test_cg_keeps_nothing(controls):
+    """Keeping CG's prepared matrix would save one assembly per derivative step, next to
+    hundreds of iterations: not worth its memory."""
+    assert all(r.factor is None for r in busy_problem("cg").simulate(controls).records)
+
+
+@pytest.mark.parametrize("solver", SOLVERS)
 def test_kept_factors_change_no_gradient(solver, controls):
     """The derivative passes give the same numbers whether they reuse the forward pass's
     factorisations or make their own (max_factor_memory=0 keeps none)."""

@@ -131,9 +131,9 @@ class LinearizedBackwardEuler(Integrator):
     "direct" (SuperLU), "cg" (modified PCG) or a solver object (:mod:`casadi_keyframe.linear`);
     ``tol`` is CG's relative tolerance for the steps and ``adjoint_tol`` for the backward and
     tangent steps' solves: a gradient needs fewer digits than a trajectory.  A forward pass
-    that keeps its records keeps each step's prepared matrix in them while their total stays
-    within ``max_factor_memory`` bytes, and the backward and tangent steps solve with those
-    instead of assembling and factorising again.
+    that keeps its records keeps each step's factorisation in them (direct solvers) while
+    their total stays within ``max_factor_memory`` bytes, and the backward and tangent steps
+    solve with those instead of assembling and factorising again.
     """
 
     name = "linearized_backward_euler"
@@ -190,7 +190,8 @@ class LinearizedBackwardEuler(Integrator):
         A, K = self.step_system(model, x, v, t, dt, work, interactions=contacts)
         b = dt * ((model.forces(x, v, t, contacts) + external).ravel() + dt * K.matvec(v).ravel())
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
-        keep = work.keep and work.kept_bytes < self.max_factor_memory
+        keep = (work.keep and work.plan.worth_keeping
+                and work.kept_bytes < self.max_factor_memory)
         factor = self._factor(work, A, n, keep)
         if keep and work.kept_bytes + factor.nbytes > self.max_factor_memory:
             keep = False  # known only now for the first factor of a pattern

@@ -33,6 +33,7 @@ class ModifiedPCG:
 @dataclass(frozen=True)
 class PCGPlan(Plan):
     solver: ModifiedPCG
+    worth_keeping = False  # reuse saves one assembly, next to hundreds of iterations
 
     def factor(self, A, keep: bool = False) -> "JacobiPreconditioned":
         """The matrix with its Jacobi preconditioner; refuses a non-positive diagonal.

@@ -59,9 +59,12 @@ class System:
 
 @dataclass(frozen=True)
 class Plan:
-    """What a solver keeps for every matrix of one pass: the free components."""
+    """What a solver keeps for every matrix of one pass: the free components.
+    ``worth_keeping``: whether a prepared matrix saves enough work when reused (a derivative
+    pass) to be kept in memory."""
 
     free: np.ndarray
+    worth_keeping = True
 
     @property
     def free_index(self) -> np.ndarray:

@@ -175,11 +175,11 @@ class LinearizedBackwardEuler(Integrator):
         product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
         return (System(block, product, product, pattern.pattern), K, *df_dx)
 
-    def _factor(self, work, system, n: int, keep: bool = False):
+    def _factor(self, work, system, n: int, keep: bool = False, what: str = "step"):
         try:
             return work.factor(system, keep)
         except SolveError as err:
-            raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
+            raise SimulationError(f"{what} {n + 1}: {err}", n + 1) from err
 
     def step(self, model, state, external, n, dt, work=None):
         """Step ``n`` (from t = n dt) under ``external`` (``(n, 3)``); raises SimulationError
@@ -251,7 +251,7 @@ class LinearizedBackwardEuler(Integrator):
             factor = later.factor
         else:
             A, _, df_dx = self.step_system(model, end.x, end.v, t, dt, work, True, contacts)
-            factor = self._factor(work, A, n)
+            factor = self._factor(work, A, n, what="derivative of step")
         mu = self._derivative_solve(work, factor, av + dt * ax, n, transpose=True)
         ax = free * (ax + dt * df_dx.matvec(mu, transpose=True).ravel())
         av = free * (mass_diagonal(model) * mu)
@@ -264,7 +264,7 @@ class LinearizedBackwardEuler(Integrator):
             return record.factor, K
         A, K = self.step_system(model, start.x, start.v, t, dt, work,
                                 interactions=record.interactions)
-        return self._factor(work, A, n), K
+        return self._factor(work, A, n, what="derivative of step"), K
 
     def _derivative_solve(self, work, factor, b, n: int, transpose: bool):
         """A solve of a backward or tangent step, warm-started from the pass's last one."""

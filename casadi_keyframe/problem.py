@@ -198,13 +198,18 @@ class ControlProblem:
         return float(np.vdot(gx, dx) + np.vdot(gv, dv) + self.control_cost(u)[1] @ du)
 
     def breakdown(self, u, traj: Trajectory | None = None) -> dict:
-        """Objective split into keyframe error and control cost, plus per-term misses."""
+        """Objective split into keyframe error and control cost, plus per-term misses and,
+        for a model that reports it (cloth), whether the motion stays physical
+        (``physical``: largest spring stretch, deepest penetration of a collider)."""
         traj = self.simulate(u, records=False) if traj is None else traj
         keyframe = self.state_cost(traj, gradient=False)[0]
         control = self.control_cost(u)[0]
-        return {"objective": keyframe + control, "keyframe_error": keyframe,
-                "control_cost": control, "control_norm": float(np.linalg.norm(u)),
-                "misses": [t.miss(traj) for t in self.objective_terms.state_terms]}
+        out = {"objective": keyframe + control, "keyframe_error": keyframe,
+               "control_cost": control, "control_norm": float(np.linalg.norm(u)),
+               "misses": [t.miss(traj) for t in self.objective_terms.state_terms]}
+        if hasattr(self.model, "physical_report"):
+            out["physical"] = self.model.physical_report(traj.x, traj.dt)
+        return out
 
     # -- the control terms, compiled -------------------------------------------------------
     def _compile_control_terms(self) -> ca.Function:

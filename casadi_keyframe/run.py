@@ -97,8 +97,9 @@ def _solve(spec: SolveRun, caught, done) -> int:
     except SimulationError as err:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
+    physical = f"; {format_physical(start['physical'])}" if "physical" in start else ""
     print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
-          f"{start['objective']:.6g}; {format_misses(start['misses'])}")
+          f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}")
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
             "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient}
     done.started = True
@@ -186,6 +187,8 @@ def report(result, summary, out) -> None:
             print("  " + format_stage(st))
     for miss in summary["breakdown"]["misses"]:
         print(f"  {format_misses([miss])}")
+    if "physical" in summary["breakdown"]:
+        print(f"  {format_physical(summary['breakdown']['physical'])}")
     print(f"  result written to {out}/{RESULT} and summary.json")
 
 
@@ -237,6 +240,13 @@ def format_stage(stage: dict) -> str:
     if stage.get("misses"):
         line += "; " + format_misses(stage["misses"])
     return line + (f"; {stage['message']}" if stage.get("message") else "")
+
+
+def format_physical(report: dict) -> str:
+    """``physical: largest stretch 1.16 (frame 30), deepest in a body 4.1 mm (frame 52)``."""
+    return (f"physical: largest stretch {report['max_stretch']:.3g} (frame "
+            f"{report['max_stretch_frame']}), deepest in a body "
+            f"{1e3 * report['max_penetration']:.3g} mm (frame {report['max_penetration_frame']})")
 
 
 def format_misses(misses) -> str:

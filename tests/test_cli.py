@@ -55,7 +55,10 @@ def test_solve_in_augmented_lagrangian_rounds(tmp_path, capsys):
     assert "start (passive): objective" in text and "rms_position_error" in text
     assert "round 0: weight x1," in text and "round 1: weight x10," in text
     assert text.count("iteration limit reached (5)") >= 3  # each round's message, the result's
+    assert text.count("physical: largest stretch") == 2  # the start's and the result's
     summary = json.loads((out / "summary.json").read_text())
+    physical = summary["breakdown"]["physical"]
+    assert physical["max_stretch"] >= 1 and physical["max_penetration"] >= 0
     assert [s["weight_scale"] for s in summary["stages"]] == [1.0, 10.0]
     assert summary["message"].startswith("2 augmented-Lagrangian rounds")
 

@@ -168,3 +168,23 @@ def test_a_sphere_sweeping_through_the_sheet_stays_stable():
     gap = np.linalg.norm(traj.x - centers[:, None], axis=2) - sphere.radius
     assert gap.min() > -0.03 and model.max_stretch(traj.x[-1]) < 1.5
     assert traj.x[-1, :, 1].max() > 0.5  # the sheet was pushed along
+
+
+def test_physical_report_finds_the_deepest_particle_and_the_largest_stretch():
+    """A 3 x 3 sheet (spacing 0.5 m): a sphere dips 0.2 m into its middle particle at frame 1
+    and leaves; a spring is stretched 1.5x at frame 2; plane and capsule depths by their
+    geometry."""
+    ball = Sphere(lambda t: np.array([0.5, 0.5, 0.3 - 4 * t + 20 * t ** 2]), 0.3)
+    ground = Plane((0, 0, -1.0), (0, 0, 1))
+    rod = Capsule((-5.0, 0, 0), (-5.0, 2, 0), 0.1)
+    model = ClothModel.grid(3, 3, plane="xy", colliders=[ball, ground, rod])
+    x = np.repeat(model.rest_positions[None], 3, axis=0)
+    x[2, 0] -= [0.25, 0, 0]  # the spring from particle 0 to 1 (rest 0.5) is now 0.75 long
+    report = model.physical_report(x, 0.1)
+    assert report["max_penetration"] == pytest.approx(0.2, abs=1e-9)
+    assert report["max_penetration_frame"] == 1
+    assert report["max_stretch"] == pytest.approx(1.5, rel=1e-3) and report["max_stretch_frame"] == 2
+    assert model.penetration(model.rest_positions - [0, 0, 1.05], 0.2) == pytest.approx(0.05)
+    inside_rod = model.rest_positions.copy()
+    inside_rod[8] = [-5.0, 1.0, 0.07]
+    assert model.penetration(inside_rod, 0.2) == pytest.approx(0.03)

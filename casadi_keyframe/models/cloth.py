@@ -309,6 +309,8 @@ class ClothModel:
         # mapped kernels of every collider and of self-contact (compiled at first use)
         self._bodies = tuple({k: MappedKernel(b.kernels[k], jit=self.jit) for k in KERNELS}
                              for b in self.colliders)
+        self._distances = tuple(MappedKernel(b.kernels["distance"], jit=False)
+                                for b in self.colliders)  # for reports: not worth compiling
         self._pairs = (None if self._self is None else
                        {k: MappedKernel(SelfContact.kernels[k], jit=self.jit) for k in KERNELS})
         self.attachments = tuple(self.attachments)
@@ -421,6 +423,23 @@ class ClothModel:
         """The largest spring length over rest length (1 at rest); a blow-up shows here first."""
         s = self.springs
         return float((np.linalg.norm(pair_difference(x, s.i, s.j), axis=1) / s.rest).max())
+
+    def penetration(self, x: np.ndarray, t: float = 0.0) -> float:
+        """How deep (m) the deepest particle is inside a collider at time t (0 if none is)."""
+        deepest = 0.0
+        for body, kernel in zip(self.colliders, self._distances):
+            (phi,) = kernel(x, np.zeros_like(x), *body.inputs(self.n, t))
+            deepest = max(deepest, float(-phi.min()))
+        return deepest
+
+    def physical_report(self, x: np.ndarray, dt: float) -> dict:
+        """Whether the frames ``x`` (``(frames, n, 3)``, ``dt`` apart) stay physical: the
+        largest spring stretch (length over rest length) and the deepest particle inside a
+        collider (m), each with the frame where it happens."""
+        stretch = [self.max_stretch(frame) for frame in x]
+        depth = [self.penetration(frame, k * dt) for k, frame in enumerate(x)]
+        return {"max_stretch": max(stretch), "max_stretch_frame": int(np.argmax(stretch)),
+                "max_penetration": max(depth), "max_penetration_frame": int(np.argmax(depth))}
 
     @functools.cached_property
     def step_pattern(self) -> BlockPattern:

@@ -73,13 +73,17 @@ def penalty_law(phi, normal, rel_v, gains, x):
 
 
 def _body_kernels(name: str, geometry: dict, distance) -> dict[str, ca.Function]:
-    """Kernels of a body; ``distance(x, **geometry) -> (phi, normal, v_body)``."""
+    """Kernels of a body; ``distance(x, **geometry) -> (phi, normal, v_body)``.  Beside the
+    interaction kernels, ``distance`` gives the signed distance phi to the surface (negative
+    inside the body), with the same inputs."""
     x, v = ca.SX.sym("x", 3), ca.SX.sym("v", 3)
     geo = {key: ca.SX.sym(key, size) for key, size in geometry.items()}
     gains = ca.SX.sym("gains", 4)
     phi, normal, v_body = distance(x, **geo)
-    return interaction_kernels(name, x, v, [*geo.values(), gains],
-                               *penalty_law(phi, normal, v - v_body, gains, x))
+    kernels = interaction_kernels(name, x, v, [*geo.values(), gains],
+                                  *penalty_law(phi, normal, v - v_body, gains, x))
+    kernels["distance"] = ca.Function(f"{name}_distance", [x, v, *geo.values(), gains], [phi])
+    return kernels
 
 
 def _point(value, name: str):

@@ -1,0 +1,169 @@
+"""Run a sweep's points on Dask distributed: a local cluster of worker processes by default,
+or any running cluster given by its scheduler's address (the library never starts remote
+machines: ``dask scheduler`` / ``dask worker``, ``dask-jobqueue`` or a Kubernetes operator do).
+
+Each point is one task, run by :func:`.tasks.run_task` on a worker with one thread (CasADi
+and the optimizers hold the GIL: more threads per process would only queue).  Dask's own
+fault handling is used as it is: a worker that dies (killed, out of memory) loses only the
+points it was running, which the scheduler gives to another worker, up to its
+``allowed-failures`` (``tries - 1`` for the local cluster); a point past that is reported
+failed with the reason.  SIGINT and SIGTERM stop the sweep at the next poll
+(:mod:`..interrupts`): waiting points are cancelled, the finished ones are on disk.
+"""
+from __future__ import annotations
+
+import contextlib
+import logging
+import os
+import signal
+from pathlib import Path
+
+from ..interrupts import Interrupted, catching, check
+from ..io import write_json
+from .progress import Progress
+from .tasks import ERROR, ROW, run_task
+
+POLL_SECONDS = 0.5
+INSTALL_HINT = ("the sweep runs on Dask distributed, which is not installed: "
+                "pip install 'casadi_keyframe[sweep]'")
+
+
+def _distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise ValueError(INSTALL_HINT) from None
+    return distributed
+
+
+@contextlib.contextmanager
+def connect(*, workers: int | None = None, scheduler: str | None = None, tries: int = 3,
+            timeout: float = 10.0):
+    """A Dask client: of the running cluster at ``scheduler``, or of a new local cluster of
+    ``workers`` processes (default one per core), one thread each, listening on loopback
+    only, where a point may be started ``tries`` times before it is reported failed.  The
+    local workers ignore SIGINT, so Ctrl-C reaches only this process, which stops them."""
+    distributed = _distributed()
+    if tries < 1:
+        raise ValueError(f"--tries must be at least 1, got {tries}")
+    if scheduler:
+        with _client_of(distributed, scheduler, timeout) as client:
+            yield client
+        return
+    import dask
+
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:  # the worker processes inherit the ignored SIGINT
+        with dask.config.set({"distributed.scheduler.allowed-failures": tries - 1}):
+            cluster = distributed.LocalCluster(
+                n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                processes=True, host="127.0.0.1", dashboard_address=None,
+                silence_logs=logging.ERROR)
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    try:
+        with distributed.Client(cluster) as client:
+            yield client
+    finally:
+        cluster.close()
+
+
+@contextlib.contextmanager
+def _client_of(distributed, address: str, timeout: float):
+    """A client of the scheduler at ``address`` with at least one worker, or ValueError."""
+    try:
+        client = distributed.Client(address, timeout=timeout)
+    except (OSError, ValueError, TypeError) as err:
+        raise ValueError(f"--scheduler {address}: cannot reach a Dask scheduler there "
+                         f"({type(err).__name__}: {' '.join(str(err).split())[:200]}); give "
+                         "the address 'dask scheduler' printed, e.g. tcp://10.0.0.5:8786, "
+                         "or leave --scheduler out to start a local cluster") from None
+    try:
+        try:
+            client.wait_for_workers(1, timeout=timeout)
+        except (TimeoutError, OSError):
+            raise ValueError(f"--scheduler {address}: the scheduler has no workers; start "
+                             f"some with 'dask worker {address} --nthreads 1'") from None
+        yield client
+    finally:
+        client.close()
+
+
+def check_workers(client, folder: Path) -> int:
+    """The number of worker threads; ValueError if a worker cannot import this library or
+    cannot see ``folder`` (a remote cluster needs a filesystem shared with this machine)."""
+    try:
+        seen = client.run(_sees, str(folder))
+    except Exception as err:  # noqa: BLE001 - unpickling fails on a worker without the library
+        raise ValueError(f"the workers cannot run casadi_keyframe ({type(err).__name__}: "
+                         f"{err}); install the same version on every worker") from None
+    blind = sorted(w for w, ok in seen.items() if not ok)
+    if blind:
+        raise ValueError(f"worker(s) {', '.join(blind)} cannot see the output folder {folder}: "
+                         "on a remote cluster --out must be on a filesystem the workers "
+                         "share with this machine, at the same path")
+    return sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+
+
+def _sees(folder: str) -> bool:
+    return os.path.isdir(folder)
+
+
+def run_specs(client, specs: list[dict], *, progress: Progress, slots: int = 1):
+    """Run every point spec on the cluster; ``(rows, signum)``: the rows of the points that
+    finished (failed ones included, with their reason) and the signal that stopped the
+    sweep early, or None."""
+    distributed = _distributed()
+    futures = {client.submit(run_task, spec, key=f"point-{spec['id']}", pure=False): spec
+               for spec in specs}
+    rows, pending, signum = [], set(futures), None
+    with catching():
+        try:
+            while pending:
+                check()
+                try:
+                    done, pending = distributed.wait(pending, timeout=POLL_SECONDS,
+                                                     return_when="FIRST_COMPLETED")
+                except TimeoutError:
+                    done = set()
+                for future in done:
+                    row = _row_of(future, futures[future])
+                    rows.append(row)
+                    progress.point(row, running=_running(client, pending), slots=slots)
+                if not done:
+                    progress.status(_running(client, pending), slots)
+        except (Interrupted, KeyboardInterrupt) as err:
+            signum = getattr(err, "signum", signal.SIGINT)
+            client.cancel(list(pending))
+    return rows, signum
+
+
+def _row_of(future, spec: dict) -> dict:
+    """The row a finished task returned, or for a task Dask gave up on (its workers died,
+    or the task could not run) a row with status ``error`` and the reason, written to the
+    point's folder so the table and ``--resume`` see it."""
+    if future.status == "finished":
+        row = future.result()
+    else:
+        err = future.exception() if future.status == "error" else None
+        name = type(err).__name__ if err is not None else future.status
+        if name == "KilledWorker":
+            reason = ("every worker that started it died (killed, out of memory or crashed); "
+                      "see the workers' logs, give the workers more memory or raise --tries")
+        else:
+            reason = f"{name}: {' '.join(str(err).split())}" if err is not None else name
+        row = {"point": spec["name"], **spec["values"], "start": spec.get("start", 0),
+               "status": ERROR, "reason": reason, "seconds": 0.0,
+               "path": spec["folder"], "spec_id": spec["id"]}
+        Path(spec["folder"]).mkdir(parents=True, exist_ok=True)
+        write_json(Path(spec["folder"]) / ROW, row)
+    return {**row, "label": spec["label"]}
+
+
+def _running(client, pending) -> int:
+    """How many of the ``pending`` points a worker is running now."""
+    keys = {f.key for f in pending}
+    try:
+        return sum(len(keys.intersection(k)) for k in client.processing().values())
+    except Exception:  # noqa: BLE001 - the display must never stop the sweep
+        return 0

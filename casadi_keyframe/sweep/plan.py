@@ -82,7 +82,7 @@ def sweep(problem, grid: dict, *, out, starts: int = 1, overrides: dict | None =
     runner = {k: options.pop(k) for k in run_keys if k in options}
     module = load_module(problem)
     overrides = dict(overrides or {})
-    check_grid(module, grid, overrides)
+    grid = check_grid(module, grid, overrides)
     if figure not in FIGURES:
         raise ValueError(f"--figure {figure!r}: choose one of {', '.join(FIGURES)}")
     file = str(resolve(module.__file__).resolve())
@@ -102,18 +102,21 @@ def sweep(problem, grid: dict, *, out, starts: int = 1, overrides: dict | None =
     return run_plan(Plan(specs, Path(out), keys, figure, group_by, about), **runner)
 
 
-def check_grid(module, grid: dict, overrides: dict) -> None:
-    """Refuse a grid key that is also a ``--set`` override, or a key or value ``build``
-    would refuse (named as :func:`..loading.check_overrides` names it)."""
+def check_grid(module, grid: dict, overrides: dict) -> dict:
+    """The grid with its values converted as ``build`` gets them (``1`` to ``1.0`` for a
+    float), so typing a value twice is caught; refuses a key that is also a ``--set``
+    override, or a key or value ``build`` would refuse (named as
+    :func:`..loading.check_overrides` names it)."""
     both = sorted(set(grid) & set(overrides))
     if both:
         raise ValueError(f"{', '.join(both)} given both in --grid and --set: keep one")
+    out = {}
     for key, values in grid.items():
-        for value in values:
-            try:
-                check_overrides(module, {key: value})
-            except OverrideError as err:
-                raise OverrideError(f"--grid {key}: {err}", err.problem) from None
+        try:
+            out[key] = [check_overrides(module, {key: value})[key] for value in values]
+        except OverrideError as err:
+            raise OverrideError(f"--grid {key}: {err}", err.problem) from None
+    return out
 
 
 def check_group_by(group_by, keys) -> list:
@@ -143,15 +146,21 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
     if todo:
         with connect(workers=workers, scheduler=scheduler, tries=tries,
                      timeout=timeout) as client:
-            slots = check_workers(client, folder.resolve())
+            slots = check_workers(client, [folder.resolve(), *_files(todo)])
             shown = Progress(len(todo), skipped=len(plan.specs) - len(todo),
                              enabled=progress)
             _, signum = run_specs(client, todo, progress=shown, slots=slots)
             shown.close()
     elif progress:
         print(f"sweep: all {len(plan.specs)} points are complete already")
-    return _finish(plan, signum, time.monotonic() - started, scheduler or f"local, "
-                   f"{workers or 'one per core'} workers")
+    where = scheduler or ("local, one worker per core" if workers is None else
+                          f"local, {workers} worker{'s' * (workers != 1)}")
+    return _finish(plan, signum, time.monotonic() - started, where)
+
+
+def _files(specs) -> set:
+    """The problem files the points load (none for a study)."""
+    return {s["problem_file"] for s in specs if "problem_file" in s}
 
 
 def spec_id(spec: dict) -> str:

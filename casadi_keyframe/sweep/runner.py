@@ -16,6 +16,7 @@ import contextlib
 import logging
 import os
 import signal
+import threading
 from pathlib import Path
 
 from ..interrupts import Interrupted, catching, check
@@ -52,20 +53,29 @@ def connect(*, workers: int | None = None, scheduler: str | None = None, tries: 
         return
     import dask
 
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:  # the worker processes inherit the ignored SIGINT
-        with dask.config.set({"distributed.scheduler.allowed-failures": tries - 1}):
-            cluster = distributed.LocalCluster(
-                n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
-                processes=True, host="127.0.0.1", dashboard_address=None,
-                silence_logs=logging.ERROR)
-    finally:
-        signal.signal(signal.SIGINT, previous)
+    with _ignoring_sigint(), dask.config.set(  # the worker processes inherit the ignoring
+            {"distributed.scheduler.allowed-failures": tries - 1}):
+        cluster = distributed.LocalCluster(
+            n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
+            host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
     try:
         with distributed.Client(cluster) as client:
             yield client
     finally:
         cluster.close()
+
+
+@contextlib.contextmanager
+def _ignoring_sigint():
+    """SIGINT ignored within the block (in the main thread; elsewhere it cannot be set)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 @contextlib.contextmanager
@@ -89,24 +99,26 @@ def _client_of(distributed, address: str, timeout: float):
         client.close()
 
 
-def check_workers(client, folder: Path) -> int:
+def check_workers(client, paths) -> int:
     """The number of worker threads; ValueError if a worker cannot import this library or
-    cannot see ``folder`` (a remote cluster needs a filesystem shared with this machine)."""
+    cannot see one of ``paths`` (the output folder, the problem file: a remote cluster needs
+    a filesystem shared with this machine, at the same paths)."""
     try:
-        seen = client.run(_sees, str(folder))
+        unseen = client.run(_unseen, [str(p) for p in paths])
     except Exception as err:  # noqa: BLE001 - unpickling fails on a worker without the library
         raise ValueError(f"the workers cannot run casadi_keyframe ({type(err).__name__}: "
                          f"{err}); install the same version on every worker") from None
-    blind = sorted(w for w, ok in seen.items() if not ok)
+    blind = {w: missing for w, missing in unseen.items() if missing}
     if blind:
-        raise ValueError(f"worker(s) {', '.join(blind)} cannot see the output folder {folder}: "
-                         "on a remote cluster --out must be on a filesystem the workers "
-                         "share with this machine, at the same path")
+        worker, missing = sorted(blind.items())[0]
+        raise ValueError(f"{len(blind)} worker(s), e.g. {worker}, cannot see {', '.join(missing)}:"
+                         " on a remote cluster --out and the problem file must be on a "
+                         "filesystem the workers share with this machine, at the same paths")
     return sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
 
 
-def _sees(folder: str) -> bool:
-    return os.path.isdir(folder)
+def _unseen(paths: list) -> list:
+    return [p for p in paths if not os.path.exists(p)]
 
 
 def run_specs(client, specs: list[dict], *, progress: Progress, slots: int = 1):

@@ -41,7 +41,7 @@ def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
     module = study_module(study, getattr(importlib.import_module(path), name), ranges)
     overrides = dict(overrides or {})
     try:
-        check_grid(module, grid, overrides)
+        grid = check_grid(module, grid, overrides)
         specs = [{"kind": "study", "function": target, "values": p.values, "start": 0,
                   "name": p.name, "label": p.label,
                   "overrides": check_overrides(module, {**overrides, **p.values})}

@@ -37,16 +37,17 @@ def run_task(spec: dict) -> dict:
     folder = Path(spec["folder"])
     folder.mkdir(parents=True, exist_ok=True)
     start = time.perf_counter()
+    worker = f"{socket.gethostname()}:{os.getpid()}"
     with _log_to(folder / LOG) as log:
+        print(f"point {spec['name']} on worker {worker}", flush=True)
         try:
             row = _KINDS[spec["kind"]](spec, folder)
         except Exception as err:  # noqa: BLE001 - a point's failure is a row, not a crash
             traceback.print_exc(file=log)
             row = {"status": ERROR, "reason": f"{type(err).__name__}: {_one_line(err)}"}
     row = {"point": spec["name"], **spec["values"], "start": spec.get("start", 0), **row,
-           "seconds": time.perf_counter() - start, "worker": f"{socket.gethostname()}:"
-           f"{os.getpid()}", "peak_rss_mb": peak_rss_mb(), "path": str(folder),
-           "spec_id": spec["id"]}
+           "seconds": time.perf_counter() - start, "worker": worker,
+           "peak_rss_mb": peak_rss_mb(), "path": str(folder), "spec_id": spec["id"]}
     write_json(folder / ROW, row)
     return row
 

@@ -18,13 +18,14 @@ from pathlib import Path
 
 from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
-from ..outcome import FAILED, INTERRUPTED, STATUS
+from ..outcome import INTERRUPTED
 from ..run import exit_code
 from .grid import folder_name, points
 from .progress import Progress, format_seconds
 from .runner import check_workers, connect, run_specs
 from .table import best_per_group, write_tables
 from .tasks import ERROR, read_row
+from .tasks import failed as is_failed
 
 POINTS, SUMMARY = "points", "sweep.json"
 FIGURES = ("objective", "keyframe_error", "control_cost", "iterations", "evaluations",
@@ -199,7 +200,7 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
     files = write_tables(rows, plan.out, plan.keys) if rows else []
     picture = sweep_plot(rows, plan.keys, plan.figure, plan.out / "sweep.png")
     files += [picture] if picture else []
-    failed = [r["point"] for r in rows if r.get("status") in (ERROR, STATUS[FAILED])]
+    failed = [r["point"] for r in rows if is_failed(r)]
     best = best_per_group(rows, plan.figure, plan.group_by)
     code = (exit_code(INTERRUPTED, signum) if signum else 1 if failed or missing else 0)
     summary = {**plan.about, "figure": plan.figure, "group_by": plan.group_by,

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sys
 import time
 
-from .tasks import ERROR
+from .tasks import ERROR, failed
 
 
 class Progress:
@@ -26,7 +26,7 @@ class Progress:
     def point(self, row: dict, *, running: int = 0, slots: int = 1) -> None:
         """A point finished (``row`` its table line); redraw the status line."""
         self.done += 1
-        self.failed += row.get("status") == ERROR
+        self.failed += failed(row)
         self.seconds.append(float(row.get("seconds") or 0.0))
         if self.enabled:
             self._line(f"  [{self.done}/{self.total}] {row.get('label', row['point'])}: "

@@ -53,8 +53,11 @@ def connect(*, workers: int | None = None, scheduler: str | None = None, tries: 
         return
     import dask
 
-    with _ignoring_sigint(), dask.config.set(  # the worker processes inherit the ignoring
-            {"distributed.scheduler.allowed-failures": tries - 1}):
+    # the worker processes inherit the ignored SIGINT; a worker is given one point at a
+    # time (saturation 1), so a free worker never waits while points queue on a busy one
+    with _ignoring_sigint(), dask.config.set(
+            {"distributed.scheduler.allowed-failures": tries - 1,
+             "distributed.scheduler.worker-saturation": 1.0}):
         cluster = distributed.LocalCluster(
             n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
             host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
@@ -138,12 +141,13 @@ def run_specs(client, specs: list[dict], *, progress: Progress, slots: int = 1):
                                                      return_when="FIRST_COMPLETED")
                 except TimeoutError:
                     done = set()
+                running = min(_running(client, pending), slots)
                 for future in done:
                     row = _row_of(future, futures[future])
                     rows.append(row)
-                    progress.point(row, running=_running(client, pending), slots=slots)
+                    progress.point(row, running=running, slots=slots)
                 if not done:
-                    progress.status(_running(client, pending), slots)
+                    progress.status(running, slots)
         except (Interrupted, KeyboardInterrupt) as err:
             signum = getattr(err, "signum", signal.SIGINT)
             client.cancel(list(pending))
@@ -173,7 +177,7 @@ def _row_of(future, spec: dict) -> dict:
 
 
 def _running(client, pending) -> int:
-    """How many of the ``pending`` points a worker is running now."""
+    """How many of the ``pending`` points the scheduler has given to a worker."""
     keys = {f.key for f in pending}
     try:
         return sum(len(keys.intersection(k)) for k in client.processing().values())

@@ -26,9 +26,15 @@ import traceback
 from pathlib import Path
 
 from ..io import SUMMARY, write_json
+from ..outcome import FAILED, STATUS
 
 ROW, LOG = "row.json", "log.txt"
 ERROR = "error"  # the status of a point that ended without a result
+
+
+def failed(row: dict) -> bool:
+    """Whether a point failed: no result (status ``error``) or its search failed."""
+    return row.get("status") in (ERROR, STATUS[FAILED])
 
 
 def run_task(spec: dict) -> dict:

@@ -211,3 +211,44 @@ def test_a_study_grid_runs_through_the_same_runner(tmp_path, capsys):
     assert [got[dt]["gap_x"] for dt in expected["dt"]] == expected["gap_x"]
     assert [got[dt]["gap_v"] for dt in expected["dt"]] == expected["gap_v"]
     assert "best (all points): dt=0.016666666666666666" in capsys.readouterr().out
+
+
+CURSED = '''"""A tiny flock whose build fails for k = 3."""
+from casadi_keyframe.scenes.flock_path import flock_path_problem
+
+RANGES = {"k": "[0, 10]"}
+
+
+def build(k: int = 0):
+    if k == 3:
+        raise ValueError("k = 3 is cursed")
+    return flock_path_problem(agents=3, steps=10)
+'''
+
+
+def test_a_failing_point_is_a_row_with_its_reason(tmp_path):
+    from casadi_keyframe.sweep.runner import _row_of
+    from casadi_keyframe.sweep.tasks import read_row, run_task
+
+    path = tmp_path / "cursed.py"
+    path.write_text(CURSED)
+    spec = {"kind": "solve", "problem_file": str(path), "problem_arg": str(path),
+            "overrides": {"k": 3}, "options": {"maxiter": 2}, "values": {"k": 3},
+            "name": "k=3", "label": "k=3", "folder": str(tmp_path / "k=3"), "id": "x"}
+    row = run_task(spec)
+    assert row["status"] == "error" and row["reason"] == "ValueError: k = 3 is cursed"
+    assert read_row(tmp_path / "k=3") == row
+
+    class KilledWorker(Exception):
+        pass
+
+    class Lost:  # a future Dask gave up on: every worker running it died
+        status = "error"
+
+        def exception(self):
+            return KilledWorker("attempted to run task point-y on 3 different workers")
+
+    lost = _row_of(Lost(), {**spec, "name": "k=4", "values": {"k": 4},
+                            "folder": str(tmp_path / "k=4"), "id": "y"})
+    assert lost["status"] == "error" and "died" in lost["reason"] and lost["k"] == 4
+    assert read_row(tmp_path / "k=4")["reason"] == lost["reason"]

@@ -30,6 +30,9 @@ from .tasks import failed as is_failed
 POINTS, SUMMARY = "points", "sweep.json"
 FIGURES = ("objective", "keyframe_error", "control_cost", "iterations", "evaluations",
            "seconds", "solve_seconds")
+SEARCH_OPTIONS = ("method", "gradient", "maxiter", "rounds", "weight_growth", "time_limit",
+                  "continuation")
+RUNNER_OPTIONS = ("workers", "scheduler", "tries", "resume", "progress", "timeout")
 SWEEP_EXIT_CODES = """\
 exit codes:
   0    every point solved (converged, or stopped at --maxiter / --time-limit: the table's
@@ -79,8 +82,8 @@ def sweep(problem, grid: dict, *, out, starts: int = 1, overrides: dict | None =
     into ``out/points/NAME/``.  ``options`` are the search's (``method``, ``gradient``,
     ``maxiter``, ``rounds``, ``weight_growth``, ``time_limit``, ``continuation``) and the
     runner's (``workers``, ``scheduler``, ``tries``, ``resume``, ``progress``)."""
-    run_keys = ("workers", "scheduler", "tries", "resume", "progress", "timeout")
-    runner = {k: options.pop(k) for k in run_keys if k in options}
+    runner = {k: options.pop(k) for k in RUNNER_OPTIONS if k in options}
+    check_search_options(options)
     module = load_module(problem)
     overrides = dict(overrides or {})
     grid = check_grid(module, grid, overrides)
@@ -101,6 +104,22 @@ def sweep(problem, grid: dict, *, out, starts: int = 1, overrides: dict | None =
     about = {"problem": Path(file).stem, "problem_file": file, "grid": grid, "starts": starts,
              "overrides": overrides, "seed": seed, "perturb": perturb, "options": options}
     return run_plan(Plan(specs, Path(out), keys, figure, group_by, about), **runner)
+
+
+def check_search_options(options: dict) -> None:
+    """Refuse an option the search does not take, an unknown method or gradient route, here
+    rather than in every point on the workers."""
+    from ..adjoints import ROUTES
+    from ..optimize import METHODS
+
+    unknown = sorted(set(options) - set(SEARCH_OPTIONS))
+    if unknown:
+        raise TypeError(f"sweep() got unknown option(s) {', '.join(unknown)}; the search "
+                        f"takes {', '.join(SEARCH_OPTIONS)}, the runner "
+                        f"{', '.join(RUNNER_OPTIONS)}")
+    for key, allowed in (("method", METHODS), ("gradient", ROUTES)):
+        if options.get(key) is not None and options[key] not in allowed:
+            raise ValueError(f"{key} {options[key]!r}: choose one of {', '.join(allowed)}")
 
 
 def check_grid(module, grid: dict, overrides: dict) -> dict:

@@ -13,6 +13,7 @@ failed with the reason.  SIGINT and SIGTERM stop the sweep at the next poll
 from __future__ import annotations
 
 import contextlib
+import gc
 import logging
 import os
 import signal
@@ -87,6 +88,10 @@ def _client_of(distributed, address: str, timeout: float):
     try:
         client = distributed.Client(address, timeout=timeout)
     except (OSError, ValueError, TypeError) as err:
+        # the half-made client closes itself when collected: do it now, not inside the
+        # start of the next client (seen: a deadlock in distributed's LoopRunner)
+        err.__traceback__ = None
+        gc.collect()
         raise ValueError(f"--scheduler {address}: cannot reach a Dask scheduler there "
                          f"({type(err).__name__}: {' '.join(str(err).split())[:200]}); give "
                          "the address 'dask scheduler' printed, e.g. tcp://10.0.0.5:8786, "

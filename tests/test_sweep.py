@@ -66,6 +66,8 @@ def test_bad_input_is_refused_before_any_worker_starts(tmp_path, capsys):
     assert main(["sweep", "flock_path", "--grid", "agents=4", "--scheduler", "nonsense",
                  "--out", str(out)]) == 2
     assert "--scheduler nonsense: cannot reach a Dask scheduler" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="--workers sets the size of a local cluster"):
+        sweep("flock_path", {"agents": [4]}, out=out, scheduler="tcp://127.0.0.1:9", workers=2)
     with pytest.raises(TypeError, match="unknown option.* maxiters"):
         sweep("flock_path", {"agents": [4]}, out=out, maxiters=3)
     with pytest.raises(ValueError, match="no workers|cannot reach"):

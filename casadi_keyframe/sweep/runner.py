@@ -49,6 +49,9 @@ def connect(*, workers: int | None = None, scheduler: str | None = None, tries: 
     if tries < 1:
         raise ValueError(f"--tries must be at least 1, got {tries}")
     if scheduler:
+        if workers is not None:
+            raise ValueError("--workers sets the size of a local cluster: with --scheduler "
+                             "the running cluster's own workers solve the points; give one")
         with _client_of(distributed, scheduler, timeout) as client:
             yield client
         return

@@ -42,7 +42,7 @@ def run_task(spec: dict) -> dict:
     ``row.json`` and return the row."""
     folder = Path(spec["folder"])
     folder.mkdir(parents=True, exist_ok=True)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     worker = f"{socket.gethostname()}:{os.getpid()}"
     with _log_to(folder / LOG) as log:
         print(f"point {spec['name']} on worker {worker}", flush=True)
@@ -52,7 +52,8 @@ def run_task(spec: dict) -> dict:
             traceback.print_exc(file=log)
             row = {"status": ERROR, "reason": f"{type(err).__name__}: {_one_line(err)}"}
     row = {"point": spec["name"], **spec["values"], "start": spec.get("start", 0), **row,
-           "seconds": time.perf_counter() - start, "worker": worker,
+           "seconds": time.perf_counter() - start,
+           "cpu_seconds": time.process_time() - cpu, "worker": worker,
            "peak_rss_mb": peak_rss_mb(), "path": str(folder), "spec_id": spec["id"]}
     write_json(folder / ROW, row)
     return row

@@ -166,10 +166,10 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
     if todo:
         with connect(workers=workers, scheduler=scheduler, tries=tries,
                      timeout=timeout) as client:
-            slots = check_workers(client, [folder.resolve(), *_files(todo)])
+            check_workers(client, [folder.resolve(), *_files(todo)])
             shown = Progress(len(todo), skipped=len(plan.specs) - len(todo),
                              enabled=progress)
-            _, signum = run_specs(client, todo, progress=shown, slots=slots)
+            _, signum = run_specs(client, todo, progress=shown)
             shown.close()
     elif progress:
         print(f"sweep: all {len(plan.specs)} points are complete already")

@@ -60,7 +60,7 @@ class Progress:
         if self.live:
             self.stream.write("\r\033[K")
         if self.enabled:
-            self._line(f"sweep: {self.done}/{self.total} solved"
+            self._line(f"sweep: {self.done}/{self.total} finished"
                        + (f", {self.failed} failed" if self.failed else "")
                        + f" in {format_seconds(time.monotonic() - self.started)}")
 

@@ -57,11 +57,9 @@ def connect(*, workers: int | None = None, scheduler: str | None = None, tries: 
         return
     import dask
 
-    # the worker processes inherit the ignored SIGINT; a worker is given one point at a
-    # time (saturation 1), so a free worker never waits while points queue on a busy one
+    # the worker processes inherit the ignored SIGINT
     with _ignoring_sigint(), dask.config.set(
-            {"distributed.scheduler.allowed-failures": tries - 1,
-             "distributed.scheduler.worker-saturation": 1.0}):
+            {"distributed.scheduler.allowed-failures": tries - 1}):
         cluster = distributed.LocalCluster(
             n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
             host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
@@ -125,41 +123,55 @@ def check_workers(client, paths) -> int:
         raise ValueError(f"{len(blind)} worker(s), e.g. {worker}, cannot see {', '.join(missing)}:"
                          " on a remote cluster --out and the problem file must be on a "
                          "filesystem the workers share with this machine, at the same paths")
-    return sum(w.get("nthreads", 1) for w in client.scheduler_info()["workers"].values())
+    return worker_threads(client)
 
 
 def _unseen(paths: list) -> list:
     return [p for p in paths if not os.path.exists(p)]
 
 
-def run_specs(client, specs: list[dict], *, progress: Progress, slots: int = 1):
+def run_specs(client, specs: list[dict], *, progress: Progress):
     """Run every point spec on the cluster; ``(rows, signum)``: the rows of the points that
     finished (failed ones included, with their reason) and the signal that stopped the
-    sweep early, or None."""
+    sweep early, or None.
+
+    Points are handed to the scheduler only as worker threads free up (not all at once: a
+    small group of tasks is not queued by Dask but spread over the workers at once, so a
+    dying worker would take its queued points' tries with it, and "running" would count
+    points that only wait)."""
     distributed = _distributed()
-    futures = {client.submit(run_task, spec, key=f"point-{spec['id']}", pure=False): spec
-               for spec in specs}
-    rows, pending, signum = [], set(futures), None
+    waiting, futures, rows, signum = list(specs), {}, [], None
     with catching():
         try:
-            while pending:
+            while waiting or futures:
                 check()
+                slots = worker_threads(client)
+                while waiting and len(futures) < slots:
+                    spec = waiting.pop(0)
+                    futures[client.submit(run_task, spec, key=f"point-{spec['id']}",
+                                          pure=False)] = spec
                 try:
-                    done, pending = distributed.wait(pending, timeout=POLL_SECONDS,
-                                                     return_when="FIRST_COMPLETED")
+                    done = distributed.wait(list(futures), timeout=POLL_SECONDS,
+                                            return_when="FIRST_COMPLETED").done
                 except TimeoutError:
                     done = set()
-                running = min(_running(client, pending), slots)
                 for future in done:
-                    row = _row_of(future, futures[future])
-                    rows.append(row)
-                    progress.point(row, running=running, slots=slots)
+                    rows.append(_row_of(future, futures.pop(future)))
+                    progress.point(rows[-1], running=len(futures), slots=slots)
                 if not done:
-                    progress.status(running, slots)
+                    progress.status(len(futures), slots)
         except (Interrupted, KeyboardInterrupt) as err:
             signum = getattr(err, "signum", signal.SIGINT)
-            client.cancel(list(pending))
+            client.cancel(list(futures))
     return rows, signum
+
+
+def worker_threads(client) -> int:
+    """The worker threads the cluster has now (at least 1: points wait for a worker)."""
+    try:
+        return max(sum(client.nthreads().values()), 1)
+    except Exception:  # noqa: BLE001 - the count only paces the submissions
+        return 1
 
 
 def _row_of(future, spec: dict) -> dict:
@@ -182,12 +194,3 @@ def _row_of(future, spec: dict) -> dict:
         Path(spec["folder"]).mkdir(parents=True, exist_ok=True)
         write_json(Path(spec["folder"]) / ROW, row)
     return {**row, "label": spec["label"]}
-
-
-def _running(client, pending) -> int:
-    """How many of the ``pending`` points the scheduler has given to a worker."""
-    keys = {f.key for f in pending}
-    try:
-        return sum(len(keys.intersection(k)) for k in client.processing().values())
-    except Exception:  # noqa: BLE001 - the display must never stop the sweep
-        return 0

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import signal
 import time
 import types
 from dataclasses import dataclass, field
@@ -164,13 +165,16 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
         print(f"sweep: {stale} finished point(s) were solved with other settings: solving "
               "them again")
     if todo:
-        with connect(workers=workers, scheduler=scheduler, tries=tries,
-                     timeout=timeout) as client:
-            check_workers(client, [folder.resolve(), *_files(todo)])
-            shown = Progress(len(todo), skipped=len(plan.specs) - len(todo),
-                             enabled=progress)
-            _, signum = run_specs(client, todo, progress=shown)
-            shown.close()
+        try:
+            with connect(workers=workers, scheduler=scheduler, tries=tries,
+                         timeout=timeout) as client:
+                check_workers(client, [folder.resolve(), *_files(todo)])
+                shown = Progress(len(todo), skipped=len(plan.specs) - len(todo),
+                                 enabled=progress)
+                _, signum = run_specs(client, todo, progress=shown)
+                shown.close()
+        except KeyboardInterrupt:  # Ctrl-C while the cluster starts or stops
+            signum = signal.SIGINT
     elif progress:
         print(f"sweep: all {len(plan.specs)} points are complete already")
     where = scheduler or ("local, one worker per core" if workers is None else
@@ -186,7 +190,8 @@ def _files(specs) -> set:
 def spec_id(spec: dict) -> str:
     """A hash of what a point solves (file contents, overrides, options, start): a row with
     another id was solved differently and does not count as this point's result."""
-    what = {k: v for k, v in spec.items() if k not in ("folder", "id", "label", "name")}
+    what = {k: v for k, v in spec.items()
+            if k not in ("folder", "id", "label", "name", "pictures", "problem_arg")}
     return hashlib.sha1(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 

@@ -1,5 +1,5 @@
-"""The ``casadi-keyframe`` command line: list, show, solve, render and gradcheck problems;
-sweep a problem over a grid of overrides; print studies or run their grids."""
+"""The ``casadi-keyframe`` command line: list, show, solve, render, export and gradcheck
+problems; sweep a problem over a grid of overrides; print studies or run their grids."""
 from __future__ import annotations
 
 import argparse
@@ -16,9 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from .adjoints import ROUTES as GRADIENT_ROUTES
+from .export import FORMATS as EXPORT_FORMATS
 from .loading import (OverrideError, check_overrides, list_problems, load_module,
                       load_problem, overrides_of, solve_defaults)
-from .run import EXIT_CODES, run_render, run_solve, solve_run
+from .run import EXIT_CODES, run_export, run_render, run_solve, solve_run
 from .sweep.plan import SWEEP_EXIT_CODES
 from .state import SimulationError
 
@@ -184,6 +185,10 @@ def format_value(value) -> str:
 
 
 def cmd_solve(args) -> int:
+    from .export import check_library
+
+    for fmt in args.export or ():
+        check_library(fmt)  # before the solve, not after it
     module = load_module(args.problem)
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
@@ -192,13 +197,18 @@ def cmd_solve(args) -> int:
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,
                      time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
-                     animation=not args.no_animation)
+                     animation=not args.no_animation, exports=tuple(args.export or ()),
+                     viewer=not args.no_viewer)
     ensure_writable(spec.out)
     return run_solve(spec)
 
 
 def cmd_render(args) -> int:
     return run_render(args.results, animation=not args.no_animation)
+
+
+def cmd_export(args) -> int:
+    return run_export(args.results, args.format, out=args.out)
 
 
 def cmd_gradcheck(args) -> int:
@@ -331,6 +341,32 @@ def _add_sweep_parser(sub) -> None:
     w.set_defaults(func=cmd_sweep)
 
 
+def _output_options(s) -> None:
+    """``solve``'s options for what it writes."""
+    s.add_argument("--out", help="output folder (default results/PROBLEM)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    s.add_argument("--no-viewer", action="store_true",
+                   help="skip viewer.html, the interactive viewer (needs plotly)")
+    s.add_argument("--export", action="append", metavar="FORMAT", choices=EXPORT_FORMATS,
+                   help="also export the result: usd, pc2, obj or html (repeatable; see "
+                        "'casadi-keyframe export')")
+
+
+def _export_parser(sub) -> None:
+    """The ``export`` command."""
+    e = sub.add_parser("export", help="write a saved result as USD, a PC2 point cache, an OBJ "
+                                      "sequence or the HTML viewer")
+    e.add_argument("results", help="results folder (with result.npz), or the result.npz")
+    e.add_argument("--format", action="append", required=True, choices=EXPORT_FORMATS,
+                   help="usd: NAME.usd, one stage (needs casadi_keyframe[usd]); pc2: NAME.pc2 "
+                        "and its rest mesh NAME_rest.obj (Blender's Mesh Cache modifier); "
+                        "obj: obj/NAME_0000.obj ... one per frame; html: viewer.html (needs "
+                        "casadi_keyframe[viewer]); repeatable")
+    e.add_argument("--out", help="output folder (default: the results folder)")
+    e.set_defaults(func=cmd_export)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
     sub = p.add_subparsers(dest="command", required=True)
@@ -359,9 +395,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "target by the miss left (hard keyframes; --maxiter per round)")
     s.add_argument("--weight-growth", type=float, metavar="G",
                    help="multiply the keyframe weights by G per round (a penalty schedule)")
-    s.add_argument("--out", help="output folder (default results/PROBLEM)")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
-    s.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    _output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
                    help="stop the search after this wall time (over all stages and rounds); "
                         "the best result is written, exit code 3")
@@ -377,6 +411,7 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--no-animation", action="store_true", help="skip the GIF")
     r.set_defaults(func=cmd_render)
 
+    _export_parser(sub)
     g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
@@ -426,7 +461,7 @@ def main(argv=None) -> int:
         fix = "" if "reduce" in text else "; reduce dt (--set dt=...) or the forces"
         print(f"error: {text}{fix}", file=sys.stderr)
         return 1
-    except (ValueError, TypeError, FileNotFoundError) as err:
+    except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
 

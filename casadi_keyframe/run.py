@@ -16,9 +16,9 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from .interrupts import NAMES, catching, check
-from .io import CHECKPOINT, RESULT, Checkpoint, read_run, run_file, save_result
+from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from .state import SimulationError, Trajectory
+from .state import SimulationError
 
 EXIT_CODES = """\
 exit codes:
@@ -60,6 +60,8 @@ class SolveRun:
     resume: str | None = None
     quiet: bool = False
     animation: bool = True
+    exports: tuple = ()  # export formats written beside the pictures (see .export)
+    viewer: bool = True  # the HTML viewer (skipped with a note when plotly is missing)
     pictures: bool = True  # False: result files only ('render' draws them later)
     u0: object = None  # starting controls instead of the problem's (a sweep's perturbed start)
 
@@ -142,9 +144,33 @@ def _solve(spec: SolveRun, caught, done) -> int:
     else:
         draw(prob, result.trajectory, result, out, animation=spec.animation)
         print(f"  pictures drawn in {out}/")
+        _write_outputs(spec, result.trajectory)
     _hint(result.status, spec)
     check()  # a signal after the last safe point still counts
     return exit_code(result.status, signum)
+
+
+def _write_outputs(spec: SolveRun, trajectory) -> None:
+    """The viewer and the ``--export`` formats, each file named as it is written."""
+    from .export import write_outputs
+
+    paths = write_outputs(spec.problem, trajectory, spec.out, spec.exports, viewer=spec.viewer)
+    if paths:
+        shown = [str(p) for p in paths[:3]] + ([f"... {len(paths) - 3} more"] if len(paths) > 3 else [])
+        print(f"  exported: {', '.join(shown)}")
+
+
+def run_export(source, formats, *, out=None) -> int:
+    """Export a saved run (``casadi-keyframe export``) in each of ``formats``; exit code 0."""
+    from .export import check_library, export
+
+    for fmt in formats:  # every format's library before any file is written
+        check_library(fmt)
+    for fmt in formats:
+        paths = export(source, fmt, out=out)
+        more = f" ... ({len(paths)} files)" if len(paths) > 2 else ""
+        print(f"{fmt}: {', '.join(str(p) for p in paths[:2])}{more}")
+    return 0
 
 
 def _search(spec: SolveRun, u0, checkpoint):
@@ -276,25 +302,12 @@ def run_render(source, *, animation: bool = True) -> int:
 
 
 def _render(source, animation: bool) -> int:
-    from .loading import load_problem
+    from .saved import load_saved
 
-    source = Path(source)
-    path = source / RESULT if (source / RESULT).is_file() else run_file(source)
-    run = read_run(path)
-    meta, arrays, out = run["meta"], run["arrays"], path.parent
-    name = meta.get("problem_file")
-    prob = load_problem(name if name and Path(name).is_file() else meta["problem"],
-                        **meta.get("overrides", {}))
-    if run["u"].size != prob.size:
-        raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
-                         f"{meta.get('overrides', {})} has {prob.size}")
-    if "x" in arrays:
-        traj = Trajectory(arrays["x"], arrays["v"], float(arrays["dt"]))
-    else:
-        print(f"{prob.name}: {path.name} holds controls only: simulating them")
-        traj = prob.simulate(run["u"])
-    draw(prob, traj, _history(meta, arrays), out, animation=animation)
-    print(f"{prob.name}: pictures drawn in {out}/ from {path.name}")
+    saved = load_saved(source)
+    prob, out = saved.problem, saved.path.parent
+    draw(prob, saved.trajectory, _history(saved.meta, saved.arrays), out, animation=animation)
+    print(f"{prob.name}: pictures drawn in {out}/ from {saved.path.name}")
     return 0
 
 

@@ -32,6 +32,7 @@ def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = 
     x[0], v[0] = x0, v0
     traj = Trajectory(x, v, dt)
     work = integrator.init(model)
+    work.keep = records
     if tangent is not None:
         dx, dv = np.empty_like(x), np.empty_like(x)
         (dx[0], dv[0]), d_external = tangent[:2], tangent[2]
@@ -58,6 +59,7 @@ def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None):
     step_vjp = integrator.step_vjp if step_vjp is None else step_vjp
     steps, dt = traj.steps, traj.dt
     work = integrator.init(model)
+    work.records = traj.records
     g_external = np.empty((steps,) + traj.x.shape[1:])
     a = State(gx[steps], gv[steps])
     for n in range(steps - 1, -1, -1):

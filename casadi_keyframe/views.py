@@ -98,6 +98,11 @@ class BlendView(ClothView):
         """The time in source clip ``kind`` ("fall" or "walk") at the blend's frame 0."""
         return self.t_a if _kind(kind) == "fall" else self.t_b
 
+    def clip_frame(self, kind: str, k: int, dt: float) -> int:
+        """The frame of source clip ``kind`` that goes with blend frame ``k`` (time step
+        ``dt``): ``start / dt + k``."""
+        return int(round(self.start(kind) / dt)) + int(k)
+
 
 def _kind(kind: str) -> str:
     if kind not in ("fall", "walk"):

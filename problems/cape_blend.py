@@ -140,7 +140,7 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
                                position_weight=position_weight / model.n,
                                velocity_weight=velocity_weight / model.n)
                  + Smoothness(alpha / m, temporal=temporal / m))
-    view = BlendView(camera=(15, -60), character=character, animation=motion, t_a=t_a, t_b=t_b,
+    view = BlendView(camera=(15, 35), character=character, animation=motion, t_a=t_a, t_b=t_b,
                      fall=Clip(fall_model, fall_traj), walk=Clip(walk_model, walk_traj))
     prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cape_blend",
                          x0=x0, v0=v0, view=view)  # forces on free particles

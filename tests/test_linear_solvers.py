@@ -1,10 +1,15 @@
 """The linear solver objects: modified PCG against sparse LU, with and without constrained
 components, transpose solves, the statistics they report, and their refusals."""
+import dataclasses
+
 import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from casadi_keyframe.linear import ModifiedPCG, SolveError, SparseLU, linear_solver
+from casadi_keyframe.linear import (Auto, ModifiedPCG, SolveError, SparseCholesky, SparseLU,
+                                    System, cholmod_available, linear_solver)
+
+needs_cholmod = pytest.mark.skipif(not cholmod_available(), reason="cvxopt is not installed")
 
 
 def spd(n, seed=0):
@@ -68,9 +73,64 @@ def test_direct_solve_reports_a_singular_matrix():
         SparseLU().init(np.ones(3, bool)).factor(A)
 
 
+@needs_cholmod
+@pytest.mark.parametrize("pinned", [0, 7])
+def test_cholesky_equals_lu_and_keeps_what_it_is_asked_to(pinned):
+    A, n = spd(120), 120
+    free, b = mask(n, pinned), np.random.default_rng(1).standard_normal(n)
+    z = np.where(free, 0.0, 0.3)
+    plan = SparseCholesky().init(free)
+    kept = plan.factor(A, keep=True)
+    x, info = kept.solve(b, z)
+    x_lu, _ = SparseLU().init(free).factor(A).solve(b, z)
+    np.testing.assert_allclose(x, x_lu, rtol=1e-10, atol=1e-12)
+    assert info.iterations == 0 and np.all(x[~free] == 0.3)
+    pattern = object()  # what a fixed-pattern assembly passes: one key per structure
+    system = dataclasses.replace(System.from_matrix(A, free), structure=pattern)
+    twice = dataclasses.replace(System.from_matrix(2 * A, free), structure=pattern)
+    shared = plan.factor(system)
+    np.testing.assert_allclose(shared.solve(b, z)[0], x, rtol=1e-10)
+    plan.factor(twice)  # the pattern's shared analysis now holds 2 A
+    with pytest.raises(RuntimeError, match="overwritten"):
+        shared.solve(b)
+    np.testing.assert_allclose(kept.solve_transpose(b, z)[0], x, rtol=1e-12)  # still A
+    assert kept.nbytes > 0
+
+
+@needs_cholmod
+def test_cholesky_refuses_an_indefinite_matrix():
+    with pytest.raises(SolveError, match="not positive definite"):
+        SparseCholesky().init(np.ones(3, bool)).factor(sp.diags([1.0, -2.0, 3.0]))
+
+
+def test_symmetric_lu_does_not_pivot_off_the_diagonal():
+    """An SPD cloth-like matrix (not diagonally dominant): SuperLU's symmetric mode with
+    threshold 0 keeps its row order equal to its column order, so the fill stays that of a
+    Cholesky factor."""
+    from casadi_keyframe.integrators.linearized_backward_euler import step_matrices
+    from casadi_keyframe.models import ClothModel
+    model = ClothModel.grid(12, 12, pinned=[0, 11])
+    x = model.rest_positions * [1.0, 0.9, 1.0]  # compressed: not diagonally dominant
+    A, _ = step_matrices(model, x, np.zeros_like(x), 1 / 30)
+    factors = SparseLU().init(model.free_mask()).factor(A)
+    assert np.array_equal(factors.lu.perm_r, factors.lu.perm_c)
+    pivoting = SparseLU(symmetric=False).init(model.free_mask()).factor(A)
+    assert factors.lu.nnz < pivoting.lu.nnz
+
+
+def test_auto_chooses_by_size_and_what_is_installed():
+    auto = Auto(cholmod_max=100, lu_max=200)
+    small = SparseCholesky if cholmod_available() else SparseLU
+    assert isinstance(auto.choose(50), small)
+    assert isinstance(auto.choose(150), SparseLU)
+    assert isinstance(auto.choose(300), ModifiedPCG)
+    assert isinstance(auto.init(np.ones(300, bool)).solver, ModifiedPCG)
+
+
 def test_solvers_by_name_and_bad_names():
     assert isinstance(linear_solver("cg", tol=1e-6), ModifiedPCG)
     assert isinstance(linear_solver("direct"), SparseLU)
+    assert isinstance(linear_solver("auto"), Auto)
     with pytest.raises(ValueError, match="solver must be one of"):
         linear_solver("lu")
     with pytest.raises(TypeError, match="init"):

@@ -10,7 +10,7 @@ from PIL import Image  # noqa: E402
 from casadi_keyframe import load_problem, render  # noqa: E402
 from casadi_keyframe.render import blend as render_blend  # noqa: E402
 from casadi_keyframe.render import select_frames, write_gif  # noqa: E402
-from casadi_keyframe.render.cloth import CLOTH, face_colors  # noqa: E402
+from casadi_keyframe.render.cloth import CLOTH, back_color, face_colors  # noqa: E402
 
 TITLES = ("fall (source clip)", "blend (optimised)", "walk (source clip)")
 
@@ -48,9 +48,17 @@ def test_lead_in_fits_both_clips(blend):
 
 
 def _cape_rgb(panel):
-    """Mean RGB of the cape the panel drew (its first dynamic artist); depth sorting only
-    reorders the faces."""
-    return panel.dynamic[0].get_facecolor()[:, :3].mean(0)
+    """Mean RGB of the cape the panel drew: the first faces of the colours it gave its
+    surfaces (cape, then bodies), which the collection drew (depth sorting only reorders)."""
+    drawn = panel.dynamic[0].get_facecolor()[:, :3].mean(0)
+    np.testing.assert_allclose(drawn, panel.colors[:, :3].mean(0))
+    return panel.colors[:len(panel.model.faces), :3].mean(0)
+
+
+def _front_rgb(panel):
+    """Mean RGB of the cape's faces turned towards the camera (the back side is tinted)."""
+    colors, away = panel.colors[:len(panel.model.faces), :3], panel.facing_away
+    return colors[~away].mean(0) if (~away).any() else colors.mean(0)
 
 
 def test_blend_highlighted_sources_plain(blend):
@@ -62,9 +70,10 @@ def test_blend_highlighted_sources_plain(blend):
             for panel in panels:
                 panel.draw(k)
                 s = render_blend.shown(p, traj, panel.panel, k)
-                want = face_colors(s.x, s.model.faces, s.color)[:, :3].mean(0)
+                want = face_colors(s.x, s.model.faces, s.color, back=back_color(s.color),
+                                   eye=panel.eye)[:, :3].mean(0)
                 np.testing.assert_allclose(_cape_rgb(panel), want)
-            fall, middle, walk = (_cape_rgb(panel) for panel in panels)
+            fall, middle, walk = (_front_rgb(panel) for panel in panels)
             assert fall[2] > fall[0] and walk[2] > walk[0]  # blue cloth
             if k >= 0:
                 assert middle[0] > middle[2]  # orange during the blend
@@ -95,7 +104,8 @@ def test_animate_dispatches_and_writes_three_panels(blend, tmp_path, monkeypatch
     for (_, title), want in zip(seen["axes"], TITLES):
         assert title.startswith(want) and " s" in title
     assert "t = 0.50 s of 0.50 s" in seen["axes"][1][1]  # ends on the blend's last frame
-    assert {"cloth", "blend (optimised)", "keyframe shape"} <= set(seen["legend"])
+    assert {"cloth (front)", "cloth (back)", "blend (optimised)", "keyframe shape"} <= set(
+        seen["legend"])
     assert "keyframe target" not in seen["legend"]  # the shape is a wireframe, not crosses
 
 

@@ -37,7 +37,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..linear import SOLVERS, ModifiedPCG, SolveError, SolveInfo, SparseLU
+from ..linear import ModifiedPCG, SolveError, SolveInfo, SparseLU
 from ..state import SimulationError, State, check_state
 from .base import Integrator, Workspace, free_components, mass_diagonal
 from .linearized_backward_euler import (check_stretch, prescribed_velocity_symbolic,
@@ -59,6 +59,9 @@ class NewtonStep:
     solves: tuple[SolveInfo, ...]
 
 
+NEWTON_SOLVERS = ("direct", "cg")  # the true (non-symmetric) Jacobian, or the SPD step matrix
+
+
 class BackwardEuler(Integrator):
     """Backward Euler for models with ``forces`` and sparse ``jacobians`` (cloth).
 
@@ -72,8 +75,8 @@ class BackwardEuler(Integrator):
 
     def __init__(self, solver: str = "direct", tol: float = 1e-12, newton_tol: float = 1e-10,
                  max_newton: int = 50):
-        if solver not in SOLVERS:
-            raise ValueError(f"solver must be one of {sorted(SOLVERS)}, got {solver!r}")
+        if solver not in NEWTON_SOLVERS:
+            raise ValueError(f"solver must be one of {sorted(NEWTON_SOLVERS)}, got {solver!r}")
         if not (0 < newton_tol < 1) or int(max_newton) < 1:
             raise ValueError("newton_tol must be in (0, 1) and max_newton at least 1, got "
                              f"{newton_tol}, {max_newton}")

@@ -36,14 +36,21 @@ import numpy as np
 class Workspace:
     """One pass's scratch: the linear solver's plan for the model (analysed once per pass)
     and the last solution, a warm start for the next iterative solve.  Made by
-    :meth:`Integrator.init` for each forward, backward or tangent pass and dropped after."""
+    :meth:`Integrator.init` for each forward, backward or tangent pass and dropped after.
+
+    ``keep``: the pass keeps its step records, so a step may keep in its record what the
+    derivative passes reuse (set by :func:`~casadi_keyframe.simulate.simulate`).
+    ``records``: in a backward pass, the forward pass's step records, so a backward step
+    can reuse what a later step kept (set by :func:`~casadi_keyframe.simulate.backward`)."""
 
     def __init__(self, plan=None):
         self.plan = plan
         self.warm = None
+        self.keep = False
+        self.records = ()
 
-    def factor(self, A):
-        return self.plan.factor(A)
+    def factor(self, A, keep: bool = False):
+        return self.plan.factor(A, keep)
 
 
 class Integrator:

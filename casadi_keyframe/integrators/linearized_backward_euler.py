@@ -9,13 +9,16 @@ modified CG): pinned particles end the step at rest, attached ones at their path
 point.  The model supplies symmetric K and D (as Baraff and Witkin, the position derivative
 of spring damping is left out of K) with -K and -D positive semi-definite (the cloth clamps
 the destabilising parts of its stiffness: compressed springs' transverse term, contact
-curvature), so A is symmetric positive definite for every dt; CG refuses it otherwise.
+curvature), so A is symmetric positive definite for every dt; CG and Cholesky refuse it otherwise.
+The step gathers A's free block from the model's 3x3 blocks into the pass's fixed pattern
+(:meth:`LinearizedBackwardEuler.step_system`), so a sparse Cholesky analyses it once.
 
 Swapped backward step (:meth:`swapped_step_vjp`, the "swapped" gradient route, APPROXIMATE):
 the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D), a
-3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler, ``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the
-adjoint variables.  Its Jacobians belong to the step's end state n+1, so its matrix is the A
-the forward pass builds there (recomputed, not stored, to keep memory at O(particles x steps)):
+3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler,
+``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the adjoint variables.  Its Jacobians
+belong to the step's end state n+1, so its matrix is the A the forward pass factorised at
+step n+1 (its factor reused when the forward pass kept it, else made again):
 
     w   = a_v(n+1) + dt a_x(n+1)
     A^T mu = w            (free components; mu = 0 on pinned and attached ones)
@@ -62,7 +65,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ..linear import SolveError, SolveInfo, linear_solver
+from ..linear import SolveError, SolveInfo, System, linear_solver
+from ..models.blocks import GrowingPattern, SparseJacobian
 from ..state import SimulationError, State, check_state
 from .base import Integrator, Workspace, free_components, mass_diagonal
 
@@ -101,38 +105,81 @@ def check_stretch(model, x, step: int, limit: float = 5.0) -> None:
 @dataclass(frozen=True)
 class LinearizedStep:
     """What a linearized step keeps: the interactions at its start state (self-contact
-    pairs) and how its linear solve went."""
+    pairs), how its linear solve went and, within the integrator's memory budget, the
+    prepared step matrix (``factor``, e.g. its Cholesky factor) for the derivative passes."""
 
     interactions: object
     solve: SolveInfo
+    factor: object = None
+
+
+class StepWorkspace(Workspace):
+    """A pass's :class:`Workspace` plus the pattern its step matrices are gathered into and
+    the bytes of factorisations its records keep."""
+
+    def __init__(self, plan, pattern: GrowingPattern):
+        super().__init__(plan)
+        self.pattern = pattern
+        self.kept_bytes = 0
 
 
 class LinearizedBackwardEuler(Integrator):
-    """Linearized implicit Euler for models with ``forces`` and sparse ``jacobians`` (cloth).
+    """Linearized implicit Euler for models with ``forces`` and block Jacobians
+    (``jacobian_blocks``: cloth).
 
-    ``solver`` is "cg" (modified PCG), "direct" (sparse LU) or a solver object
-    (:mod:`casadi_keyframe.linear`); ``tol`` is CG's relative tolerance for the steps and
-    ``adjoint_tol`` for the backward and tangent steps' solves: a gradient needs fewer
-    digits than a trajectory.
+    ``solver`` is "auto" (CHOLMOD, SuperLU or CG by size and what is installed), "cholmod",
+    "direct" (SuperLU), "cg" (modified PCG) or a solver object (:mod:`casadi_keyframe.linear`);
+    ``tol`` is CG's relative tolerance for the steps and ``adjoint_tol`` for the backward and
+    tangent steps' solves: a gradient needs fewer digits than a trajectory.  A forward pass
+    that keeps its records keeps each step's factorisation in them (direct solvers) while
+    their total stays within ``max_factor_memory`` bytes, and the backward and tangent steps
+    solve with those instead of assembling and factorising again.
     """
 
     name = "linearized_backward_euler"
 
-    def __init__(self, solver="cg", tol: float = 1e-10, adjoint=None,
-                 adjoint_tol: float = 1e-8):
+    def __init__(self, solver="auto", tol: float = 1e-10, adjoint=None,
+                 adjoint_tol: float = 1e-8, max_factor_memory: float = 2 * 2 ** 30):
         if adjoint is not None:
             warnings.warn(
                 "LinearizedBackwardEuler(adjoint=...) is deprecated and has no effect: the "
                 "gradient route chooses the backward pass (gradient='adjoint' for the exact "
                 "one, 'swapped' for the paper's approximate one)", DeprecationWarning,
                 stacklevel=2)
-        options = {"tol": tol} if solver == "cg" else {}
+        if not max_factor_memory >= 0:
+            raise ValueError(f"max_factor_memory must be >= 0 bytes, got {max_factor_memory}")
+        options = {"tol": tol} if solver in ("cg", "auto") else {}
         self.linear_solver = linear_solver(solver, **options)
         self.solver = getattr(self.linear_solver, "name", type(self.linear_solver).__name__)
         self.tol, self.adjoint_tol = tol, adjoint_tol
+        self.max_factor_memory = max_factor_memory
 
-    def init(self, model) -> Workspace:
-        return Workspace(self.linear_solver.init(model.free_mask()))
+    def init(self, model) -> StepWorkspace:
+        pattern = (GrowingPattern(model.step_pattern) if hasattr(model, "jacobian_blocks")
+                   else None)
+        return StepWorkspace(self.linear_solver.init(model.free_mask()), pattern)
+
+    def step_system(self, model, x, v, t, dt, work, with_df_dx=False, interactions=None):
+        """``(System of A, K[, df/dx])`` at (x, v, t), K and df/dx with a ``matvec``: the
+        model's :class:`~casadi_keyframe.models.blocks.Blocks`, A's free block gathered into
+        the pass's pattern; or, for a model with sparse ``jacobians`` only, those matrices."""
+        if work.pattern is None:
+            A, *jacobians = step_matrices(model, x, v, dt, t, with_df_dx, interactions)
+            return (work.plan.system(A), *map(SparseJacobian, jacobians))
+        K, D, *df_dx = model.jacobian_blocks(x, v, t, with_df_dx, interactions)
+        A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
+        pattern = work.pattern
+        data = pattern.values(A)
+        block = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
+                              shape=(pattern.pattern.size,) * 2)
+        product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
+        return (System(block, product, product, pattern.pattern), K, *df_dx)
+
+    def _factor(self, work, system, n: int, keep: bool = False):
+        try:
+            return work.factor(system, keep)
+        except SolveError as err:
+            raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
 
     def step(self, model, state, external, n, dt, work=None):
         """Step ``n`` (from t = n dt) under ``external`` (``(n, 3)``); raises SimulationError
@@ -140,11 +187,17 @@ class LinearizedBackwardEuler(Integrator):
         work = self.init(model) if work is None else work
         x, v, t = state.x, state.v, n * dt
         contacts = model.interactions(x)
-        A, K = step_matrices(model, x, v, dt, t, interactions=contacts)
-        b = dt * ((model.forces(x, v, t, contacts) + external).ravel() + dt * (K @ v.ravel()))
+        A, K = self.step_system(model, x, v, t, dt, work, interactions=contacts)
+        b = dt * ((model.forces(x, v, t, contacts) + external).ravel() + dt * K.matvec(v).ravel())
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
+        keep = (work.keep and work.plan.worth_keeping
+                and work.kept_bytes < self.max_factor_memory)
+        factor = self._factor(work, A, n, keep)
+        if keep and work.kept_bytes + factor.nbytes > self.max_factor_memory:
+            keep = False  # known only now for the first factor of a pattern
+        work.kept_bytes += factor.nbytes if keep else 0
         try:
-            dv, info = work.factor(A).solve(b, z, x0=work.warm)
+            dv, info = factor.solve(b, z, x0=work.warm)
         except SolveError as err:
             raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
         work.warm = dv
@@ -152,7 +205,7 @@ class LinearizedBackwardEuler(Integrator):
         x1 = x + dt * v1
         check_state(x1, v1, n + 1)
         check_stretch(model, x1, n + 1)
-        return State(x1, v1), LinearizedStep(contacts, info)
+        return State(x1, v1), LinearizedStep(contacts, info, factor if keep else None)
 
     def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
         """The exact backward step of the linearized scheme (module docstring)."""
@@ -161,13 +214,13 @@ class LinearizedBackwardEuler(Integrator):
         free = free_components(model, shape).ravel()
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
         contacts = record.interactions
-        A, K = step_matrices(model, start.x, start.v, dt, t, interactions=contacts)
+        factor, K = self._step_factor(model, start, t, dt, work, record, n)
         w = av + dt * ax
-        lam = self._derivative_solve(work, A, w, n, transpose=True)
+        lam = self._derivative_solve(work, factor, w, n, transpose=True)
         bx, bv = model.linearization_vjp(start.x, start.v, t, lam.reshape(shape), end.v,
                                          end.v - start.v, dt, interactions=contacts)
         ax = free * (ax + bx.ravel())
-        av = free * (w + bv.ravel() + dt * dt * (K.T @ lam))
+        av = free * (w + bv.ravel() + dt * dt * K.matvec(lam, transpose=True).ravel())
         return State(ax.reshape(shape), av.reshape(shape)), (dt * lam).reshape(shape)
 
     def step_jvp(self, model, start, end, record, n, dt, tangent, d_external, work=None):
@@ -176,12 +229,11 @@ class LinearizedBackwardEuler(Integrator):
         shape, t = start.x.shape, n * dt
         free = free_components(model, shape)
         dx, dv = free * tangent.x, free * tangent.v
-        contacts = record.interactions
-        A, K = step_matrices(model, start.x, start.v, dt, t, interactions=contacts)
-        rhs = (dt * np.asarray(d_external).ravel() + dt * dt * (K @ dv.ravel())
+        factor, K = self._step_factor(model, start, t, dt, work, record, n)
+        rhs = (dt * np.asarray(d_external).ravel() + dt * dt * K.matvec(dv).ravel()
                + model.linearization_jvp(start.x, start.v, t, end.v, end.v - start.v, dt, dx,
-                                         dv, interactions=contacts).ravel())
-        ddv = self._derivative_solve(work, A, rhs, n, transpose=False)
+                                         dv, interactions=record.interactions).ravel())
+        ddv = self._derivative_solve(work, factor, rhs, n, transpose=False)
         dv1 = free * (dv + ddv.reshape(shape))
         return State(free * (dx + dt * dv1), dv1)
 
@@ -189,19 +241,34 @@ class LinearizedBackwardEuler(Integrator):
         """APPROXIMATE: the paper's integrator-swapping backward step, eqs. (13)-(15): the
         exact adjoint of full backward Euler at the step's end state (module docstring)."""
         work = self.init(model) if work is None else work
-        shape = start.x.shape
+        shape, t = start.x.shape, (n + 1) * dt
         free = free_components(model, shape).ravel()
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
-        A, _, df_dx = step_matrices(model, end.x, end.v, dt, (n + 1) * dt, with_df_dx=True)
-        mu = self._derivative_solve(work, A, av + dt * ax, n, transpose=True)
-        ax = free * (ax + dt * (df_dx.T @ mu))
+        later = work.records[n + 1] if n + 1 < len(work.records) else None  # step n+1's A
+        contacts = model.interactions(end.x) if later is None else later.interactions
+        if later is not None and later.factor is not None and work.pattern is not None:
+            *_, df_dx = model.jacobian_blocks(end.x, end.v, t, True, contacts)
+            factor = later.factor
+        else:
+            A, _, df_dx = self.step_system(model, end.x, end.v, t, dt, work, True, contacts)
+            factor = self._factor(work, A, n)
+        mu = self._derivative_solve(work, factor, av + dt * ax, n, transpose=True)
+        ax = free * (ax + dt * df_dx.matvec(mu, transpose=True).ravel())
         av = free * (mass_diagonal(model) * mu)
         return State(ax.reshape(shape), av.reshape(shape)), (dt * mu).reshape(shape)
 
-    def _derivative_solve(self, work, A, b, n: int, transpose: bool):
+    def _step_factor(self, model, start, t, dt, work, record, n):
+        """Step n's prepared matrix A (kept by the forward pass, or made again) and its K."""
+        if record.factor is not None and work.pattern is not None:
+            K, _ = model.jacobian_blocks(start.x, start.v, t, interactions=record.interactions)
+            return record.factor, K
+        A, K = self.step_system(model, start.x, start.v, t, dt, work,
+                                interactions=record.interactions)
+        return self._factor(work, A, n), K
+
+    def _derivative_solve(self, work, factor, b, n: int, transpose: bool):
         """A solve of a backward or tangent step, warm-started from the pass's last one."""
-        system = work.factor(A)
-        solve = system.solve_transpose if transpose else system.solve
+        solve = factor.solve_transpose if transpose else factor.solve
         try:
             out, _ = solve(b, x0=work.warm, tol=self.adjoint_tol)
         except SolveError as err:

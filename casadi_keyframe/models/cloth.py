@@ -54,14 +54,15 @@ and are added as a separate sparse term.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
-import scipy.sparse as sp
 
 from ..kernels import (MappedKernel, interaction_kernels, pair_difference, pair_incidence,
                        scatter_pairs)
+from .blocks import BlockPattern, Blocks
 from .colliders import Body, Contact, SelfContact
 
 KERNELS = ("force", "jac", "df_dx", "vjp", "jvp")  # of every interaction, see interaction_kernels
@@ -223,46 +224,20 @@ def lumped_masses(vertices: np.ndarray, faces: np.ndarray, total: float) -> np.n
     return total * share / share.sum()
 
 
-def _block_pattern(i: np.ndarray, j: np.ndarray, n: int, particle_blocks: bool = True):
-    """CSC pattern of the 3x3 blocks (i,i), (i,j), (j,i), (j,j) of every pair plus (unless
-    ``particle_blocks`` is False) every particle's diagonal block.
-
-    Returns ``(indices, indptr, gather)``: the CSC data of ``-B_p`` at (i,i) and (j,j), ``+B_p``
-    at (i,j) and (j,i) for pair blocks ``B_p``, plus particle blocks ``C_k`` at (k,k), is
-    ``gather @ [vec_row_major(B); vec_row_major(C)]``.  The ``(nnz, 9P + 9n)`` gather matrix
-    holds the COO -> CSC map with the signs (duplicates add up); without particle blocks it is
-    ``(nnz, 9P)``.
-    """
-    P = i.size
-    k = np.arange(n if particle_blocks else 0)
-    bi, bj = np.concatenate([i, i, j, j, k]), np.concatenate([i, j, i, j, k])
-    a, b = np.divmod(np.arange(9), 3)  # row-major entry e of a block is (a, b)
-    rows = (3 * bi[:, None] + a).ravel()
-    cols = (3 * bj[:, None] + b).ravel()
-    keys, slot = np.unique(cols.astype(np.int64) * (3 * n) + rows, return_inverse=True)
-    indices = (keys % (3 * n)).astype(np.int32)
-    indptr = np.concatenate([[0], np.cumsum(np.bincount(keys // (3 * n), minlength=3 * n))])
-    source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(9 * k.size)])
-    sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P), np.ones(9 * k.size)])
-    gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, 9 * P + 9 * k.size))
-    return indices, indptr.astype(np.int32), gather
-
-
-def _symbolic_csc(pattern, blocks, n: int):
-    """The ``3n x 3n`` sparse SX matrix of a :func:`_block_pattern` filled with ``blocks``
-    (a column: the row-major blocks one after another, as the numeric route's data)."""
-    indices, indptr, gather = pattern
-    sparsity = ca.Sparsity(3 * n, 3 * n, indptr.tolist(), indices.tolist())
-    return ca.SX(sparsity, ca.mtimes(ca.DM(gather.tocsc()), blocks))
+def _symbolic_csc(pattern: BlockPattern, blocks) -> ca.SX:
+    """The sparse SX matrix of a :class:`BlockPattern` filled with ``blocks`` (a column: the
+    row-major blocks one after another, as the numeric route's data)."""
+    size = pattern.size
+    sparsity = ca.Sparsity(size, size, pattern.indptr.tolist(), pattern.indices.tolist())
+    return ca.SX(sparsity, ca.mtimes(ca.DM(pattern.gather.tocsc()), blocks))
 
 
 def pair_block_matrices(i: np.ndarray, j: np.ndarray, n: int, *blocks: np.ndarray) -> list:
     """One ``3n x 3n`` CSC matrix per ``(P, 9)`` row-major block array ``B``: ``-B`` at (i,i),
     (j,j) and ``+B`` at (i,j), (j,i), for pairs that change every step (self-contacts); the
     pattern is built once for all of them."""
-    indices, indptr, gather = _block_pattern(i, j, n, particle_blocks=False)
-    return [sp.csc_matrix((gather @ b.ravel(), indices.copy(), indptr.copy()),
-                          shape=(3 * n, 3 * n)) for b in blocks]
+    pattern = BlockPattern(i, j, n, particle_blocks=False)
+    return [pattern.matrix(b) for b in blocks]
 
 
 @dataclass(frozen=True)
@@ -322,7 +297,7 @@ class ClothModel:
                                np.full((s.rest.size, 1), p.damping)]
         self._kernels = spring_kernels(p.eps)
         self._springs = {k: MappedKernel(self._kernels[k], jit=self.jit) for k in KERNELS}
-        self._indices, self._indptr, self._gather = _block_pattern(s.i, s.j, self.n)
+        self._pattern = BlockPattern(s.i, s.j, self.n)
         self._drag_blocks = np.outer(-p.air_drag * self.masses, np.eye(3).ravel())
         self._gravity = self.masses[:, None] * np.asarray(p.gravity)[None, :]
         self.colliders = tuple(self.colliders)
@@ -447,6 +422,14 @@ class ClothModel:
         s = self.springs
         return float((np.linalg.norm(pair_difference(x, s.i, s.j), axis=1) / s.rest).max())
 
+    @functools.cached_property
+    def step_pattern(self) -> BlockPattern:
+        """The springs' :class:`~.blocks.BlockPattern` restricted to the free components: the
+        structure of an implicit step matrix's free block without self-contact (built once:
+        it depends on the springs and constraints only)."""
+        s = self.springs
+        return BlockPattern(s.i, s.j, self.n, self.free_mask())
+
     # -- numeric -------------------------------------------------------------------------
     def interactions(self, x: np.ndarray):
         """What the forces at positions x act over beyond the fixed springs: the self-contact
@@ -494,17 +477,10 @@ class ClothModel:
             out += self.contact_forces(x, v, t, interactions)
         return out
 
-    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0, with_df_dx: bool = False,
-                  interactions=None):
-        """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric, ``-K`` and ``-D``
-        positive semi-definite; with ``with_df_dx`` also the full ``df/dx`` (not symmetric).
-
-        ``D = df/dv``.  K is the stiffness the implicit step uses: ``df/dx`` at zero velocity
-        (damping's position derivative omitted, as in Baraff-Witkin) without the transverse
-        term of compressed springs and the curvature of contact surfaces
-        (:func:`spring_law`, :func:`.colliders.penalty_law`).  The adjoints of full backward
-        Euler (exact and swapped) need the true ``df/dx``, damping's part included.
-        """
+    def jacobian_blocks(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
+                        with_df_dx: bool = False, interactions=None) -> tuple[Blocks, ...]:
+        """:meth:`jacobians` as :class:`~.blocks.Blocks` over the springs followed by the
+        self-contact pairs (``interactions``, default: those of x)."""
         inputs = self._spring_inputs(x, v)
         pairs = self._springs["jac"](*inputs) + (self._springs["df_dx"](*inputs)
                                                   if with_df_dx else [])
@@ -516,19 +492,35 @@ class ClothModel:
                 blocks += kernels["df_dx"](x, v, *columns)
             for acc, b in zip(particles, blocks):
                 acc += b
-        size = 3 * self.n
-        out = []
-        for pair_blocks, particle_blocks in zip(pairs, particles):
-            data = self._gather @ np.concatenate([pair_blocks.ravel(), particle_blocks.ravel()])
-            out.append(sp.csc_matrix((data, self._indices.copy(), self._indptr.copy()),
-                                     shape=(size, size)))
+        i, j = self.springs.i, self.springs.j
         contacts = self._contacts(x, interactions)
         if contacts is not None:
             columns = self._self.inputs(x, v, *contacts)
             blocks = self._pairs["jac"](*columns)
             if with_df_dx:
                 blocks += self._pairs["df_dx"](*columns)
-            out = [a + b for a, b in zip(out, pair_block_matrices(*contacts, self.n, *blocks))]
+            pairs = [np.vstack([a, b]) for a, b in zip(pairs, blocks)]
+            i, j = np.concatenate([i, contacts[0]]), np.concatenate([j, contacts[1]])
+        return tuple(Blocks(i, j, p, q) for p, q in zip(pairs, particles))
+
+    def jacobians(self, x: np.ndarray, v: np.ndarray, t: float = 0.0, with_df_dx: bool = False,
+                  interactions=None):
+        """``(K, D)`` as 3n x 3n CSC matrices at time t, both symmetric, ``-K`` and ``-D``
+        positive semi-definite; with ``with_df_dx`` also the full ``df/dx`` (not symmetric).
+
+        ``D = df/dv``.  K is the stiffness the implicit step uses: ``df/dx`` at zero velocity
+        (damping's position derivative omitted, as in Baraff-Witkin) without the transverse
+        term of compressed springs and the curvature of contact surfaces
+        (:func:`spring_law`, :func:`.colliders.penalty_law`).  The adjoints of full backward
+        Euler (exact and swapped) need the true ``df/dx``, damping's part included.
+        """
+        blocks = self.jacobian_blocks(x, v, t, with_df_dx, interactions)
+        S = self.springs.i.size
+        out = [self._pattern.matrix(b.pairs[:S], b.particles) for b in blocks]
+        i, j = blocks[0].i[S:], blocks[0].j[S:]
+        if i.size:
+            contact = pair_block_matrices(i, j, self.n, *(b.pairs[S:] for b in blocks))
+            out = [a + b for a, b in zip(out, contact)]
         return tuple(out)
 
     def linearization_vjp(self, x, v, t: float, lam, w, q, dt: float, interactions=None):
@@ -610,16 +602,15 @@ class ClothModel:
         for body, part in self._scene_parts(S):
             kb, db = body.symbolic("jac", X, V, part)
             k_blocks, d_blocks = k_blocks + kb, d_blocks + db
-        pattern = (self._indices, self._indptr, self._gather)
-        K = _symbolic_csc(pattern, ca.vertcat(ca.vec(kp), ca.vec(k_blocks)), self.n)
-        D = _symbolic_csc(pattern, ca.vertcat(ca.vec(dp), ca.vec(d_blocks)), self.n)
+        K = _symbolic_csc(self._pattern, ca.vertcat(ca.vec(kp), ca.vec(k_blocks)))
+        D = _symbolic_csc(self._pattern, ca.vertcat(ca.vec(dp), ca.vec(d_blocks)))
         if self._self is not None:
             i, j, gains = self._symbolic_pairs()
             kc, dc = SelfContact.kernels["jac"].map(i.size)(X[:, j] - X[:, i],
                                                            V[:, j] - V[:, i], gains)
-            pattern = _block_pattern(i, j, self.n, particle_blocks=False)
-            K += _symbolic_csc(pattern, ca.vec(kc), self.n)
-            D += _symbolic_csc(pattern, ca.vec(dc), self.n)
+            pattern = BlockPattern(i, j, self.n, particle_blocks=False)
+            K += _symbolic_csc(pattern, ca.vec(kc))
+            D += _symbolic_csc(pattern, ca.vec(dc))
         return K, D
 
     def _scene_parts(self, S):

@@ -11,7 +11,8 @@ shorter if a clip starts sooner, so that both source panels still play along), d
 which the middle panel shows the fall clip itself in the cloth colour: the blend takes
 over from it.  From ``k = 0`` the middle panel's cape is orange (:data:`BLEND`) and the
 walk target, the problem's keyframe, is a red wireframe, faded until the last frame.  Each
-panel keeps its own limits (equal aspect) over all its frames.  Each panel is a
+panel keeps its limits over all its frames, about its own centre on the same scale as the
+others (equal aspect, equal lengths across panels).  Each panel is a
 :class:`.cloth.ClothPanel` shown the positions of its clip's frame.
 """
 from __future__ import annotations
@@ -25,7 +26,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
 from ..views import BlendView, view_of
-from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, save_grid, targets
+from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, same_scale, save_grid, targets
 from .flock import HIGHLIGHT
 from .frames import mass_centers, select_frames, write_gif
 
@@ -48,8 +49,7 @@ class Shown(NamedTuple):
 def clip_frame(problem, kind: str, k: int) -> int:
     """The frame of source clip ``kind`` ("fall" or "walk") that goes with blend frame ``k``:
     ``t_a / dt + k`` or ``t_b / dt + k``."""
-    start = view_of(problem, BlendView).start(kind)
-    return int(round(start / problem.dt)) + int(k)
+    return view_of(problem, BlendView).clip_frame(kind, k, problem.dt)
 
 
 def lead_in(problem, seconds: float = LEAD_IN) -> int:
@@ -124,8 +124,9 @@ def blend_frames(problem) -> np.ndarray:
 
 def side_by_side(fig, problem, trajectory, ks) -> list[BlendPanel]:
     """The fall, blend and walk panels side by side in ``fig``, over blend frames ``ks``."""
+    boxes = same_scale([panel_box(problem, trajectory, p, ks) for p in PANELS])
     return [BlendPanel(fig.add_subplot(1, 3, i + 1, projection="3d"), problem, trajectory, p, ks,
-                   panel_box(problem, trajectory, p, ks)) for i, p in enumerate(PANELS)]
+                       box) for i, (p, box) in enumerate(zip(PANELS, boxes))]
 
 
 def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
@@ -134,7 +135,7 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     first and last; ``title`` overrides the problem name.  Returns the path."""
     path, ks = Path(path), blend_frames(problem)
     name = problem.name if title is None else title
-    fig = plt.figure(figsize=(12.0, 4.8))
+    fig = plt.figure(figsize=(16.0, 6.4))
     try:
         panels = side_by_side(fig, problem, trajectory, ks)
         legend(fig, panels[1], _handles())
@@ -166,8 +167,8 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
     rows, cols, middle = len(PANELS), len(ks), None
     fig = plt.figure(figsize=(3.2 * cols, 3.0 * rows + 0.7))
     try:
-        for r, p in enumerate(PANELS):
-            box = panel_box(problem, trajectory, p, range(steps + 1))
+        boxes = same_scale([panel_box(problem, trajectory, p, range(steps + 1)) for p in PANELS])
+        for r, (p, box) in enumerate(zip(PANELS, boxes)):
             for c, k in enumerate(ks):
                 ax = fig.add_subplot(rows, cols, r * cols + c + 1, projection="3d")
                 panel = BlendPanel(ax, problem, trajectory, p, range(steps + 1), box)

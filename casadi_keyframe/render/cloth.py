@@ -1,12 +1,16 @@
 """A cloth in 3-D: a GIF (``animate``) or small multiples at the keyframes (``snapshot``).
 
-The cloth is a Lambert-shaded triangle surface, pinned and attached particles dark dots,
-colliders translucent grey, keyframe targets red (a wireframe for a whole-cloth target), the
-centre-of-mass path a thin line and the view's ring a thick circle.  Axis limits (equal
-aspect, :class:`Box`) and the view's camera (:class:`..views.ClothView`) are fixed for a
-whole animation.  :class:`ClothPanel` draws the cloth at given positions, so that a picture of
-something other than one trajectory (the blend's panels, :mod:`.blend`) draws alike;
-:class:`TrajectoryPanel` draws a cloth problem's trajectory frame by frame.
+The cloth is a Lambert-shaded triangle surface, its side turned away from the camera tinted
+(a cape's inside and outside differ), drawn in one collection with the round colliders'
+shaded surfaces, so that matplotlib's per-polygon depth sort (the painter's algorithm)
+hides what is behind across cloth and bodies; planes lie beneath, translucent; pinned and
+attached particles are dark dots, keyframe targets red (a wireframe for a whole-cloth
+target), the centre-of-mass path a thin line and the view's ring a thick circle, drawn over
+the surfaces.  Axis limits (equal aspect, :class:`Box`) and the view's camera
+(:class:`..views.ClothView`) are fixed for a whole animation.  :class:`ClothPanel` draws the
+cloth at given positions, so that a picture of something other than one trajectory (the
+blend's panels, :mod:`.blend`) draws alike; :class:`TrajectoryPanel` draws a cloth problem's
+trajectory frame by frame.
 """
 from __future__ import annotations
 
@@ -18,72 +22,71 @@ import numpy as np
 from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from ..models.colliders import Plane, Sphere
+from ..geometry import body_geometry, capsule_grid, circle, plane_patch
 from ..objectives import StateKeyframe
 from ..views import ClothView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
+BACK = "#c9b58f"  # the side of a cloth turned away from the camera (a cape's inside)
+BODY_RGB = "0.72"  # colliders' shaded surfaces
 LIGHT = np.array([0.5, -0.6, 0.65]) / np.linalg.norm([0.5, -0.6, 0.65])  # the camera's side
 
 
-def face_colors(vertices, faces, color=CLOTH, light=LIGHT) -> np.ndarray:
-    """RGBA per triangle: ``color`` times ``0.3 + 0.7 |cos|`` of its normal to ``light``.
+def face_colors(vertices, faces, color=CLOTH, light=LIGHT, *, back=None, eye=None) -> np.ndarray:
+    """RGBA per polygon ``vertices[faces]``: ``color`` times ``0.3 + 0.7 |cos|`` of its
+    normal to ``light``.
 
-    Both sides are lit alike; a degenerate triangle gets the ambient part only.
+    Both sides are lit alike; with ``back`` and ``eye`` (the direction to the camera), a
+    polygon whose normal turns away from the camera is ``back`` instead, so the two sides
+    of a cloth (a cape's inside and outside) differ.  A degenerate polygon gets the ambient
+    part only.
     """
-    tri = np.asarray(vertices, dtype=float)[np.asarray(faces)]
-    normal = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    return shade(np.asarray(vertices, dtype=float)[np.asarray(faces)], color, light,
+                 back=back, eye=eye)
+
+
+def shade(polygons, color, light=LIGHT, *, back=None, eye=None) -> np.ndarray:
+    """RGBA per polygon of ``polygons`` ``(m, k, 3)`` (see :func:`face_colors`)."""
+    p = np.asarray(polygons, dtype=float)
+    if p.shape[1] == 3:
+        normal = np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+    else:  # a quad's normal: the cross product of its diagonals
+        normal = np.cross(p[:, 2] - p[:, 0], p[:, 3] - p[:, 1])
     length = np.linalg.norm(normal, axis=1)
     cos = np.abs(normal @ np.asarray(light, float)) / np.where(length > 0, length, 1.0)
-    shade = 0.3 + 0.7 * np.clip(np.nan_to_num(cos), 0.0, 1.0)
-    return np.c_[shade[:, None] * matplotlib.colors.to_rgb(color), np.ones(len(shade))]
+    lit = 0.3 + 0.7 * np.clip(np.nan_to_num(cos), 0.0, 1.0)
+    rgb = np.tile(matplotlib.colors.to_rgb(color), (len(p), 1))
+    if back is not None and eye is not None:
+        rgb[facing_away(p, eye)] = matplotlib.colors.to_rgb(back)
+    return np.c_[lit[:, None] * rgb, np.ones(len(p))]
 
 
-def _basis(normal):
-    """Unit ``normal`` and two unit vectors spanning the plane orthogonal to it."""
-    n = np.asarray(normal, dtype=float)
-    n = n / np.linalg.norm(n) if np.linalg.norm(n) > 1e-12 else np.array([0.0, 0.0, 1.0])
-    e1 = np.cross(n, [1.0, 0.0, 0.0] if abs(n[0]) < 0.9 else [0.0, 1.0, 0.0])
-    e1 /= np.linalg.norm(e1)
-    return n, e1, np.cross(n, e1)
+def back_color(color):
+    """The colour of a cloth's back side: :data:`BACK` for the default cloth colour, else
+    ``color`` halfway to white (the blend's orange cape gets a pale orange inside)."""
+    if color == CLOTH:
+        return BACK
+    return tuple(0.5 + 0.5 * np.asarray(matplotlib.colors.to_rgb(color)))
 
 
-def _circle(center, normal, radius, k: int = 64) -> np.ndarray:
-    _, e1, e2 = _basis(normal)
-    phi = np.linspace(0, 2 * np.pi, k)
-    return np.asarray(center, float) + radius * (np.outer(np.cos(phi), e1)
-                                                 + np.outer(np.sin(phi), e2))
+def facing_away(polygons, eye) -> np.ndarray:
+    """Whether each polygon's normal (by its winding) turns away from the camera at ``eye``."""
+    p = np.asarray(polygons, dtype=float)
+    return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) @ np.asarray(eye, float) < 0
 
 
-def _capsule_mesh(a, b, radius, k: int = 12) -> np.ndarray:
-    """``(2k, 2k, 3)`` grid over a capsule's surface (a sphere when ``a == b``)."""
-    a, b = np.asarray(a, float), np.asarray(b, float)
-    n, e1, e2 = _basis(b - a)
-    theta = np.r_[np.linspace(-np.pi / 2, 0, k), np.linspace(0, np.pi / 2, k)]
-    ends = np.r_[np.tile(a, (k, 1)), np.tile(b, (k, 1))]
-    phi = np.linspace(0, 2 * np.pi, 2 * k)
-    ring = np.cos(phi)[:, None] * e1 + np.sin(phi)[:, None] * e2
-    return (ends[:, None] + radius * (np.cos(theta)[:, None, None] * ring[None]
-                                      + np.sin(theta)[:, None, None] * n))
+def camera_direction(camera) -> np.ndarray:
+    """The unit vector from the scene towards a camera at ``(elevation, azimuth)`` degrees."""
+    el, az = np.radians(camera)
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
 
-def body_geometry(body, t: float):
-    """``("plane", point, normal)`` or ``("round", a, b, radius)`` from ``body.geometry(t)``."""
-    g = [np.asarray(p, dtype=float) for p in body.geometry(t)]
-    if isinstance(body, Plane):
-        return "plane", g[0], g[1]
-    if isinstance(body, Sphere):  # center, radius, velocity
-        return "round", g[0], g[0], float(g[1][0])
-    return "round", g[0], g[1], float(g[2][0])  # Capsule: a, b, radius, va, vb
-
-
-def _plane_patch(point, normal, mid, half: float) -> np.ndarray:
-    """The 4 corners of a square of half-side ``half`` on the plane, centred below ``mid``."""
-    n, e1, e2 = _basis(normal)
-    c = mid - np.dot(mid - point, n) * n
-    return np.array([c + half * (s * e1 + r * e2) for s, r in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
+def grid_quads(grid) -> np.ndarray:
+    """``(m, 4, 3)`` quads of a ``(rows, cols, 3)`` surface grid."""
+    return np.stack([grid[:-1, :-1], grid[1:, :-1], grid[1:, 1:], grid[:-1, 1:]], axis=2
+                    ).reshape(-1, 4, 3)
 
 
 def _extent(points) -> tuple[np.ndarray, np.ndarray]:
@@ -103,7 +106,7 @@ class Box:
         self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1e-3)
         for kind, a, b, *_ in (g for frame in bodies for g in frame):
             if kind == "plane":
-                pts.append(_plane_patch(a, b, self.mid, self.half))
+                pts.append(plane_patch(a, b, self.mid, self.half))
         lo, hi = _extent(pts)
         span = max((hi - lo).max(), 1e-3)
         half = np.maximum(hi - lo, 0.3 * span) / 2 + 0.03 * span
@@ -117,10 +120,20 @@ class Box:
         pts += [np.atleast_2d(t.position_target)[:, :3] for t in targets(problem)]
         ring = view_of(problem, ClothView).ring
         if ring:
-            pts.append(_circle(ring.center, ring.normal, ring.radius))
+            pts.append(circle(ring.center, ring.normal, ring.radius))
         bodies = [[body_geometry(b, n * trajectory.dt) for b in problem.model.colliders]
                   for n in range(trajectory.steps + 1)]
         return cls(pts, bodies)
+
+
+def same_scale(boxes: list) -> list:
+    """Give every box the largest half-extent of any, per axis, about its own centre, so
+    panels side by side show lengths alike (the blend's three clips)."""
+    half = np.max([(b.hi - b.lo) / 2 for b in boxes], 0)
+    for b in boxes:
+        mid = (b.lo + b.hi) / 2
+        b.lo, b.hi = mid - half, mid + half
+    return boxes
 
 
 def targets(problem) -> list:
@@ -141,11 +154,13 @@ class ClothPanel:
                zlim=(box.lo[2], box.hi[2]))
         ax.set_box_aspect(box.hi - box.lo)
         ax.view_init(*view.camera)
+        ax.computed_zorder = False  # planes, then the depth-sorted surfaces, then marks
+        self.eye = camera_direction(view.camera)
         ax.tick_params(labelsize=6, pad=0)
         if path is not None:
             ax.plot(*np.asarray(path).T, color=COM, lw=0.8, alpha=0.8)
         if self.ring:
-            ax.plot(*_circle(self.ring.center, self.ring.normal, self.ring.radius).T, color=RING,
+            ax.plot(*circle(self.ring.center, self.ring.normal, self.ring.radius).T, color=RING,
                     lw=3)
 
     @property
@@ -160,6 +175,7 @@ class ClothPanel:
         for artist in self.dynamic:
             artist.remove()
         self.dynamic, self.model = [], model
+        self._bodies = [body_geometry(body, t) for body in model.colliders]
         self._cloth(np.asarray(x), color)
         self._colliders(t)
 
@@ -171,23 +187,32 @@ class ClothPanel:
         self.dynamic.append(collection)
 
     def _cloth(self, x, color):
+        """The cloth's triangles and the round colliders' quads in one collection, so that
+        matplotlib's per-polygon depth sort hides what is behind across them (the body
+        hides the cape behind it); the cloth's two sides are shaded apart."""
         faces, marked = self.model.faces, self.marked
-        self._add(Poly3DCollection(x[faces], facecolors=face_colors(x, faces, color),
-                                   edgecolors=(0, 0, 0, 0.12), lw=0.2))
+        polys = list(x[faces])
+        self.facing_away = facing_away(x[faces], self.eye)
+        colors = [face_colors(x, faces, color, back=back_color(color), eye=self.eye)]
+        for kind, a, b, *r in self._bodies:
+            if kind == "round":
+                quads = grid_quads(capsule_grid(a, b, r[0], 8))
+                polys += list(quads)
+                colors.append(shade(quads, BODY_RGB))
+        self.colors = np.vstack(colors)  # the cloth's faces first, then the bodies' quads
+        self._add(Poly3DCollection(polys, facecolors=self.colors,
+                                   edgecolors=(0, 0, 0, 0.08), lw=0.15, zorder=1))
         if marked.size:
-            self.dynamic.append(self.ax.scatter(*x[marked].T, s=10, c=MARK, depthshade=False))
+            self.dynamic.append(self.ax.scatter(*x[marked].T, s=10, c=MARK, depthshade=False,
+                                                zorder=2))
 
     def _colliders(self, t: float):
-        for kind, a, b, *r in (body_geometry(body, t) for body in self.model.colliders):
+        """The planes, drawn beneath everything (the camera looks down on them)."""
+        for kind, a, b, *_ in self._bodies:
             if kind == "plane":
-                patch = _plane_patch(a, b, self.box.mid, self.box.half)
+                patch = plane_patch(a, b, self.box.mid, self.box.half)
                 self._add(Poly3DCollection([patch], facecolors=(0.5, 0.5, 0.5, 0.12),
-                                           edgecolors=(0.4, 0.4, 0.4, 0.4)))
-            else:
-                mesh = _capsule_mesh(a, b, r[0])
-                self.dynamic += [
-                    self.ax.plot_surface(*mesh.T, color=BODY, alpha=0.15, lw=0, shade=False),
-                    self.ax.plot_wireframe(*mesh.T, color=BODY, lw=0.3, alpha=0.5)]
+                                           edgecolors=(0.4, 0.4, 0.4, 0.4), zorder=0))
 
     def is_shape(self, term) -> bool:
         """Whether ``term`` targets every particle's position, drawn as a wireframe (other
@@ -210,9 +235,10 @@ class ClothPanel:
                 # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
                 lw = min(0.4, 120 / len(self.model.faces))
                 self._add(Poly3DCollection(shape[self.model.faces], facecolors="none", lw=lw,
-                                           edgecolors=matplotlib.colors.to_rgba(TARGET, alpha)))
+                                           edgecolors=matplotlib.colors.to_rgba(TARGET, alpha),
+                                           zorder=2))
             else:
-                self.dynamic.append(self.ax.scatter(*target.T, marker="x", s=40, c=TARGET,
+                self.dynamic.append(self.ax.scatter(*target.T, marker="x", s=40, c=TARGET, zorder=2,
                                                     alpha=alpha, depthshade=False))
 
 
@@ -237,7 +263,7 @@ class TrajectoryPanel(ClothPanel):
 def legend(fig, panel: ClothPanel, extra=()):
     """A figure legend listing only what ``panel`` draws (and the ``extra`` handles)."""
     line = plt.Line2D
-    h = [Patch(fc=CLOTH, label="cloth"), *extra,
+    h = [Patch(fc=CLOTH, label="cloth (front)"), Patch(fc=BACK, label="cloth (back)"), *extra,
          line([], [], color=COM, lw=0.8, label="centre of mass")]
     if panel.marked.size:
         h.append(line([], [], ls="", marker="o", ms=3, color=MARK, label="pinned / attached"))
@@ -261,7 +287,7 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     ``title`` overrides the problem name in the title.
     """
     path = Path(path)
-    fig = plt.figure(figsize=(6.0, 5.4))
+    fig = plt.figure(figsize=(8.0, 7.2))
     try:
         panel = TrajectoryPanel(fig.add_subplot(projection="3d"), problem, trajectory,
                                 name=title)

@@ -10,7 +10,7 @@ from .maths import rotation
 
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
-                  controls=None, view=None, solver: str = "cg", guess=None) -> ControlProblem:
+                  controls=None, view=None, solver: str = "auto", guess=None) -> ControlProblem:
     """A cloth control problem integrated by linearized backward Euler (rest shape and rest
     velocities by default, per-step force controls on the free particles by default)."""
     x0 = model.rest_positions if x0 is None else x0

@@ -21,7 +21,7 @@ from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
 from ..outcome import INTERRUPTED
 from ..run import exit_code
-from .grid import folder_name, points
+from .grid import points
 from .progress import Progress, format_seconds
 from .runner import check_workers, connect, run_specs
 from .table import best_per_group, write_tables

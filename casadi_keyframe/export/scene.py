@@ -1,0 +1,166 @@
+"""What a result shows, as plain arrays every exporter writes: the particles at each frame,
+the surface's triangles, the colliders at each frame, the keyframe targets, the view's ring,
+a blend's source clips and the keyframe misses.
+
+Positions are always 3-D (a 2-D flock lies in the plane z = 0, seen from above), in metres,
+z up, as the problems build them.  Nothing here knows a file format.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..geometry import body_geometry, moves
+from ..objectives import CenterOfMassKeyframe, RegionTarget
+from ..views import BlendView, ClothView, FlockView
+
+
+def points3(x) -> np.ndarray:
+    """``(..., 3)`` positions: 2-D ones get z = 0."""
+    x = np.asarray(x, dtype=float)
+    if x.shape[-1] == 3:
+        return x
+    return np.concatenate([x, np.zeros(x.shape[:-1] + (3 - x.shape[-1],))], axis=-1)
+
+
+@dataclass
+class Body:
+    """A collider: ``kind`` "plane" (``a`` a point, ``b`` the normal) or "round" (a capsule
+    from ``a`` to ``b``, a sphere when they coincide, of ``radius``), per frame
+    ``(frames, 3)``; ``moving`` says whether it changes over the frames."""
+
+    name: str
+    kind: str
+    a: np.ndarray
+    b: np.ndarray
+    radius: np.ndarray
+    moving: bool
+
+    @property
+    def sphere(self) -> bool:
+        return self.kind == "round" and np.array_equal(self.a, self.b)
+
+
+def bodies(model, times, prefix: str = "") -> list[Body]:
+    """The colliders of ``model`` at each of ``times``."""
+    out = []
+    for i, body in enumerate(getattr(model, "colliders", ())):
+        geo = [body_geometry(body, t) for t in times]
+        kind = geo[0][0]
+        radius = np.array([g[3] if kind == "round" else 0.0 for g in geo])
+        out.append(Body(f"{prefix}{type(body).__name__}{i}", kind, np.array([g[1] for g in geo]),
+                        np.array([g[2] for g in geo]), radius, moves(body, list(times))))
+    return out
+
+
+@dataclass
+class Target:
+    """A keyframe's target at ``frame``: ``kind`` "shape" (``points`` for every particle,
+    drawn with the surface's faces), "points" (some particles or a centre of mass) or
+    "outline" (a region's closed outline in z = 0); ``label`` the term's."""
+
+    label: str
+    frame: int
+    kind: str
+    points: np.ndarray
+
+
+def targets(problem) -> list[Target]:
+    """The targets of the problem's keyframe terms that have a position to show."""
+    out, n = [], problem.model.n
+    for term in problem.objective_terms.state_terms:
+        if isinstance(term, RegionTarget):
+            outline = term.shape.outline()
+            out.append(Target(term.label, term.frame, "outline", points3(outline)))
+        elif term.position_target is not None:
+            pts = points3(np.atleast_2d(term.position_target))
+            whole = (not isinstance(term, CenterOfMassKeyframe) and hasattr(problem.model, "faces")
+                     and np.unique(term.particles).size == n)
+            if whole:
+                shape = np.empty((n, 3))
+                shape[term.particles] = pts
+                pts = shape
+            out.append(Target(term.label, term.frame, "shape" if whole else "points", pts))
+    return out
+
+
+@dataclass
+class Clip:
+    """A blend's source clip over the blend's frames: ``positions`` ``(steps + 1, n, 3)``,
+    its colliders (the character on the clip's clock) and the clip's ``times``."""
+
+    name: str
+    positions: np.ndarray
+    bodies: list
+    times: np.ndarray
+
+
+@dataclass
+class Scene:
+    """Everything an export writes for one result (see the module docstring)."""
+
+    name: str
+    dt: float
+    positions: np.ndarray            # (frames, n, 3)
+    faces: np.ndarray | None         # (m, 3) triangles of a cloth, None for a flock
+    bodies: list
+    targets: list
+    dim: int = 3
+    highlight: tuple = ()
+    ring: object = None
+    camera: tuple = (20.0, -60.0)  # (elevation, azimuth) in degrees, the view's
+    marked: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
+    clips: list = field(default_factory=list)
+    misses: dict = field(default_factory=dict)  # frame -> one line of keyframe misses
+
+    @property
+    def frames(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def times(self) -> np.ndarray:
+        return self.dt * np.arange(self.frames)
+
+
+def scene_of(problem, trajectory) -> Scene:
+    """The :class:`Scene` of ``problem``'s ``trajectory``."""
+    model, view = problem.model, problem.view
+    times = trajectory.times
+    scene = Scene(problem.name, float(trajectory.dt), points3(trajectory.x),
+                  np.asarray(model.faces, int) if hasattr(model, "faces") else None,
+                  bodies(model, times), targets(problem), dim=model.dim,
+                  misses=misses(problem, trajectory))
+    if isinstance(view, FlockView):
+        scene.highlight = view.highlight
+    if isinstance(view, ClothView):
+        scene.ring, scene.camera = view.ring, view.camera
+    if hasattr(model, "attachments"):
+        scene.marked = np.concatenate([np.asarray(model.pinned, int)]
+                                      + [a.particles for a in model.attachments]).astype(int)
+    if isinstance(view, BlendView):
+        scene.clips = [clip_of(view, kind, trajectory.steps, trajectory.dt)
+                       for kind in ("fall", "walk")]
+    return scene
+
+
+def clip_of(view: BlendView, kind: str, steps: int, dt: float) -> Clip:
+    """Source clip ``kind`` at the frames that go with the blend's ``0..steps``."""
+    clip = view.clip(kind)
+    frames = [view.clip_frame(kind, k, dt) for k in range(steps + 1)]
+    if frames[0] < 0 or frames[-1] > clip.trajectory.steps:
+        raise ValueError(f"the blend's frames need {kind} clip frames {frames[0]}..{frames[-1]}, "
+                         f"outside 0..{clip.trajectory.steps}")
+    times = np.array(frames) * clip.trajectory.dt
+    return Clip(kind, points3(np.asarray(clip.trajectory.x)[frames]),
+                bodies(clip.model, times, prefix=f"{kind}_"), times)
+
+
+def misses(problem, trajectory) -> dict:
+    """``{frame: "term: miss ...; ..."}`` at each keyframe frame."""
+    from ..run import format_misses
+
+    by_frame: dict[int, list] = {}
+    for term in problem.objective_terms.state_terms:
+        by_frame.setdefault(int(term.frame), []).append(term.miss(trajectory))
+    return {frame: format_misses(found) for frame, found in sorted(by_frame.items())}

@@ -1,0 +1,251 @@
+"""One USD stage per result (needs ``usd-core``: ``pip install casadi_keyframe[usd]``).
+
+``/Result`` (the default prim) holds the particles, a cloth as a time-sampled
+``UsdGeom.Mesh`` (faces once, points per frame) or a flock as time-sampled ``UsdGeom.Points``
+(``ids`` per agent, the view's highlighted agents marked by the ``primvars:highlighted`` flag
+and coloured orange); ``Colliders`` (``Sphere``, ``Capsule``, planes as a quad ``Mesh``;
+moving ones with a time-sampled transform); ``Targets``, one prim per keyframe target (a
+whole-cloth shape as a mesh, particle and centre-of-mass targets as points, a region's outline
+as a closed curve), and the view's ``Ring``, so that each can be hidden on its own; and for
+a blend, ``Clips/fall`` and ``Clips/walk``, the source clips' capes and characters over the
+blend's frames, in their own world positions.
+
+Time code n is frame n; ``timeCodesPerSecond`` and ``framesPerSecond`` are ``1 / dt``,
+``metersPerUnit`` is 1 and the up axis is z, as the problems are built.
+"""
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry import basis, circle, plane_patch
+from ..interrupts import check
+from ..io import atomic_path
+
+INSTALL = "pip install casadi_keyframe[usd]"
+CLOTH, CLIP, HIGHLIGHT, AGENT, TARGET, BODY, RING = (
+    (0.42, 0.56, 0.78), (0.6, 0.6, 0.65), (0.88, 0.51, 0.17), (0.3, 0.45, 0.69),
+    (0.84, 0.15, 0.16), (0.55, 0.55, 0.55), (0.88, 0.51, 0.17))
+
+
+def pxr_modules():
+    """``(Gf, Sdf, Usd, UsdGeom, Vt)`` from usd-core, or an ImportError that says how to
+    install it."""
+    try:
+        from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+    except ImportError:
+        raise ImportError(f"USD export needs usd-core, which is not installed: "
+                          f"{INSTALL} (or pip install usd-core)") from None
+    return Gf, Sdf, Usd, UsdGeom, Vt
+
+
+def frame_rate(dt: float) -> float:
+    """``1 / dt``, rounded to a whole number when it is one to round-off (1/60 -> 60)."""
+    rate = 1.0 / dt
+    return float(round(rate)) if abs(rate - round(rate)) < 1e-9 * rate else rate
+
+
+def prim_name(text: str) -> str:
+    """A valid prim name from a label (``"CenterOfMass@32"`` -> ``"CenterOfMass_32"``)."""
+    name = re.sub(r"\W", "_", text)
+    return name if name[:1].isalpha() or name[:1] == "_" else f"_{name}"
+
+
+def write_usd(scene, path) -> Path:
+    """Write ``scene`` (:class:`.scene.Scene`) as a USD stage at ``path`` (``.usd``,
+    ``.usda`` or ``.usdc``), whole or not at all."""
+    _, Sdf, Usd, UsdGeom, _ = pxr_modules()
+    layer = Sdf.Layer.CreateAnonymous(Path(path).suffix)
+    stage = Usd.Stage.Open(layer)
+    rate = frame_rate(scene.dt)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(scene.frames - 1)
+    stage.SetTimeCodesPerSecond(rate)
+    stage.SetFramesPerSecond(rate)
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+    UsdGeom.SetStageMetersPerUnit(stage, 1.0)
+    root = UsdGeom.Xform.Define(stage, "/Result").GetPrim()
+    stage.SetDefaultPrim(root)
+    layer.documentation = (f"{scene.name}: a result of casadi_keyframe; time code n is frame "
+                           f"n, dt = {scene.dt:.9g} s; metres, z up")
+    writer = _Writer(stage, scene)
+    writer.particles("/Result/" + ("Cloth" if scene.faces is not None else "Flock"))
+    writer.colliders("/Result/Colliders", scene.bodies)
+    writer.targets("/Result/Targets")
+    for clip in scene.clips:
+        writer.mesh(f"/Result/Clips/{clip.name}/Cape", clip.positions, CLIP)
+        writer.colliders(f"/Result/Clips/{clip.name}/Colliders", clip.bodies)
+    with atomic_path(path) as tmp:
+        layer.Export(str(tmp))
+    return Path(path)
+
+
+class _Writer:
+    """Defines the prims of one scene on one stage."""
+
+    def __init__(self, stage, scene):
+        self.Gf, self.Sdf, self.Usd, self.UsdGeom, self.Vt = pxr_modules()
+        self.stage, self.scene = stage, scene
+        pts = [scene.positions.reshape(-1, 3)] + [t.points for t in scene.targets]
+        lo, hi = np.min([p.min(0) for p in pts], 0), np.max([p.max(0) for p in pts], 0)
+        self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1.0)
+
+    def _vec3(self, x):
+        return self.Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(x, dtype=np.float32))
+
+    def _extent(self, x, pad: float = 0.0):
+        x = np.asarray(x, dtype=np.float32)
+        return self._vec3(np.array([x.min(0) - pad, x.max(0) + pad]))
+
+    def _points_over_time(self, geom, positions, pad: float = 0.0):
+        """Author ``points`` and ``extent`` at every frame (one value if there is one)."""
+        points, extent = geom.CreatePointsAttr(), geom.CreateExtentAttr()
+        if len(positions) == 1:
+            points.Set(self._vec3(positions[0]))
+            extent.Set(self._extent(positions[0], pad))
+            return
+        for n, x in enumerate(positions):
+            check()
+            points.Set(self._vec3(x), float(n))
+            extent.Set(self._extent(x, pad), float(n))
+
+    def _color(self, geom, rgb):
+        geom.CreateDisplayColorAttr(self.Vt.Vec3fArray([self.Gf.Vec3f(*rgb)]))
+
+    def mesh(self, path, positions, rgb, faces=None):
+        """A triangle mesh with ``positions`` per frame (``(frames, n, 3)``)."""
+        UsdGeom = self.UsdGeom
+        mesh = UsdGeom.Mesh.Define(self.stage, path)
+        faces = self.scene.faces if faces is None else np.asarray(faces)
+        mesh.CreateFaceVertexCountsAttr(self.Vt.IntArray([faces.shape[1]] * len(faces)))
+        mesh.CreateFaceVertexIndicesAttr(self.Vt.IntArray(faces.ravel().tolist()))
+        mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+        mesh.CreateDoubleSidedAttr(True)
+        self._points_over_time(mesh, positions)
+        self._color(mesh, rgb)
+        return mesh
+
+    def points(self, path, positions, rgb, width: float):
+        """A points prim with ``positions`` per frame and a constant ``width``."""
+        pts = self.UsdGeom.Points.Define(self.stage, path)
+        pts.CreateWidthsAttr(self.Vt.FloatArray([width]))
+        pts.SetWidthsInterpolation(self.UsdGeom.Tokens.constant)
+        self._points_over_time(pts, positions, pad=width / 2)
+        self._color(pts, rgb)
+        return pts
+
+    def particles(self, path):
+        """The cloth's mesh, or the flock's points with ids and the highlight flag."""
+        scene = self.scene
+        if scene.faces is not None:
+            self.mesh(path, scene.positions, CLOTH)
+            return
+        n = scene.positions.shape[1]
+        pts = self.points(path, scene.positions, AGENT, width=0.3)
+        pts.CreateIdsAttr(self.Vt.Int64Array(list(range(n))))
+        flag = np.zeros(n, dtype=np.int32)
+        flag[list(scene.highlight)] = 1
+        api = self.UsdGeom.PrimvarsAPI(pts)
+        api.CreatePrimvar("highlighted", self.Sdf.ValueTypeNames.IntArray,
+                          self.UsdGeom.Tokens.vertex).Set(self.Vt.IntArray(flag.tolist()))
+        colors = np.where(flag[:, None] == 1, HIGHLIGHT, AGENT)
+        pts.CreateDisplayColorPrimvar(self.UsdGeom.Tokens.vertex).Set(self._vec3(colors))
+
+    def colliders(self, path, bodies):
+        """One prim per collider under ``path``."""
+        if not bodies:
+            return
+        self.UsdGeom.Scope.Define(self.stage, path)
+        for body in bodies:
+            where = f"{path}/{prim_name(body.name)}"
+            if body.kind == "plane":
+                self._plane(where, body)
+            else:
+                self._round(where, body)
+
+    def _plane(self, path, body):
+        corners = [plane_patch(a, b, self.mid, self.half) for a, b in zip(body.a, body.b)]
+        positions = np.array(corners if body.moving else corners[:1])
+        self.mesh(path, positions, BODY, faces=np.array([[0, 1, 2, 3]]))
+
+    def _round(self, path, body):
+        """A sphere, or a capsule along z placed by a transform from ``a`` to ``b``."""
+        Gf, UsdGeom = self.Gf, self.UsdGeom
+        if body.sphere:
+            prim = UsdGeom.Sphere.Define(self.stage, path)
+        else:
+            prim = UsdGeom.Capsule.Define(self.stage, path)
+            prim.CreateAxisAttr(UsdGeom.Tokens.z)
+        op = prim.AddTransformOp()
+        frames = range(len(body.a)) if body.moving else [0]
+        for n in frames:
+            a, b, r = body.a[n], body.b[n], float(body.radius[n])
+            axis, e1, e2 = basis(b - a)
+            if body.sphere:
+                axis, e1, e2 = np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]
+            matrix = Gf.Matrix4d(*np.r_[e1, 0, e2, 0, axis, 0, (a + b) / 2, 1].tolist())
+            length = float(np.linalg.norm(b - a))
+            time = float(n) if body.moving else self.Usd.TimeCode.Default()
+            op.Set(matrix, time)
+            prim.GetRadiusAttr().Set(r, time)
+            half = np.array([r, r, r + (0 if body.sphere else length / 2)])
+            prim.CreateExtentAttr().Set(self._vec3(np.array([-half, half])), time)
+            if not body.sphere:
+                prim.GetHeightAttr().Set(length, time)
+        self._color(prim, BODY)
+
+    def targets(self, path):
+        """Each keyframe target, and the view's ring, as its own prim under ``path``."""
+        scene = self.scene
+        if not scene.targets and scene.ring is None:
+            return
+        self.UsdGeom.Scope.Define(self.stage, path)
+        for t in scene.targets:
+            where = f"{path}/{prim_name(t.label)}"
+            if t.kind == "shape":
+                prim = self.mesh(where, t.points[None], TARGET)
+            elif t.kind == "points":
+                prim = self.points(where, t.points[None], TARGET, width=0.05)
+            else:
+                prim = self.curve(where, t.points, TARGET, width=0.05)
+            prim.GetPrim().SetCustomDataByKey("keyframe_frame", int(t.frame))
+        if scene.ring is not None:
+            ring = scene.ring
+            self.curve(f"{path}/Ring", circle(ring.center, ring.normal, ring.radius)[:-1], RING,
+                       width=0.03)
+
+    def curve(self, path, points, rgb, width: float):
+        """A closed polyline through ``points`` (``(k, 3)``)."""
+        UsdGeom = self.UsdGeom
+        points = np.asarray(points, float)
+        if np.allclose(points[0], points[-1]):
+            points = points[:-1]
+        curve = UsdGeom.BasisCurves.Define(self.stage, path)
+        curve.CreateTypeAttr(UsdGeom.Tokens.linear)
+        curve.CreateWrapAttr(UsdGeom.Tokens.periodic)
+        curve.CreateCurveVertexCountsAttr(self.Vt.IntArray([len(points)]))
+        curve.CreateWidthsAttr(self.Vt.FloatArray([width]))
+        curve.SetWidthsInterpolation(UsdGeom.Tokens.constant)
+        self._points_over_time(curve, points[None], pad=width / 2)
+        self._color(curve, rgb)
+        return curve
+
+
+def validate(path) -> list[str]:
+    """USD's own checks of the file at ``path``: the messages of
+    ``UsdUtils.ComplianceChecker`` where this usd-core has it, else of every registered
+    ``UsdValidation`` validator (its successor, what ``usdchecker`` runs); empty if clean."""
+    pxr_modules()
+    from pxr import Usd, UsdUtils
+
+    if hasattr(UsdUtils, "ComplianceChecker"):
+        checker = UsdUtils.ComplianceChecker()
+        checker.CheckCompliance(str(path))
+        return [*checker.GetErrors(), *checker.GetFailedChecks()]
+    from pxr import UsdValidation
+
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    errors = UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
+    return [e.GetErrorAsString() for e in errors]

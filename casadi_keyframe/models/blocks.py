@@ -1,0 +1,145 @@
+"""Block-sparse Jacobians of pairwise forces: 3x3 blocks per pair and per particle, their
+products with vectors, and the fixed sparsity pattern they are gathered into.
+
+A pair law acting on ``d = x_j - x_i`` with force ``+F`` on i and ``-F`` on j has the Jacobian
+block ``B = dF/dd`` at (i,j) and (j,i) and ``-B`` at (i,i) and (j,j); a particle's own forces
+(drag, colliders) give a diagonal block.  :class:`Blocks` holds one Jacobian that way;
+:class:`BlockPattern` is the structure of such a matrix for a fixed list of pairs, with the
+gather that turns blocks into CSC values in one sparse product, optionally restricted to the
+free (unconstrained) components, so a matrix assembled every step keeps one pattern and a
+sparse factorisation can analyse it once.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..kernels import scatter_pairs
+
+
+@dataclass(frozen=True)
+class Blocks:
+    """One ``3n x 3n`` Jacobian as row-major 3x3 blocks: ``pairs (P, 9)`` for the pairs
+    ``(i, j)`` and ``particles (n, 9)`` on the diagonal."""
+
+    i: np.ndarray
+    j: np.ndarray
+    pairs: np.ndarray
+    particles: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.particles.shape[0]
+
+    def matvec(self, y: np.ndarray, transpose: bool = False) -> np.ndarray:
+        """``J y`` (``J^T y`` with ``transpose``) for ``y`` of shape ``(n, 3)`` or flat."""
+        y = np.asarray(y).reshape(self.n, 3)
+        spec = "pba,pb->pa" if transpose else "pab,pb->pa"
+        pairs = np.einsum(spec, self.pairs.reshape(-1, 3, 3), y[self.j] - y[self.i])
+        out = np.einsum(spec.replace("p", "k"), self.particles.reshape(-1, 3, 3), y)
+        return out + scatter_pairs(pairs, self.i, self.j, self.n)
+
+    def scaled_sum(self, others, weights, diagonal=None) -> "Blocks":
+        """``w0 self + w1 others[0] + ...`` plus ``diagonal`` (``(n,)``, times the identity
+        in each particle block); every term over the same pairs."""
+        pairs, particles = weights[0] * self.pairs, weights[0] * self.particles
+        for blocks, w in zip(others, weights[1:]):
+            pairs, particles = pairs + w * blocks.pairs, particles + w * blocks.particles
+        if diagonal is not None:
+            particles = particles + np.outer(diagonal, np.eye(3).ravel())
+        return Blocks(self.i, self.j, pairs, particles)
+
+
+@dataclass(frozen=True)
+class SparseJacobian:
+    """A Jacobian given as a sparse matrix, with :meth:`Blocks.matvec`'s interface (for
+    models that give ``jacobians`` but no blocks)."""
+
+    matrix: object
+
+    def matvec(self, y: np.ndarray, transpose: bool = False) -> np.ndarray:
+        y = np.asarray(y)
+        return ((self.matrix.T if transpose else self.matrix) @ y.ravel()).reshape(y.shape)
+
+
+class BlockPattern:
+    """The CSC structure of a matrix of :class:`Blocks` over fixed pairs ``(i, j)`` of n
+    particles, restricted to the components where ``free`` (flat, ``3n``) is True (all by
+    default; the rows and columns of the others are dropped) and, unless ``particle_blocks``
+    is False, with every particle's diagonal block.  ``values(pairs, particles)``
+    gives the CSC data in that structure by one product with ``gather``, so every matrix
+    with these pairs shares ``indices`` and ``indptr``."""
+
+    def __init__(self, i: np.ndarray, j: np.ndarray, n: int, free: np.ndarray | None = None,
+                 particle_blocks: bool = True):
+        self.i, self.j, self.n = np.asarray(i, np.intp), np.asarray(j, np.intp), n
+        k = np.arange(n if particle_blocks else 0)
+        bi = np.concatenate([self.i, self.i, self.j, self.j, k])
+        bj = np.concatenate([self.i, self.j, self.i, self.j, k])
+        a, b = np.divmod(np.arange(9), 3)  # row-major entry e of a block is (a, b)
+        rows, cols = (3 * bi[:, None] + a).ravel(), (3 * bj[:, None] + b).ravel()
+        P = self.i.size
+        source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(9 * k.size)])
+        sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P),
+                               np.ones(9 * k.size)])
+        free = np.ones(3 * n, bool) if free is None else np.asarray(free, bool)
+        keep = free[rows] & free[cols]
+        number = np.cumsum(free) - 1  # a free component's index among the free ones
+        rows, cols, source, sign = number[rows[keep]], number[cols[keep]], source[keep], sign[keep]
+        self.size = int(free.sum())
+        keys, slot = np.unique(cols.astype(np.int64) * self.size + rows, return_inverse=True)
+        self.indices = (keys % self.size).astype(np.int32)
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(keys // self.size,
+                                                                 minlength=self.size))])
+        self.indptr = self.indptr.astype(np.int32)
+        self.gather = sp.csr_matrix((sign, (slot.ravel(), source)),
+                                    shape=(keys.size, 9 * P + 9 * k.size))
+        self.free = free
+
+    @property
+    def nnz(self) -> int:
+        return self.indices.size
+
+    def values(self, pairs: np.ndarray, particles: np.ndarray | None = None) -> np.ndarray:
+        """CSC data of the matrix with ``(P, 9)`` pair blocks and ``(n, 9)`` particle blocks
+        (none for a pattern built without ``particle_blocks``)."""
+        if particles is None:
+            return self.gather @ pairs.ravel()
+        return self.gather @ np.concatenate([pairs.ravel(), particles.ravel()])
+
+    def matrix(self, pairs: np.ndarray, particles: np.ndarray | None = None) -> sp.csc_matrix:
+        """The matrix itself (the free block when the pattern is restricted)."""
+        return sp.csc_matrix((self.values(pairs, particles), self.indices.copy(),
+                              self.indptr.copy()), shape=(self.size, self.size))
+
+
+class GrowingPattern:
+    """The pattern of one pass's step matrices: a fixed pattern (the springs', restricted to
+    the free components) plus every extra pair (self-contact) met so far.  It grows when a
+    matrix has a pair it lacks and never shrinks within the pass, so a factorisation
+    re-analyses only when contact spreads; each growth makes a new :class:`BlockPattern`
+    (its identity is the structure key)."""
+
+    def __init__(self, fixed: BlockPattern):
+        self.fixed = self.pattern = fixed
+        self.extra = np.zeros(0, np.int64)  # sorted keys i * n + j of the extra pairs
+        self.growths = 0
+
+    def values(self, blocks: Blocks) -> np.ndarray:
+        """CSC data of ``blocks`` (the fixed pairs first, then extra pairs) in
+        :attr:`pattern`, grown first if ``blocks`` has pairs it lacks."""
+        fixed, n = self.fixed, self.fixed.n
+        S = fixed.i.size
+        keys = blocks.i[S:].astype(np.int64) * n + blocks.j[S:]
+        if keys.size and not np.all(np.isin(keys, self.extra, assume_unique=True)):
+            self.extra = np.union1d(self.extra, keys)
+            i, j = np.divmod(self.extra, n)
+            self.pattern = BlockPattern(np.concatenate([fixed.i, i]),
+                                        np.concatenate([fixed.j, j]), n, fixed.free)
+            self.growths += 1
+        pairs = np.zeros((S + self.extra.size, 9))
+        pairs[:S] = blocks.pairs[:S]
+        pairs[S + np.searchsorted(self.extra, keys)] = blocks.pairs[S:]
+        return self.pattern.values(pairs, blocks.particles)

@@ -1,5 +1,5 @@
 """The ``casadi-keyframe`` command line: list, show, solve, render, export and gradcheck
-problems; print studies."""
+problems; sweep a problem over a grid of overrides; print studies or run their grids."""
 from __future__ import annotations
 
 import argparse
@@ -17,9 +17,10 @@ import numpy as np
 
 from .adjoints import ROUTES as GRADIENT_ROUTES
 from .export import FORMATS as EXPORT_FORMATS
-from .loading import (OverrideError, build_problem, check_overrides, list_problems,
-                      load_module, load_problem, overrides_of, resolve, solve_defaults)
-from .run import EXIT_CODES, SolveRun, run_export, run_render, run_solve
+from .loading import (OverrideError, check_overrides, list_problems, load_module,
+                      load_problem, overrides_of, solve_defaults)
+from .run import EXIT_CODES, run_export, run_render, run_solve, solve_run
+from .sweep.plan import SWEEP_EXIT_CODES
 from .state import SimulationError
 
 
@@ -29,18 +30,61 @@ def parse_overrides(items) -> dict:
     string (checked against the problem's ``build`` by :func:`loading.check_overrides`)."""
     out = {}
     for item in items or []:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or not key.isidentifier():
-            raise ValueError(f"--set expects KEY=VALUE such as agents=50, got {item!r}")
-        try:
-            out[key] = ast.literal_eval(value.strip())
-        except (ValueError, SyntaxError, MemoryError, RecursionError):
-            try:
-                out[key] = float(Fraction(value.strip()))
-            except (ValueError, ZeroDivisionError):
-                out[key] = value
+        key, value = _key_value(item, "--set", "agents=50")
+        out[key] = parse_value(value)
     return out
+
+
+def parse_grid(items) -> dict:
+    """``["weight=10,100", "dt=1/30,1/60", "x0=(0,1),(2,3)"]`` -> ``{"weight": [10, 100],
+    "dt": [0.0333, 0.0167], "x0": [(0, 1), (2, 3)]}``: each value as :func:`parse_overrides`
+    reads it, split at the commas outside brackets and quotes."""
+    out = {}
+    for item in items or []:
+        key, values = _key_value(item, "--grid", "weight=10,100")
+        if key in out:
+            raise ValueError(f"--grid {key} is given twice: list all its values in one --grid")
+        out[key] = [parse_value(v) for v in _split_top(values)]
+    return out
+
+
+def _key_value(item: str, option: str, example: str) -> tuple[str, str]:
+    key, sep, value = item.partition("=")
+    key = key.strip()
+    if not sep or not key.isidentifier():
+        raise ValueError(f"{option} expects KEY=VALUE such as {example}, got {item!r}")
+    return key, value
+
+
+def _split_top(text: str) -> list[str]:
+    """``"1,(2,3),'a,b'"`` -> ``["1", "(2,3)", "'a,b'"]``; empty items dropped."""
+    parts, depth, quote, current = [], 0, None, ""
+    for char in text:
+        if quote:
+            quote = None if char == quote else quote
+        elif char in "'\"":
+            quote = char
+        elif char in "([{":
+            depth += 1
+        elif char in ")]}":
+            depth -= 1
+        elif char == "," and depth == 0:
+            parts.append(current)
+            current = ""
+            continue
+        current += char
+    return [p.strip() for p in parts + [current] if p.strip()]
+
+
+def parse_value(text: str):
+    """A command-line value: a Python literal, else a fraction as a float, else the text."""
+    try:
+        return ast.literal_eval(text.strip())
+    except (ValueError, SyntaxError, MemoryError, RecursionError):
+        try:
+            return float(Fraction(text.strip()))
+        except (ValueError, ZeroDivisionError):
+            return text
 
 
 def at_least(kind, low, *, strict: bool = False):
@@ -149,23 +193,14 @@ def cmd_solve(args) -> int:
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
     out = ensure_writable(args.out) if args.out else None
-    prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module)
-    method = args.method or defaults["method"]
-    gradient = args.gradient or defaults["gradient"]
-    maxiter = args.maxiter if args.maxiter is not None else defaults["maxiter"]
-    out = out or ensure_writable(Path("results") / prob.name)
-    rounds = {key: value for key, value in (("rounds", args.rounds),
-                                             ("weight_growth", args.weight_growth))
-              if value is not None} or {k: defaults[k] for k in ("rounds", "weight_growth")
-                                        if k in defaults}
-    return run_solve(SolveRun(
-        prob, out, problem_file=str(resolve(args.problem).resolve()), problem_arg=args.problem,
-        overrides=overrides, method=method, gradient=gradient, maxiter=maxiter,
-        continuation=continuation, rounds=rounds,
-        time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
-        animation=not args.no_animation, exports=tuple(args.export or ()),
-        viewer=not args.no_viewer))
+    spec = solve_run(module, args.problem, overrides, out, method=args.method,
+                     gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
+                     weight_growth=args.weight_growth, continuation=continuation,
+                     time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
+                     animation=not args.no_animation, exports=tuple(args.export or ()),
+                     viewer=not args.no_viewer)
+    ensure_writable(spec.out)
+    return run_solve(spec)
 
 
 def cmd_render(args) -> int:
@@ -213,11 +248,97 @@ def cmd_gradcheck(args) -> int:
 def cmd_study(args) -> int:
     from . import studies
 
+    if args.grid:
+        from .sweep import report, study_sweep
+
+        out = ensure_writable(args.out or Path("results") / f"study-{args.study}")
+        result = study_sweep(args.study, parse_grid(args.grid), out=out,
+                             overrides=parse_overrides(args.set), figure=args.figure,
+                             **_runner_options(args))
+        report(result, out)
+        return result.exit_code
+    if args.set or args.out:
+        raise ValueError("--set and --out go with --grid (a study grid run as a sweep)")
     if args.study == "gradient-accuracy":
         print(studies.format_gradient_accuracy(studies.gradient_accuracy(quick=args.quick)))
     else:
         print(studies.format_one_step_gap(studies.one_step_gap(quick=args.quick)))
     return 0
+
+
+def cmd_sweep(args) -> int:
+    from .sweep import report, sweep
+
+    grid = parse_grid(args.grid)
+    out = ensure_writable(args.out or Path("results") / f"sweep-{Path(args.problem).stem}")
+    result = sweep(args.problem, grid, out=out, starts=args.starts,
+                   overrides=parse_overrides(args.set), seed=args.seed, perturb=args.perturb,
+                   figure=args.figure, pictures=args.pictures,
+                   group_by=args.group_by.split(",") if args.group_by else None,
+                   continuation=parse_time_steps(args.continuation),
+                   **{k: getattr(args, k) for k in ("method", "gradient", "maxiter",
+                                                    "time_limit")},
+                   **_runner_options(args))
+    report(result, out)
+    return result.exit_code
+
+
+def _runner_options(args) -> dict:
+    return {"workers": args.workers, "scheduler": args.scheduler, "tries": args.tries,
+            "resume": args.resume, "progress": not args.quiet}
+
+
+def _add_runner_options(p) -> None:
+    """The cluster and resume options ``sweep`` and ``study --grid`` share."""
+    p.add_argument("--workers", type=positive_int, metavar="N",
+                   help="worker processes of the local cluster (default: one per core)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="use the running Dask cluster whose scheduler is at ADDRESS (e.g. "
+                        "tcp://10.0.0.5:8786) instead of a local one; its workers need this "
+                        "library and a filesystem shared with --out")
+    p.add_argument("--tries", type=positive_int, default=3, metavar="N",
+                   help="times a point is started before it is reported failed when the "
+                        "workers running it die (local cluster; default 3)")
+    p.add_argument("--resume", action="store_true",
+                   help="continue a sweep in --out: points already complete are skipped")
+    p.add_argument("--quiet", action="store_true", help="no progress display")
+
+
+def _add_sweep_parser(sub) -> None:
+    w = sub.add_parser("sweep", help="solve a problem at every combination of some overrides "
+                                     "(and from several starts), on a Dask cluster",
+                       epilog=SWEEP_EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
+    w.add_argument("problem", help="problem name (see 'list') or path to a problem file")
+    w.add_argument("--grid", action="append", required=True, metavar="KEY=V1,V2,...",
+                   help="values of a build() argument to sweep; several --grid make a "
+                        "Cartesian product")
+    w.add_argument("--starts", type=positive_int, default=1, metavar="K",
+                   help="starts per grid point: the problem's own and K-1 perturbed ones")
+    w.add_argument("--perturb", type=at_least(float, 0), default=0.5, metavar="SIGMA",
+                   help="rms of a perturbed start: m/s^2 times each particle's mass for "
+                        "per-step forces, m/s for initial velocities (default 0.5)")
+    w.add_argument("--seed", type=at_least(int, 0), default=0,
+                   help="seed of the perturbed starts")
+    w.add_argument("--set", action="append", metavar="KEY=VALUE",
+                   help="override a build() argument at every point")
+    w.add_argument("--method", choices=("lbfgsb", "ipopt"))
+    w.add_argument("--gradient", choices=GRADIENT_ROUTES)
+    w.add_argument("--maxiter", type=positive_int, help="iteration limit of each point")
+    w.add_argument("--continuation", metavar="DT,DT,...", help="as for solve")
+    w.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
+                   help="wall-time limit of each point's search")
+    w.add_argument("--figure", default="objective",
+                   help="what ranks the points and is plotted: objective (default), "
+                        "keyframe_error, control_cost, iterations, evaluations, seconds")
+    w.add_argument("--group-by", metavar="KEY,KEY",
+                   help="name the best point of each combination of these swept keys "
+                        "(default: of each grid point with --starts > 1, else overall)")
+    w.add_argument("--pictures", action="store_true",
+                   help="draw each point's keyframes.png and convergence.png (default: "
+                        "results only; 'casadi-keyframe render POINT_FOLDER' draws them)")
+    w.add_argument("--out", help="output folder (default results/sweep-PROBLEM)")
+    _add_runner_options(w)
+    w.set_defaults(func=cmd_sweep)
 
 
 def _output_options(s) -> None:
@@ -302,10 +423,25 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(func=cmd_gradcheck)
 
-    st = sub.add_parser("study", help="print an accuracy study (the notebooks' tables)")
+    st = sub.add_parser("study", help="print an accuracy study (the notebooks' tables), or "
+                                      "run a grid of it as a sweep (--grid)",
+                        epilog=SWEEP_EXIT_CODES + "\n\nexample: casadi-keyframe study "
+                        "gradient-accuracy --grid dt=1/30,1/60,1/120 --grid stretch=50,500",
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
     st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy"))
     st.add_argument("--quick", action="store_true", help="small sizes (as CASADI_KEYFRAME_QUICK=1)")
+    st.add_argument("--grid", action="append", metavar="KEY=V1,V2,...",
+                    help="run the study at every combination of these values on the sweep "
+                         "runner (gradient-accuracy: dt, horizon, stretch, amplitude, seed; "
+                         "integrator-accuracy: dt, stretch, rows, seed)")
+    st.add_argument("--set", action="append", metavar="KEY=VALUE",
+                    help="a fixed value for every point of the grid")
+    st.add_argument("--figure", help="the figure ranked and plotted (gradient-accuracy: "
+                                     "relative_error; integrator-accuracy: gap_x or gap_v)")
+    st.add_argument("--out", help="output folder (default results/study-STUDY)")
+    _add_runner_options(st)
     st.set_defaults(func=cmd_study)
+    _add_sweep_parser(sub)
     return p
 
 

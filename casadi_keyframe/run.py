@@ -62,6 +62,31 @@ class SolveRun:
     animation: bool = True
     exports: tuple = ()  # export formats written beside the pictures (see .export)
     viewer: bool = True  # the HTML viewer (skipped with a note when plotly is missing)
+    pictures: bool = True  # False: result files only ('render' draws them later)
+    u0: object = None  # starting controls instead of the problem's (a sweep's perturbed start)
+
+
+def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=None,
+              gradient=None, maxiter=None, rounds=None, weight_growth=None,
+              **options) -> SolveRun:
+    """The :class:`SolveRun` of a loaded problem file built with ``overrides`` (checked
+    first), writing to ``out`` (default ``results/PROBLEM``): the search options not given
+    (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
+    each point of a sweep solve a problem the same way; ``options`` are SolveRun's others."""
+    from .loading import build_problem, resolve, solve_defaults
+
+    prob = build_problem(module, **overrides)
+    defaults = solve_defaults(module)
+    given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
+             if v is not None}
+    return SolveRun(
+        prob, Path(out) if out else Path("results") / prob.name,
+        problem_file=str(resolve(module.__file__).resolve()), problem_arg=str(problem_arg),
+        overrides=overrides, method=method or defaults["method"],
+        gradient=gradient or defaults["gradient"],
+        maxiter=defaults["maxiter"] if maxiter is None else maxiter,
+        rounds=given or {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults},
+        **options)
 
 
 def run_solve(spec: SolveRun) -> int:
@@ -90,8 +115,9 @@ def _guarded(work, stopped) -> int:
 
 def _solve(spec: SolveRun, caught, done) -> int:
     prob, out = spec.problem, spec.out
-    u0, resumed = resume_controls(spec) if spec.resume else (None, {})
-    origin = ("resumed" if resumed else "guess" if prob.has_guess else "passive")
+    u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
+    origin = ("resumed" if resumed else "given" if u0 is not None
+              else "guess" if prob.has_guess else "passive")
     try:
         start = prob.breakdown(prob.initial_controls() if u0 is None else u0)
     except SimulationError as err:
@@ -114,6 +140,8 @@ def _solve(spec: SolveRun, caught, done) -> int:
         print(f"  {_stopped(signum)}: pictures skipped; draw them with 'casadi-keyframe "
               f"render {out}', continue with '{_command(spec, 'solve')} --out {out} "
               f"--resume {out}'")
+    elif not spec.pictures:
+        print(f"  pictures not drawn; draw them with 'casadi-keyframe render {out}'")
     else:
         draw(prob, result.trajectory, result, out, animation=spec.animation)
         print(f"  pictures drawn in {out}/")

@@ -92,25 +92,44 @@ def one_step_gap(dts=None, stretch: float = 500.0, rows: int = 5, seed: int = 0,
     quick = quick_mode() if quick is None else quick
     if dts is None:
         dts = 1 / 30 * 0.5 ** np.arange(4 if quick else 7)
-    model = hanging_sheet(rows, stretch, ground=False)
-    rng = np.random.default_rng(seed)
-    x0 = model.rest_positions + 0.02 * rng.standard_normal((model.n, 3))
-    v0 = 0.3 * rng.standard_normal((model.n, 3))
-    e = np.zeros((1, model.n, 3))
-    gap_x, gap_v = [], []
-    for dt in dts:
-        full = simulate(BackwardEuler(), model, x0, v0, e, dt)
-        linear = simulate(LinearizedBackwardEuler("direct"), model, x0, v0, e, dt)
-        gap_x.append(float(np.abs(full.x[1] - linear.x[1]).max()))
-        gap_v.append(float(np.abs(full.v[1] - linear.v[1]).max()))
+    sheet = _moving_sheet(stretch, rows, seed)
+    gaps = [_one_step(*sheet, dt) for dt in dts]
+    gap_x, gap_v = [g[0] for g in gaps], [g[1] for g in gaps]
     fine = slice(-(len(dts) // 2) - 1, None)
-    omega = np.sqrt(stretch / model.masses.min())
+    omega = np.sqrt(stretch / sheet[0].masses.min())
     dts = np.asarray(dts, float)
     return {"dt": dts.tolist(), "gap_x": gap_x, "gap_v": gap_v,
             "omega_dt": (omega * dts).tolist(),
             "slope_x": fitted_order(dts[fine], gap_x[fine]),
             "slope_v": fitted_order(dts[fine], gap_v[fine]),
             "slope_x_all": fitted_order(dts, gap_x), "slope_v_all": fitted_order(dts, gap_v)}
+
+
+def one_step_point(dt: float, stretch: float = 500.0, rows: int = 5, seed: int = 0) -> dict:
+    """One row of :func:`one_step_gap`: the gaps at one ``dt`` (a sweep's point; the sweep
+    fits no slope, its table holds the gaps to fit)."""
+    sheet = _moving_sheet(stretch, rows, seed)
+    gap_x, gap_v = _one_step(*sheet, dt)
+    omega = np.sqrt(stretch / sheet[0].masses.min())
+    return {"dt": dt, "omega_dt": float(omega * dt), "gap_x": gap_x, "gap_v": gap_v}
+
+
+def _moving_sheet(stretch: float, rows: int, seed: int):
+    """The hanging sheet (no ground) and a perturbed moving state of it: model, x0, v0."""
+    model = hanging_sheet(rows, stretch, ground=False)
+    rng = np.random.default_rng(seed)
+    x0 = model.rest_positions + 0.02 * rng.standard_normal((model.n, 3))
+    v0 = 0.3 * rng.standard_normal((model.n, 3))
+    return model, x0, v0
+
+
+def _one_step(model, x0, v0, dt: float) -> tuple[float, float]:
+    """Largest position and velocity difference after one step of size ``dt``."""
+    e = np.zeros((1, model.n, 3))
+    full = simulate(BackwardEuler(), model, x0, v0, e, dt)
+    linear = simulate(LinearizedBackwardEuler("direct"), model, x0, v0, e, dt)
+    return (float(np.abs(full.x[1] - linear.x[1]).max()),
+            float(np.abs(full.v[1] - linear.v[1]).max()))
 
 
 def format_one_step_gap(gap: dict) -> str:

@@ -1,0 +1,57 @@
+"""The accuracy studies' grids through the sweep runner (``casadi-keyframe study NAME
+--grid ...``): each point is one row of the study, computed on a worker, kept in its
+folder like a solve's point, so a large grid can use a cluster and ``--resume``.
+
+    from casadi_keyframe.sweep import study_sweep
+    result = study_sweep("gradient-accuracy", {"dt": [1/30, 1/60], "stretch": [50, 500]},
+                         out="results/study", workers=2)
+    result.rows   # one dict per point: dt, stretch, relative_error, cosine, ...
+"""
+from __future__ import annotations
+
+import importlib
+from pathlib import Path
+
+from ..loading import OverrideError, check_overrides
+from .grid import points
+from .plan import Plan, SweepResult, check_grid, check_group_by, run_plan, study_module
+
+# name: (the function computing one row, the ranges of its keywords, the figures to rank by)
+STUDIES = {
+    "gradient-accuracy": ("casadi_keyframe.studies:swapped_vs_exact",
+                          {"dt": "(0, inf)", "horizon": "(0, inf)", "stretch": "(0, inf)",
+                           "amplitude": "[0, inf)", "seed": "[0, inf)"},
+                          ("relative_error",)),
+    "integrator-accuracy": ("casadi_keyframe.studies:one_step_point",
+                            {"dt": "(0, inf)", "stretch": "(0, inf)", "rows": "[2, inf)",
+                             "seed": "[0, inf)"},
+                            ("gap_x", "gap_v")),
+}
+
+
+def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
+                figure: str | None = None, group_by=None, **runner) -> SweepResult:
+    """Run the study ``study`` (a key of :data:`STUDIES`) at every combination of
+    ``grid``'s values on top of ``overrides``; ``runner`` as for :func:`.plan.sweep`
+    (``workers``, ``scheduler``, ``tries``, ``resume``, ``progress``)."""
+    if study not in STUDIES:
+        raise ValueError(f"unknown study {study!r}; choose one of {', '.join(STUDIES)}")
+    target, ranges, figures = STUDIES[study]
+    path, _, name = target.partition(":")
+    module = study_module(study, getattr(importlib.import_module(path), name), ranges)
+    overrides = dict(overrides or {})
+    try:
+        grid = check_grid(module, grid, overrides)
+        specs = [{"kind": "study", "function": target, "values": p.values, "start": 0,
+                  "name": p.name, "label": p.label,
+                  "overrides": check_overrides(module, {**overrides, **p.values})}
+                 for p in points(grid)]
+    except OverrideError as err:  # not a problem file: no 'show' hint
+        raise ValueError(str(err)) from None
+    figure = figure or figures[0]
+    if figure not in figures:
+        raise ValueError(f"--figure {figure!r}: the {study} study ranks by "
+                         f"{', '.join(figures)}")
+    group_by = check_group_by(group_by or [], list(grid))
+    about = {"study": study, "grid": grid, "overrides": overrides}
+    return run_plan(Plan(specs, Path(out), list(grid), figure, group_by, about), **runner)

@@ -271,10 +271,14 @@ def format_stage(stage: dict) -> str:
 
 
 def format_physical(report: dict) -> str:
-    """``physical: largest stretch 1.16 (frame 30), deepest in a body 4.1 mm (frame 52)``."""
-    return (f"physical: largest stretch {report['max_stretch']:.3g} (frame "
-            f"{report['max_stretch_frame']}), deepest in a body "
-            f"{1e3 * report['max_penetration']:.3g} mm (frame {report['max_penetration_frame']})")
+    """``physical: largest stretch 1.16 (frame 30), deepest in a body 4.1 mm (frame 52)``
+    (no depth for a cloth without colliders)."""
+    text = (f"physical: largest stretch {report['max_stretch']:.3g} (frame "
+            f"{report['max_stretch_frame']})")
+    if "max_penetration" in report:
+        text += (f", deepest in a body {1e3 * report['max_penetration']:.3g} mm (frame "
+                 f"{report['max_penetration_frame']})")
+    return text
 
 
 def format_misses(misses) -> str:

@@ -434,12 +434,14 @@ class ClothModel:
 
     def physical_report(self, x: np.ndarray, dt: float) -> dict:
         """Whether the frames ``x`` (``(frames, n, 3)``, ``dt`` apart) stay physical: the
-        largest spring stretch (length over rest length) and the deepest particle inside a
-        collider (m), each with the frame where it happens."""
+        largest spring stretch (length over rest length) and, if it has colliders, the
+        deepest particle inside one (m), each with the frame where it happens."""
         stretch = [self.max_stretch(frame) for frame in x]
-        depth = [self.penetration(frame, k * dt) for k, frame in enumerate(x)]
-        return {"max_stretch": max(stretch), "max_stretch_frame": int(np.argmax(stretch)),
-                "max_penetration": max(depth), "max_penetration_frame": int(np.argmax(depth))}
+        out = {"max_stretch": max(stretch), "max_stretch_frame": int(np.argmax(stretch))}
+        if self.colliders:
+            depth = [self.penetration(frame, k * dt) for k, frame in enumerate(x)]
+            out.update(max_penetration=max(depth), max_penetration_frame=int(np.argmax(depth)))
+        return out
 
     @functools.cached_property
     def step_pattern(self) -> BlockPattern:

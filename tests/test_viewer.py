@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import cli, load_problem
-from casadi_keyframe.export import export, scene_of
+from casadi_keyframe.export import scene_of
 
 pytest.importorskip("plotly", reason="the viewer needs plotly: pip install casadi_keyframe[viewer]")
 from casadi_keyframe.export.viewer import equal_boxes, figure, panels  # noqa: E402

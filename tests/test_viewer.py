@@ -44,6 +44,8 @@ def test_frames_caption_and_toggles():
     assert "frame 4 / 10" in captions[4] and "t = 0.067 s" in captions[4]
     assert "keyframe: CenterOfMass@4 position_error" in captions[4]
     assert "keyframe" not in captions[3]
+    stretch = p.model.max_stretch(traj.x[4])
+    assert f"largest stretch {stretch:.3g}" in captions[4]
     labels = [b.label for menu in fig.layout.updatemenus for b in menu.buttons]
     assert {"\u25b6 play", "targets on/off", "colliders on/off", "trails on/off"} <= set(labels)
     moved = fig.frames[7].data[0]

@@ -1,6 +1,6 @@
 """What a result shows, as plain arrays every exporter writes: the particles at each frame,
 the surface's triangles, the colliders at each frame, the keyframe targets, the view's ring,
-a blend's source clips and the keyframe misses.
+a blend's source clips, the keyframe misses and a cloth's largest stretch per frame.
 
 Positions are always 3-D (a 2-D flock lies in the plane z = 0, seen from above), in metres,
 z up, as the problems build them.  Nothing here knows a file format.
@@ -113,6 +113,7 @@ class Scene:
     marked: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     clips: list = field(default_factory=list)
     misses: dict = field(default_factory=dict)  # frame -> one line of keyframe misses
+    stretch: np.ndarray | None = None  # (frames,) a cloth's largest spring stretch per frame
 
     @property
     def frames(self) -> int:
@@ -131,6 +132,8 @@ def scene_of(problem, trajectory) -> Scene:
                   np.asarray(model.faces, int) if hasattr(model, "faces") else None,
                   bodies(model, times), targets(problem), dim=model.dim,
                   misses=misses(problem, trajectory))
+    if hasattr(model, "max_stretch"):
+        scene.stretch = np.array([model.max_stretch(x) for x in trajectory.x])
     if isinstance(view, FlockView):
         scene.highlight = view.highlight
     if isinstance(view, ClothView):

@@ -152,8 +152,11 @@ def build_2d(go, scene):
 
 
 def caption(scene, n: int) -> str:
-    """The numbers above the plot at frame ``n``: frame, time, and the keyframe misses."""
+    """The numbers above the plot at frame ``n``: frame, time, a cloth's largest spring
+    stretch, and the keyframe misses."""
     text = f"<b>{scene.name}</b>   frame {n} / {scene.frames - 1}   t = {n * scene.dt:.3f} s"
+    if scene.stretch is not None:
+        text += f"   largest stretch {scene.stretch[n]:.3g}"
     if n in scene.misses:
         text += f"<br>keyframe: {scene.misses[n]}"
     return text

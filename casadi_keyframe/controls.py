@@ -43,10 +43,41 @@ def resample_steps(values, steps: int) -> np.ndarray:
 
 
 class Controls:
-    """Base: ``bind`` to a system, then map ``u`` to forces / initial-velocity offsets."""
+    """Base: ``bind`` to a system, then map ``u`` to forces / initial-velocity offsets.
 
-    def __init__(self, agents=None, *, lower=None, upper=None):
+    ``smoothing`` (metres, per-particle controls of a mesh) and ``time_smoothing``
+    (seconds, step forces) change only the geometry the optimizer searches in, not the
+    objective: see :mod:`.metrics` and :meth:`metric`.  They exclude bounds."""
+
+    def __init__(self, agents=None, *, lower=None, upper=None, smoothing: float | None = None,
+                 time_smoothing: float | None = None):
         self.agents, self.lower, self.upper = agents, lower, upper
+        for name, value in (("smoothing", smoothing), ("time_smoothing", time_smoothing)):
+            if value is not None and not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{name} must be a positive length (None for none), got "
+                                 f"{value!r}")
+        if (smoothing or time_smoothing) and (lower is not None or upper is not None):
+            raise ValueError("smoothing changes the search's variables, so it cannot keep "
+                             "bounds on u: give either bounds or smoothing")
+        self.smoothing, self.time_smoothing = smoothing, time_smoothing
+
+    def metric(self, model, dt: float):
+        """The :class:`~.metrics.SmoothingMetric` the optimizer searches in (None without
+        smoothing).  Space smoothing needs a mesh (``model.faces``)."""
+        from .metrics import SmoothingMetric, mesh_laplacian, path_laplacian
+
+        space = time = None
+        if self.smoothing:
+            if getattr(model, "faces", None) is None:
+                raise ValueError("smoothing over space needs a mesh (a cloth); for a flock use "
+                                 "time_smoothing")
+            laplacian = mesh_laplacian(model.faces, model.rest_positions, self.idx)
+            space = self.smoothing ** 2 * laplacian
+        if self.time_smoothing and len(self.block_shape) == 3:
+            time = self.time_smoothing ** 2 * path_laplacian(self.steps, dt)
+        if space is None and time is None:
+            return None
+        return SmoothingMetric(self.block_shape, space, time)
 
     def bind(self, n: int, dim: int, steps: int) -> None:
         if self.agents is None:
@@ -59,6 +90,9 @@ class Controls:
                 raise ValueError(f"controlled agent index out of range 0..{n - 1}")
         self.n, self.dim, self.steps = n, dim, steps
         self.bounds()  # validate early
+        if self.time_smoothing and len(self.block_shape) != 3:
+            raise ValueError(f"time_smoothing needs controls per step; {type(self).__name__} "
+                             "has none: use smoothing (over the mesh) alone")
 
     @property
     def block_shape(self) -> tuple:

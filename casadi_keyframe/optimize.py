@@ -286,8 +286,11 @@ class _Search:
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
         run = _lbfgsb if self.method == "lbfgsb" else _ipopt
+        metric = problem.controls.metric(problem.model, problem.dt)
+        searched, start = (ev, u0) if metric is None else (_InMetric(ev, metric),
+                                                          metric.unsmooth(u0))
         try:
-            return run(problem, ev, u0, self.maxiter, self.tol, self.options,
+            return run(problem, searched, start, self.maxiter, self.tol, self.options,
                        lambda: ev.record(self.history, self.start, bar), self.deadline)
         except KeyboardInterrupt as err:
             handled()
@@ -297,6 +300,27 @@ class _Search:
             return INTERRUPTED, f"interrupted {who}; best result kept"
         finally:
             bar.close()
+
+
+class _InMetric:
+    """The evaluator as the optimizer sees it in a smooth metric: a function of z with
+    ``u = S z`` (:mod:`.metrics`), its gradient ``S^T g = S g``; ``best_u`` is the z of the
+    best controls.  The evaluator itself keeps working in u (history, checkpoint, best)."""
+
+    def __init__(self, ev, metric):
+        self.ev, self.metric = ev, metric
+
+    def __call__(self, z):
+        f, g = self.ev(self.metric.smooth(z))
+        return f, self.metric.smooth(g)
+
+    @property
+    def best_u(self):
+        return self.metric.unsmooth(self.ev.best_u)
+
+    @property
+    def interrupted(self):
+        return self.ev.interrupted
 
 
 def _carry(source, u, target):

@@ -12,8 +12,8 @@ STATUS = {CONVERGED: "converged", LIMIT: "limit reached", FAILED: "search failed
           INTERRUPTED: "interrupted"}
 
 INACCURATE = ("the gradient may be inaccurate or the problem badly scaled: compare the "
-              "gradient routes (gradcheck), try the exact route (gradient 'exact', or "
-              "adjoint='exact' for cloth), or bring the keyframe and control weights closer")
+              "gradient routes (gradcheck), use an exact route (--gradient adjoint, not the "
+              "approximate swapped one), or bring the keyframe and control weights closer")
 
 _IPOPT_FAILURES = {
     "Search_Direction_Becomes_Too_Small": "the search direction became too small to make "

@@ -93,6 +93,12 @@ def test_cholesky_equals_lu_and_keeps_what_it_is_asked_to(pinned):
     plan.factor(twice)  # the pattern's shared analysis now holds 2 A
     with pytest.raises(RuntimeError, match="overwritten"):
         shared.solve(b)
+    again = plan.factor(system)
+    indefinite = dataclasses.replace(System.from_matrix(-A, free), structure=pattern)
+    with pytest.raises(SolveError, match="not positive definite"):
+        plan.factor(indefinite)
+    with pytest.raises(RuntimeError, match="overwritten"):  # the failed one spoilt it too
+        again.solve(b)
     np.testing.assert_allclose(kept.solve_transpose(b, z)[0], x, rtol=1e-12)  # still A
     assert kept.nbytes > 0
 

@@ -108,16 +108,16 @@ class CholeskyPlan(Plan):
             if analysis.shared is None:
                 analysis.shared = _cholmod.symbolic(analysis.matrix)
             symbolic = analysis.shared
+        generation = None
+        if symbolic is analysis.shared:  # every earlier factor sharing it is now stale
+            analysis.generation += 1
+            generation = analysis.generation
         try:
             _cholmod.numeric(analysis.matrix, symbolic)
         except ArithmeticError:
             raise SolveError("the step matrix is not positive definite (Cholesky failed): "
                              "stiff compression or contact at this dt; reduce dt") from None
-        generation = None
-        if symbolic is analysis.shared:
-            analysis.generation += 1
-            generation = analysis.generation
-        elif analysis.factor_nbytes is None:
+        if generation is None and analysis.factor_nbytes is None:
             analysis.measure()
         return CholeskyFactor(system, self, symbolic, analysis, generation)
 

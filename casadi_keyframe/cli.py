@@ -367,15 +367,8 @@ def _export_parser(sub) -> None:
     e.set_defaults(func=cmd_export)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
-    sub = p.add_subparsers(dest="command", required=True)
-    sub.add_parser("list", help="list the problem files").set_defaults(func=cmd_list)
-    sh = sub.add_parser("show", help="a problem's description, overrides (type, default, range) "
-                                     "and solve defaults")
-    sh.add_argument("problem", help="problem name (see 'list') or path to a problem file")
-    sh.set_defaults(func=cmd_show)
-
+def _solve_parser(sub) -> None:
+    """The ``solve`` command's arguments."""
     s = sub.add_parser("solve", help="optimise a problem and write results and pictures",
                        epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
@@ -404,14 +397,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "checkpoint.npz and result.npz) or either file; same problem and --set")
     s.set_defaults(func=cmd_solve)
 
-    r = sub.add_parser("render", help="draw a saved run's pictures again (convergence.png, "
-                                      "keyframes.png, animation.gif) without solving")
-    r.add_argument("results", help="results folder (result.npz and summary.json, or only "
-                                    "checkpoint.npz), or one of those .npz files")
-    r.add_argument("--no-animation", action="store_true", help="skip the GIF")
-    r.set_defaults(func=cmd_render)
 
-    _export_parser(sub)
+def _gradcheck_parser(sub) -> None:
+    """The ``gradcheck`` command's arguments."""
     g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
@@ -423,6 +411,9 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(func=cmd_gradcheck)
 
+
+def _study_parser(sub) -> None:
+    """The ``study`` command's arguments (and its grid on the sweep runner)."""
     st = sub.add_parser("study", help="print an accuracy study (the notebooks' tables), or "
                                       "run a grid of it as a sweep (--grid)",
                         epilog=SWEEP_EXIT_CODES + "\n\nexample: casadi-keyframe study "
@@ -441,6 +432,29 @@ def build_parser() -> argparse.ArgumentParser:
     st.add_argument("--out", help="output folder (default results/study-STUDY)")
     _add_runner_options(st)
     st.set_defaults(func=cmd_study)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="casadi-keyframe", description=__doc__)
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("list", help="list the problem files").set_defaults(func=cmd_list)
+    sh = sub.add_parser("show", help="a problem's description, overrides (type, default, range) "
+                                     "and solve defaults")
+    sh.add_argument("problem", help="problem name (see 'list') or path to a problem file")
+    sh.set_defaults(func=cmd_show)
+
+    _solve_parser(sub)
+
+    r = sub.add_parser("render", help="draw a saved run's pictures again (convergence.png, "
+                                      "keyframes.png, animation.gif) without solving")
+    r.add_argument("results", help="results folder (result.npz and summary.json, or only "
+                                    "checkpoint.npz), or one of those .npz files")
+    r.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    r.set_defaults(func=cmd_render)
+
+    _export_parser(sub)
+    _gradcheck_parser(sub)
+    _study_parser(sub)
     _add_sweep_parser(sub)
     return p
 

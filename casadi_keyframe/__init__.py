@@ -7,7 +7,7 @@ from .adjoints import Adjoint, CasADiReverse, Exact, FiniteDifference, Swapped
 from .controls import InitialVelocity, StepForces
 from .loading import list_problems, load_problem
 from .objectives import (CenterOfMassKeyframe, Objective, ParticleKeyframe, RegionTarget,
-                         Smoothness, StateKeyframe)
+                         Smoothness, StateKeyframe, StrainLimit)
 from .optimize import Result, solve
 from .problem import ControlProblem
 from .simulate import backward, simulate
@@ -17,5 +17,6 @@ __all__ = [
     "Adjoint", "CasADiReverse", "CenterOfMassKeyframe", "ControlProblem", "Exact",
     "FiniteDifference", "InitialVelocity", "Objective", "ParticleKeyframe", "RegionTarget",
     "Result", "SimulationError", "Smoothness", "State", "StateKeyframe", "StepForces",
+    "StrainLimit",
     "Swapped", "Trajectory", "backward", "list_problems", "load_problem", "simulate", "solve",
 ]

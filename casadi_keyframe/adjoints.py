@@ -73,6 +73,9 @@ def unrolled_objective(problem, U):
     for n in range(problem.steps + 1):
         for t in by_frame.get(n, []):
             J += t.symbolic(X, V)
+        if n > 0:
+            for t in problem.objective_terms.trajectory_terms:
+                J += t.symbolic(X, V, problem.dt)
         if n < problem.steps:
             E = ca.DM(problem.external[n].T)
             if forces is not None:

@@ -27,7 +27,7 @@ class Objective:
         for t in terms:
             self.terms.extend(t.terms if isinstance(t, Objective) else [t])
         for t in self.terms:
-            if not isinstance(t, (StateTerm, ControlTerm)):
+            if not isinstance(t, (StateTerm, ControlTerm, TrajectoryTerm)):
                 raise TypeError(f"not an objective term: {t!r}")
 
     def __add__(self, other):
@@ -43,12 +43,18 @@ class Objective:
     def control_terms(self):
         return [t for t in self.terms if isinstance(t, ControlTerm)]
 
+    @property
+    def trajectory_terms(self):
+        return [t for t in self.terms if isinstance(t, TrajectoryTerm)]
+
     def bound(self, model, steps: int) -> "Objective":
-        """A copy whose state terms are bound to ``model`` over ``steps`` (checked and
-        compiled, see :meth:`StateTerm.bind`); the terms given stay as they were."""
-        out = Objective([t.at_frame(t.frame) if isinstance(t, StateTerm) else t
+        """A copy whose state and trajectory terms are bound to ``model`` over ``steps``
+        (checked and compiled, see :meth:`StateTerm.bind`); the terms given stay as they
+        were."""
+        out = Objective([t.at_frame(t.frame) if isinstance(t, StateTerm)
+                         else copy.copy(t) if isinstance(t, TrajectoryTerm) else t
                          for t in self.terms])
-        for term in out.state_terms:
+        for term in out.state_terms + out.trajectory_terms:
             term.bind(model, steps)
         return out
 
@@ -352,3 +358,63 @@ class Smoothness(ControlTerm):
         if self.temporal and blocks.shape[1] > 1:
             val += 0.5 * self.temporal / dt * ca.sumsqr(blocks[:, 1:] - blocks[:, :-1])
         return val
+
+
+class TrajectoryTerm(_Addable):
+    """A term on every frame of the motion (not a keyframe): ``value(traj)``,
+    ``accumulate(traj, gx, gv)`` (its derivative added into every frame) and
+    ``symbolic(X, V, dt)`` for one frame of the unrolled CasADi route."""
+
+    def bind(self, model, steps: int) -> None:
+        pass
+
+
+class StrainLimit(TrajectoryTerm):
+    """A cloth that does not tear: ``0.5 weight dt sum_n sum_springs max(0, s - limit)^2``
+    over frames 1..N, with ``s = |x_j - x_i| / rest`` a spring's stretch.  Zero while every
+    spring stays below ``limit`` times its rest length, and C^1 (its derivative is the
+    hinge's), so it limits strain softly without changing anything in the limit; a Riemann
+    sum of a time integral, so a weight means the same at any dt."""
+
+    label = "StrainLimit"
+
+    def __init__(self, limit: float = 1.1, weight: float = 1e3):
+        if not (np.isfinite(limit) and limit >= 1) or not (np.isfinite(weight) and weight >= 0):
+            raise ValueError(f"StrainLimit needs limit >= 1 and weight >= 0, got {limit}, "
+                             f"{weight}")
+        self.limit, self.weight = float(limit), float(weight)
+
+    def bind(self, model, steps: int) -> None:
+        springs = getattr(model, "springs", None)
+        if springs is None:
+            raise ValueError("StrainLimit needs a cloth (a model with springs)")
+        self._i, self._j, self._rest = springs.i, springs.j, springs.rest
+
+    def _excess(self, x):
+        d = x[..., self._j, :] - x[..., self._i, :]
+        length = np.linalg.norm(d, axis=-1)
+        return d, length, np.maximum(length / self._rest - self.limit, 0.0)
+
+    def value(self, traj) -> float:
+        _, _, excess = self._excess(traj.x[1:])
+        return float(0.5 * self.weight * traj.dt * np.sum(excess ** 2))
+
+    def accumulate(self, traj, gx, gv) -> float:
+        d, length, excess = self._excess(traj.x[1:])
+        scale = self.weight * traj.dt * excess / (self._rest * np.maximum(length, 1e-300))
+        pull = scale[..., None] * d  # d value / d x_j per frame and spring
+        frames, n = pull.shape[0], traj.x.shape[1]
+        offset = (n * np.arange(frames))[:, None]
+        into_j, into_i = (self._j + offset).ravel(), (self._i + offset).ravel()
+        for k in range(3):
+            col = pull[..., k].ravel()
+            gx[1:, :, k] += (np.bincount(into_j, col, minlength=frames * n)
+                             - np.bincount(into_i, col, minlength=frames * n)).reshape(frames, n)
+        return float(0.5 * self.weight * traj.dt * np.sum(excess ** 2))
+
+    def symbolic(self, X, V, dt):
+        """This frame's share, ``0.5 weight dt sum max(0, s - limit)^2`` (X: 3 x n)."""
+        d = X[:, self._j.tolist()] - X[:, self._i.tolist()]
+        length = ca.sqrt(ca.sum1(d ** 2))
+        excess = ca.fmax(length / ca.DM(self._rest).T - self.limit, 0)
+        return 0.5 * self.weight * dt * ca.sumsqr(excess)

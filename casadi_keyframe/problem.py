@@ -160,7 +160,7 @@ class ControlProblem:
     def state_cost(self, traj: Trajectory, *, gradient: bool = True):
         """Keyframe cost of a trajectory and its derivative per frame, ``(value, gx, gv)``;
         with ``gradient=False`` the value only (``gx, gv`` None)."""
-        terms = self.objective_terms.state_terms
+        terms = self.objective_terms.state_terms + self.objective_terms.trajectory_terms
         if not gradient:
             return float(sum(t.value(traj) for t in terms)), None, None
         gx = np.zeros_like(traj.x)

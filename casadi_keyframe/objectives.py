@@ -373,8 +373,9 @@ class StrainLimit(TrajectoryTerm):
     """A cloth that does not tear: ``0.5 weight dt sum_n sum_springs max(0, s - limit)^2``
     over frames 1..N, with ``s = |x_j - x_i| / rest`` a spring's stretch.  Zero while every
     spring stays below ``limit`` times its rest length, and C^1 (its derivative is the
-    hinge's), so it limits strain softly without changing anything in the limit; a Riemann
-    sum of a time integral, so a weight means the same at any dt."""
+    hinge's), so it limits strain softly and leaves motions within the limit alone; a
+    Riemann sum of a time integral, so a weight means the same at any dt.  Its value counts
+    in a result's ``keyframe_error`` (the objective less the control cost)."""
 
     label = "StrainLimit"
 

@@ -20,14 +20,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from .models.cloth import mesh_edges
+
 
 def mesh_laplacian(faces, positions, idx) -> sp.csc_matrix:
     """The graph Laplacian of the mesh edges between the particles ``idx`` (their order),
     weights ``1 / |edge|^2`` at ``positions``."""
-    faces = np.asarray(faces, dtype=np.intp)
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]),
-                    axis=1)
-    edges = np.unique(edges, axis=0)
+    edges = mesh_edges(faces)
     where = np.full(len(positions), -1)
     where[idx] = np.arange(len(idx))
     a, b = where[edges[:, 0]], where[edges[:, 1]]

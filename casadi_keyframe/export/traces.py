@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import capsule_grid, circle, grid_triangles, plane_patch
+from ..models.cloth import mesh_edges
 
 CLOTH, CLIP, BLEND, AGENT, HIGHLIGHT = "#6a8fc7", "#8d9bb0", "#e1812c", "#4c72b0", "#e1812c"
 TARGET, BODY, RING, COM, REGION = "#d62728", "#9a9a9a", "#e1812c", "#7b4ea3", "#3a923a"
@@ -78,9 +79,7 @@ def target_traces(go, targets, faces, scene):
         common = dict(name=f"target {t.label}", legendgroup="targets", scene=scene,
                       hoverinfo="name")
         if t.kind == "shape":
-            edges = np.unique(np.sort(np.r_[faces[:, [0, 1]], faces[:, [1, 2]],
-                                            faces[:, [2, 0]]], axis=1), axis=0)
-            line = polylines(t.points[e] for e in edges)
+            line = polylines(t.points[e] for e in mesh_edges(faces))
             out.append(go.Scatter3d(**xyz(line), mode="lines",
                                     line=dict(color=TARGET, width=2), **common))
         elif t.kind == "points":

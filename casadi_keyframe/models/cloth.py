@@ -194,6 +194,13 @@ def grid_topology(rows: int, cols: int):
     return {STRETCH: stretch, SHEAR: shear, BEND: bend}, quads
 
 
+def mesh_edges(faces: np.ndarray) -> np.ndarray:
+    """The unique undirected edges ``(E, 2)``, smaller index first, of triangles ``faces``."""
+    faces = np.asarray(faces, dtype=np.intp)
+    return np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
+                                             faces[:, [2, 0]]]), axis=1), axis=0)
+
+
 def mesh_topology(faces: np.ndarray):
     """Stretch springs on the mesh edges, bend springs across each interior edge."""
     half = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])

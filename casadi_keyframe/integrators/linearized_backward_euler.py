@@ -247,7 +247,7 @@ class LinearizedBackwardEuler(Integrator):
         later = work.records[n + 1] if n + 1 < len(work.records) else None  # step n+1's A
         contacts = model.interactions(end.x) if later is None else later.interactions
         if later is not None and later.factor is not None and work.pattern is not None:
-            *_, df_dx = model.jacobian_blocks(end.x, end.v, t, True, contacts)
+            df_dx = model.force_jacobian_blocks(end.x, end.v, t, contacts)
             factor = later.factor
         else:
             A, _, df_dx = self.step_system(model, end.x, end.v, t, dt, work, True, contacts)

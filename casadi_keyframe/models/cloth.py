@@ -509,24 +509,31 @@ class ClothModel:
                         with_df_dx: bool = False, interactions=None) -> tuple[Blocks, ...]:
         """:meth:`jacobians` as :class:`~.blocks.Blocks` over the springs followed by the
         self-contact pairs (``interactions``, default: those of x)."""
+        return self._blocks(x, v, t, interactions, ("jac", "df_dx") if with_df_dx else ("jac",))
+
+    def force_jacobian_blocks(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
+                              interactions=None) -> Blocks:
+        """The full ``df/dx`` alone as :class:`~.blocks.Blocks` (what the swapped adjoint
+        needs when the step matrix's factor is already at hand)."""
+        return self._blocks(x, v, t, interactions, ("df_dx",))[0]
+
+    def _blocks(self, x, v, t, interactions, kinds) -> tuple[Blocks, ...]:
+        """The blocks of kernels ``kinds`` ("jac": K and D, "df_dx": J) of every interaction."""
         inputs = self._spring_inputs(x, v)
-        pairs = self._springs["jac"](*inputs) + (self._springs["df_dx"](*inputs)
-                                                  if with_df_dx else [])
-        particles = [np.zeros((self.n, 9)), self._drag_blocks.copy(), np.zeros((self.n, 9))]
+        pairs = [b for kind in kinds for b in self._springs[kind](*inputs)]
+        start = {"jac": [np.zeros((self.n, 9)), self._drag_blocks.copy()],
+                 "df_dx": [np.zeros((self.n, 9))]}
+        particles = [b for kind in kinds for b in start[kind]]
         for body, kernels in zip(self.colliders, self._bodies):
             columns = body.inputs(self.n, t)
-            blocks = kernels["jac"](x, v, *columns)
-            if with_df_dx:
-                blocks += kernels["df_dx"](x, v, *columns)
+            blocks = [b for kind in kinds for b in kernels[kind](x, v, *columns)]
             for acc, b in zip(particles, blocks):
                 acc += b
         i, j = self.springs.i, self.springs.j
         contacts = self._contacts(x, interactions)
         if contacts is not None:
             columns = self._self.inputs(x, v, *contacts)
-            blocks = self._pairs["jac"](*columns)
-            if with_df_dx:
-                blocks += self._pairs["df_dx"](*columns)
+            blocks = [b for kind in kinds for b in self._pairs[kind](*columns)]
             pairs = [np.vstack([a, b]) for a, b in zip(pairs, blocks)]
             i, j = np.concatenate([i, contacts[0]]), np.concatenate([j, contacts[1]])
         return tuple(Blocks(i, j, p, q) for p, q in zip(pairs, particles))

@@ -136,6 +136,24 @@ def parse_time_steps(text: str | None) -> list[float] | None:
                          f"coarse to fine, e.g. 1/15,1/30,1/60; got {text!r}") from None
 
 
+def parse_resolutions(module, items) -> list[dict] | None:
+    """``["rows=12,cols=12", "rows=25,cols=25"]`` -> build overrides of the coarser meshes,
+    each checked against the problem's ``build``; ``["none"]`` -> ``[]`` (the file's default
+    meshes off); no items -> None (the file's defaults)."""
+    if not items:
+        return None
+    if [i.strip().lower() for i in items] == ["none"]:
+        return []
+    out = []
+    for item in items:
+        pairs = _split_top(item)
+        if not pairs:
+            raise ValueError(f"--resolution expects KEY=VALUE,... such as rows=12,cols=12, "
+                             f"got {item!r}")
+        out.append(check_overrides(module, parse_overrides(pairs)))
+    return out
+
+
 def cmd_list(args) -> int:
     width = min(shutil.get_terminal_size((100, 24)).columns, 100)
     problems = list_problems()
@@ -196,6 +214,7 @@ def cmd_solve(args) -> int:
     spec = solve_run(module, args.problem, overrides, out, method=args.method,
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,
+                     resolutions=parse_resolutions(module, args.resolution),
                      time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
                      animation=not args.no_animation, exports=tuple(args.export or ()),
                      viewer=not args.no_viewer)
@@ -383,6 +402,10 @@ def _solve_parser(sub) -> None:
     s.add_argument("--continuation", metavar="DT,DT,...",
                    help="solve at these time steps first, coarse to fine (e.g. 1/15,1/30,1/60); "
                         "the problem's dt ends the list")
+    s.add_argument("--resolution", action="append", metavar="KEY=VALUE,...",
+                   help="solve first on this coarser mesh of the same cloth, e.g. "
+                        "rows=12,cols=12 (repeat, coarse to fine; 'none': not the problem "
+                        "file's default meshes); the controls are carried to each finer mesh")
     s.add_argument("--rounds", type=int, metavar="N",
                    help="augmented-Lagrangian rounds: after each, the keyframes aim past their "
                         "target by the miss left (hard keyframes; --maxiter per round)")

@@ -170,10 +170,12 @@ def load_problem(problem, **overrides) -> ControlProblem:
 
 
 def build_problem(module, **overrides) -> ControlProblem:
-    """The problem of an already loaded problem file, ``overrides`` checked first."""
+    """The problem of an already loaded problem file, ``overrides`` checked first; it can be
+    rebuilt with more overrides (:meth:`ControlProblem.at_resolution`)."""
     prob = module.build(**check_overrides(module, overrides))
     if not isinstance(prob, ControlProblem):
         raise TypeError(f"{module.__file__}: build() must return a ControlProblem")
+    prob.rebuild = lambda **more: build_problem(module, **{**overrides, **more})
     return prob
 
 

@@ -23,6 +23,7 @@ from .interrupts import NAMES, Interrupted, catching, check, handled
 from .io import as_checkpoint
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS, ipopt_outcome, lbfgsb_outcome
 from .state import SimulationError, Trajectory
+from .transfer import carry_to_mesh
 
 METHODS = ("lbfgsb", "ipopt")
 __all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "Result", "solve",
@@ -124,7 +125,8 @@ class _Evaluator:
         u, (f, _) = self.last_u, self.last
         control = self.problem.control_cost(u)[0]
         history.append({"iteration": len(history) + 1, "stage": self.stage,
-                        "dt": self.problem.dt, "objective": float(f),
+                        "dt": self.problem.dt, "particles": self.problem.model.n,
+                        "objective": float(f),
                         "keyframe_error": float(f - control),
                         "control_norm": float(np.linalg.norm(u)),
                         "seconds": time.perf_counter() - start, "nfev": self.nfev})
@@ -139,7 +141,7 @@ class _Evaluator:
 
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
-          options: dict | None = None, continuation=None,
+          options: dict | None = None, continuation=None, resolutions=None,
           time_limit: float | None = None) -> Result:
     """Optimise the problem's controls.
 
@@ -164,6 +166,15 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     stage's best controls resampled to ``problem.dt`` and evaluated there, and its message
     names the stage.
 
+    ``resolutions`` (coarse to fine in space, e.g. a cloth solved on a 12 x 12 mesh, then
+    25 x 25, then its own) lists coarser versions of the problem: problems, or dicts of
+    build overrides such as ``{"rows": 12, "cols": 12}`` for a problem built from a problem
+    file (:meth:`~.problem.ControlProblem.at_resolution`).  Each mesh, coarse to fine, is
+    solved in turn (with the ``continuation``'s time steps, if given) from the previous
+    mesh's best controls carried to it (:func:`~.transfer.carry_to_mesh`: interpolated on
+    the rest mesh, momentum and impulse kept); stages and history records name the mesh's
+    ``particles``, and the checkpoint always holds controls of ``problem`` itself.
+
     A simulation that fails at the starting controls raises :class:`SimulationError`;
     during the search a failing point counts as a failed evaluation.
     """
@@ -173,7 +184,7 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
         raise ValueError("maxiter must be at least 1")
     if time_limit is not None and not time_limit > 0:
         raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
-    problems = stage_problems(problem, continuation)
+    problems = stage_problems(problem, continuation, resolutions)
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options or {}, quiet, as_checkpoint(checkpoint),
                      time_limit)
@@ -201,9 +212,9 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
         if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
             status = LIMIT
             message = f"time limit reached ({search.time_limit:g} s) before converging"
-        message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} (dt = "
-                   f"{p.dt:.6g} s): its best controls, resampled to dt = {problem.dt:.6g} s, "
-                   "kept")
+        message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} "
+                   f"({_stage_name(p)}): its best controls, carried to the problem "
+                   f"({_stage_name(problem)}), kept")
     traj = problem.simulate(u)
     return Result(x=u, fun=fun, jac=jac, nit=sum(s["nit"] for s in stages),
                   nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
@@ -217,13 +228,49 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
                   breakdown=problem.breakdown(u, traj), stages=stages)
 
 
-def stage_problems(problem, continuation) -> list:
+def stage_problems(problem, continuation, resolutions=None) -> list:
     """The problems a continuation solves in turn, coarse to fine; the last is ``problem``.
 
-    ``continuation`` None means ``[problem]``.  Otherwise its time steps must decrease
-    strictly and end at ``problem.dt`` (appended if missing), each dividing the horizon into
-    whole steps with every keyframe on its grid (else ValueError, from ``resampled``).
+    For every mesh of ``resolutions`` (see :func:`coarser_meshes`) and then ``problem``, the
+    time stages of ``continuation`` on that mesh.  ``continuation`` None means one stage per
+    mesh.  Otherwise its time steps must decrease strictly and end at ``problem.dt``
+    (appended if missing), each dividing the horizon into whole steps with every keyframe on
+    its grid (else ValueError, from ``resampled``).
     """
+    meshes = coarser_meshes(problem, resolutions) + [problem]
+    return [stage for mesh in meshes for stage in _time_stages(mesh, continuation)]
+
+
+def coarser_meshes(problem, resolutions) -> list:
+    """The problems of ``resolutions`` (None or a list of problems or build-override dicts),
+    checked to be the same kind of problem on ever finer meshes, all coarser than
+    ``problem``."""
+    if resolutions is None:
+        return []
+    if isinstance(resolutions, (dict, str)) or not hasattr(resolutions, "__iter__"):
+        raise ValueError(f"resolutions must be a list of coarser problems or of build "
+                         f"overrides such as {{'rows': 12, 'cols': 12}}, got {resolutions!r}")
+    meshes = [problem.at_resolution(**r) if isinstance(r, dict) else r for r in resolutions]
+    sizes = []
+    for r, mesh in zip(resolutions, meshes):
+        if not isinstance(mesh, type(problem)):
+            raise ValueError(f"resolutions: {r!r} is neither a problem nor a dict of build "
+                             "overrides")
+        if mesh.horizon != problem.horizon or type(mesh.controls) is not type(problem.controls):
+            raise ValueError(f"resolutions: {mesh.name} on {mesh.model.n} particles is not the "
+                             f"same problem as {problem.name} ({mesh.steps} steps of "
+                             f"{mesh.dt:.6g} s, {mesh.controls.label}; the problem: "
+                             f"{problem.steps} of {problem.dt:.6g} s, {problem.controls.label})")
+        sizes.append(mesh.model.n)
+    if any(b <= a for a, b in zip(sizes, sizes[1:] + [problem.model.n])):
+        raise ValueError(f"resolutions must go coarse to fine, each mesh with fewer particles "
+                         f"than the next and than the problem's {problem.model.n}; got "
+                         f"{sizes} particles")
+    return meshes
+
+
+def _time_stages(problem, continuation) -> list:
+    """``problem`` at each time step of ``continuation`` (see :func:`stage_problems`)."""
     if continuation is None:
         return [problem]
     try:
@@ -268,6 +315,7 @@ class _Search:
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
+                "particles": problem.model.n,
                 "nit": len(self.history) - first, "nfev": ev.nfev, "fun": float(ev.best_f),
                 "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
                 "success": status == CONVERGED, "status": status, "message": message,
@@ -276,7 +324,7 @@ class _Search:
 
     def _search(self, problem, ev, u0, stage):
         k, count = stage
-        where = "" if count == 1 else f" of stage {k} (dt = {problem.dt:.6g} s)"
+        where = "" if count == 1 else f" of stage {k} ({_stage_name(problem)})"
         f0, _ = ev(u0)
         ev.start = (float(f0), float(f0 - problem.control_cost(u0)[0]))
         if ev.failures:
@@ -323,9 +371,17 @@ class _InMetric:
         return self.ev.interrupted
 
 
+def _stage_name(problem) -> str:
+    return f"{problem.model.n} particles, dt = {problem.dt:.6g} s"
+
+
 def _carry(source, u, target):
-    """Controls ``u`` of problem ``source`` on the grid of problem ``target``."""
-    return u if source is target else source.controls.resample(u, target.steps)
+    """Controls ``u`` of problem ``source`` on the grid (and mesh) of problem ``target``."""
+    if source is target:
+        return u
+    if source.model is target.model:
+        return source.controls.resample(u, target.steps)
+    return carry_to_mesh(source, u, target)
 
 
 def evaluate_final(problem, strategy, u):

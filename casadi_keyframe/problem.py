@@ -50,6 +50,7 @@ class ControlProblem:
         self._control_fn = self._compile_control_terms()
         self.view = checked_view(view, scene)
         self._guess = None if guess is None else self.controls.check(guess).copy()
+        self.rebuild = None  # build(**overrides) of the problem file, set by build_problem
 
     # -- the simulation ------------------------------------------------------------------
     @property
@@ -90,6 +91,18 @@ class ControlProblem:
         guess = None if self._guess is None else self.controls.resample(self._guess, steps)
         return self._rebuilt(steps=steps, dt=self.horizon / steps, objective=objective,
                              external=resample_steps(self.external, steps), guess=guess)
+
+    def at_resolution(self, **overrides) -> "ControlProblem":
+        """This problem's file built again with ``overrides`` over the ones it was built with,
+        e.g. ``rows=12, cols=12`` for a coarser mesh of the same cloth (``solve``'s
+        ``resolutions``).  Only a problem as built from its file knows how: a problem changed
+        since (``with_objective``, ``resampled``, ...) raises ValueError."""
+        if self.rebuild is None:
+            raise ValueError(f"{self.name}: this problem was not built from a problem file, or "
+                             "was changed since (with_objective, with_guess, resampled), so it "
+                             "cannot be rebuilt at another resolution; build the coarser "
+                             "problems yourself and pass them as resolutions")
+        return self.rebuild(**overrides)
 
     def with_objective(self, objective) -> "ControlProblem":
         """The same problem (model, integrator, start, controls, view, guess shared) with

@@ -55,6 +55,7 @@ class SolveRun:
     gradient: str = "adjoint"
     maxiter: int = 200
     continuation: list | None = None
+    resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
     rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
     time_limit: float | None = None
     resume: str | None = None
@@ -68,24 +69,32 @@ class SolveRun:
 
 def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=None,
               gradient=None, maxiter=None, rounds=None, weight_growth=None,
-              **options) -> SolveRun:
+              resolutions=None, **options) -> SolveRun:
     """The :class:`SolveRun` of a loaded problem file built with ``overrides`` (checked
     first), writing to ``out`` (default ``results/PROBLEM``): the search options not given
     (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
-    each point of a sweep solve a problem the same way; ``options`` are SolveRun's others."""
+    each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
+    The file's default ``resolutions`` keep only the meshes coarser than the problem built
+    (none when it is built coarse itself)."""
     from .loading import build_problem, resolve, solve_defaults
 
     prob = build_problem(module, **overrides)
     defaults = solve_defaults(module)
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
              if v is not None}
+    if resolutions is None:
+        resolutions = [r for r in defaults.get("resolutions", [])
+                       if prob.at_resolution(**r).model.n < prob.model.n]
+    if resolutions and (given or "rounds" in defaults):
+        raise ValueError("coarse meshes (resolutions) and augmented-Lagrangian rounds do not "
+                         "combine: choose one")
     return SolveRun(
         prob, Path(out) if out else Path("results") / prob.name,
         problem_file=str(resolve(module.__file__).resolve()), problem_arg=str(problem_arg),
         overrides=overrides, method=method or defaults["method"],
         gradient=gradient or defaults["gradient"],
         maxiter=defaults["maxiter"] if maxiter is None else maxiter,
-        rounds=given or {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults},
+        resolutions=[dict(r) for r in resolutions], rounds=given or {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults},
         **options)
 
 
@@ -183,7 +192,7 @@ def _search(spec: SolveRun, u0, checkpoint):
     if spec.rounds:
         from .augmented_lagrangian import solve_augmented
         return solve_augmented(spec.problem, **spec.rounds, **options)
-    return solve(spec.problem, **options)
+    return solve(spec.problem, resolutions=spec.resolutions or None, **options)
 
 
 def resume_controls(spec: SolveRun):
@@ -262,7 +271,8 @@ def format_stage(stage: dict) -> str:
     weight scale and keyframe misses), ending with how it stopped."""
     head = (f"round {stage['stage']}: weight x{stage['weight_scale']:.3g}"
             if "weight_scale" in stage else
-            f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps")
+            f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps"
+            + (f", {stage['particles']} particles" if "particles" in stage else ""))
     line = (f"{head}, {stage['nit']} iterations, objective {stage['fun']:.6g}, "
             f"{stage['seconds']:.1f} s")
     if stage.get("misses"):

@@ -182,9 +182,17 @@ def build_problem(module, **overrides) -> ControlProblem:
 def solve_defaults(module) -> dict:
     """How the problem file asks to be solved: its ``SOLVE`` over the library's defaults
     (L-BFGS-B, 200 iterations, the exact "adjoint" gradient route; it may add ``rounds``,
-    ``weight_growth``)."""
+    ``weight_growth``, ``resolutions``)."""
     return {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint",
             **getattr(module, "SOLVE", {})}
+
+
+def default_resolutions(module, problem) -> list[dict]:
+    """The coarser meshes the problem file's ``SOLVE["resolutions"]`` asks to solve first
+    (build overrides), keeping only those with fewer particles than ``problem``: none when
+    it is built that coarse itself."""
+    return [dict(r) for r in solve_defaults(module).get("resolutions", [])
+            if problem.at_resolution(**r).model.n < problem.model.n]
 
 
 _INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*$")

@@ -76,15 +76,14 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
     each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
     The file's default ``resolutions`` keep only the meshes coarser than the problem built
     (none when it is built coarse itself)."""
-    from .loading import build_problem, resolve, solve_defaults
+    from .loading import build_problem, default_resolutions, resolve, solve_defaults
 
     prob = build_problem(module, **overrides)
     defaults = solve_defaults(module)
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
              if v is not None}
     if resolutions is None:
-        resolutions = [r for r in defaults.get("resolutions", [])
-                       if prob.at_resolution(**r).model.n < prob.model.n]
+        resolutions = default_resolutions(module, prob)
     if resolutions and (given or "rounds" in defaults):
         raise ValueError("coarse meshes (resolutions) and augmented-Lagrangian rounds do not "
                          "combine: choose one")
@@ -127,8 +126,9 @@ def _solve(spec: SolveRun, caught, done) -> int:
     u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
     origin = ("resumed" if resumed else "given" if u0 is not None
               else "guess" if prob.has_guess else "passive")
+    start_controls = prob.initial_controls() if u0 is None else u0
     try:
-        start = prob.breakdown(prob.initial_controls() if u0 is None else u0)
+        start = prob.breakdown(start_controls)
     except SimulationError as err:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
@@ -138,7 +138,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
             "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient}
     done.started = True
-    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta))
+    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=bool(resumed))
     signum = caught.signum if result.status == INTERRUPTED else None
     extra = {"problem_file": spec.problem_file, **({"resumed_from": resumed} if resumed else {})}
     summary = save_result(result, out, problem_name=prob.name, overrides=spec.overrides,
@@ -152,7 +152,8 @@ def _solve(spec: SolveRun, caught, done) -> int:
     elif not spec.pictures:
         print(f"  pictures not drawn; draw them with 'casadi-keyframe render {out}'")
     else:
-        draw(prob, result.trajectory, result, out, animation=spec.animation)
+        draw(prob, result.trajectory, result, out, animation=spec.animation,
+             start=start_controls)
         print(f"  pictures drawn in {out}/")
         _write_outputs(spec, result.trajectory)
     _hint(result.status, spec)
@@ -183,7 +184,9 @@ def run_export(source, formats, *, out=None) -> int:
     return 0
 
 
-def _search(spec: SolveRun, u0, checkpoint):
+def _search(spec: SolveRun, u0, checkpoint, resumed: bool = False):
+    """The search ``spec`` asks for from ``u0``; a resumed one goes straight to the problem's
+    own mesh (its controls were found there)."""
     from .optimize import solve
 
     options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
@@ -192,7 +195,8 @@ def _search(spec: SolveRun, u0, checkpoint):
     if spec.rounds:
         from .augmented_lagrangian import solve_augmented
         return solve_augmented(spec.problem, **spec.rounds, **options)
-    return solve(spec.problem, resolutions=spec.resolutions or None, **options)
+    resolutions = None if resumed or not spec.resolutions else spec.resolutions
+    return solve(spec.problem, resolutions=resolutions, **options)
 
 
 def resume_controls(spec: SolveRun):
@@ -302,14 +306,19 @@ def format_misses(misses) -> str:
                      for m in misses)
 
 
-def draw(problem, trajectory, result, out, *, animation: bool = True) -> None:
-    """convergence.png (if ``result`` has a history), keyframes.png and animation.gif."""
+def draw(problem, trajectory, result, out, *, animation: bool = True, start=None) -> None:
+    """convergence.png (if ``result`` has a history), keyframes.png, animation.gif and, given
+    the ``start`` controls of a cloth's search, start_and_result.png (the two side by side)."""
     from . import render
 
     out = Path(out)
     if getattr(result, "history", None):
         render.convergence(result, out / "convergence.png")
     render.snapshot(problem, trajectory, out / "keyframes.png")
+    if start is not None and render.renderer(problem) is render.cloth:
+        render.cloth.side_by_side(problem, {"start": problem.simulate(start, records=False),
+                                            "result": trajectory},
+                                  out / "start_and_result.png")
     if animation:
         render.animate(problem, trajectory, out / "animation.gif")
 

@@ -159,3 +159,4 @@ def test_cli_solves_coarse_to_fine(tmp_path, capsys):
     assert "stage 1: dt 0.0166667 s, 12 steps, 25 particles" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert [s["particles"] for s in summary["stages"]] == [9, 25]
+    assert (tmp_path / "start_and_result.png").stat().st_size > 0  # a cloth's: side by side

@@ -19,7 +19,7 @@ __all__ = ["animate", "blend", "cloth", "convergence", "flock", "keyframes", "se
            "snapshot", "write_gif"]
 
 
-def _renderer(problem):
+def renderer(problem):
     """The module that draws ``problem``: blend, cloth or flock."""
     if isinstance(problem.view, BlendView):
         return blend
@@ -37,10 +37,10 @@ def animate(problem, trajectory, path, *, fps: int | None = None,
     and 80); ``title`` overrides the problem name in the title.
     """
     given = {k: v for k, v in (("fps", fps), ("max_frames", max_frames)) if v is not None}
-    return _renderer(problem).animate(problem, trajectory, path, title=title, **given)
+    return renderer(problem).animate(problem, trajectory, path, title=title, **given)
 
 
 def snapshot(problem, trajectory, path, frames=None):
     """Write a PNG of small multiples, by default at the first frame, each keyframe and the
     last (a blend: the start, two between and the end of the blend); returns the path."""
-    return _renderer(problem).snapshot(problem, trajectory, path, frames)
+    return renderer(problem).snapshot(problem, trajectory, path, frames)

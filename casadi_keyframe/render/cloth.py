@@ -113,10 +113,10 @@ class Box:
         self.lo, self.hi = (lo + hi) / 2 - half, (lo + hi) / 2 + half
 
     @classmethod
-    def of(cls, problem, trajectory) -> "Box":
-        """The box over all frames of a cloth problem's ``trajectory``, its targets, its
-        ring and its colliders."""
-        pts = [np.asarray(trajectory.x).reshape(-1, 3)]
+    def of(cls, problem, trajectory, *more) -> "Box":
+        """The box over all frames of a cloth problem's ``trajectory`` (and of ``more``
+        trajectories of it), its targets, its ring and its colliders."""
+        pts = [np.asarray(t.x).reshape(-1, 3) for t in (trajectory, *more)]
         pts += [np.atleast_2d(t.position_target)[:, :3] for t in targets(problem)]
         ring = view_of(problem, ClothView).ring
         if ring:
@@ -314,6 +314,30 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
             panel = TrajectoryPanel(ax, problem, trajectory, box=box)
             panel.draw(n, full_title=False)
+        save_grid(fig, path, problem.name, panel)
+    finally:
+        plt.close(fig)
+    return path
+
+
+def side_by_side(problem, rows: dict, path, frames=None) -> Path:
+    """Write a PNG with one row of 3-D panels per trajectory of ``rows`` (``{label:
+    trajectory}``, e.g. the optimizer's start and its result) at the same frames (default:
+    the first, each keyframe and the last, at most 6), all in one box."""
+    path = Path(path)
+    first = next(iter(rows.values()))
+    frames = snapshot_frames(problem, first, frames, most=6)
+    fig = plt.figure(figsize=(3.0 * len(frames), 3.0 * len(rows) + 0.6))
+    try:
+        box = Box.of(problem, *rows.values())
+        for r, (label, trajectory) in enumerate(rows.items()):
+            for c, n in enumerate(frames):
+                ax = fig.add_subplot(len(rows), len(frames), r * len(frames) + c + 1,
+                                     projection="3d")
+                panel = TrajectoryPanel(ax, problem, trajectory, box=box)
+                panel.draw(n, full_title=False)
+                ax.set_title(f"{label}: " + ax.get_title() if c == 0 else ax.get_title(),
+                             fontsize=8)
         save_grid(fig, path, problem.name, panel)
     finally:
         plt.close(fig)

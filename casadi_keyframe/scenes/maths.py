@@ -51,3 +51,14 @@ def soft_min(values, softness: float) -> float:
 def soft_max(a: float, b: float, softness: float) -> float:
     """A smooth upper bound of ``max(a, b)``, within ``softness log 2``."""
     return max(a, b) + softness * np.log1p(np.exp(-abs(a - b) / softness))
+
+
+def turn_angle(rest, moved, weights=None) -> float:
+    """The angle in degrees of the rotation that best carries the points ``rest`` onto
+    ``moved`` (both ``(n, 3)``, weighted, centroids removed: Kabsch), e.g. how far a tossed
+    sheet has turned over, 180 for upside down."""
+    w = np.ones(len(rest)) if weights is None else np.asarray(weights, float)
+    a = np.asarray(rest, float) - np.average(rest, axis=0, weights=w)
+    b = np.asarray(moved, float) - np.average(moved, axis=0, weights=w)
+    turn, _ = Rotation.align_vectors(b, a, weights=w)
+    return float(np.degrees(turn.magnitude()))

@@ -75,25 +75,28 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
     (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
     each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
     The file's default ``resolutions`` keep only the meshes coarser than the problem built
-    (none when it is built coarse itself)."""
+    (none when it is built coarse itself), and give way to rounds asked for; rounds and
+    resolutions both given are refused (ValueError)."""
     from .loading import build_problem, default_resolutions, resolve, solve_defaults
 
     prob = build_problem(module, **overrides)
     defaults = solve_defaults(module)
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
              if v is not None}
-    if resolutions is None:
-        resolutions = default_resolutions(module, prob)
-    if resolutions and (given or "rounds" in defaults):
-        raise ValueError("coarse meshes (resolutions) and augmented-Lagrangian rounds do not "
-                         "combine: choose one")
+    if given and resolutions:
+        raise ValueError("coarse meshes (--resolution) and augmented-Lagrangian rounds "
+                         "(--rounds, --weight-growth) do not combine: choose one")
+    rounds = given or ({} if resolutions else
+                       {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults})
+    if resolutions is None:  # the file's, unless rounds are asked for
+        resolutions = [] if rounds else default_resolutions(module, prob)
     return SolveRun(
         prob, Path(out) if out else Path("results") / prob.name,
         problem_file=str(resolve(module.__file__).resolve()), problem_arg=str(problem_arg),
         overrides=overrides, method=method or defaults["method"],
         gradient=gradient or defaults["gradient"],
         maxiter=defaults["maxiter"] if maxiter is None else maxiter,
-        resolutions=[dict(r) for r in resolutions], rounds=given or {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults},
+        resolutions=[dict(r) for r in resolutions], rounds=rounds,
         **options)
 
 

@@ -160,3 +160,13 @@ def test_cli_solves_coarse_to_fine(tmp_path, capsys):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert [s["particles"] for s in summary["stages"]] == [9, 25]
     assert (tmp_path / "start_and_result.png").stat().st_size > 0  # a cloth's: side by side
+
+
+def test_cli_refuses_coarse_meshes_with_rounds(capsys):
+    from casadi_keyframe.cli import main
+
+    assert main(["solve", "cloth_shapes", "--set", "rows=4", "--resolution", "rows=3,cols=3",
+                 "--rounds", "2"]) == 2
+    assert "do not combine" in capsys.readouterr().err
+    assert main(["solve", "cloth_shapes", "--set", "rows=4", "--resolution", "rowz=3"]) == 2
+    assert "rowz" in capsys.readouterr().err

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+from scipy.optimize import brentq
 
 from ..controls import StepForces
 from ..integrators import LinearizedBackwardEuler
@@ -46,4 +47,32 @@ def bend_into_arch(points, axis: int = 0, up: int = 2, lift: float = 0.0) -> np.
     center = p[:, axis].min() + length / 2
     p[:, axis] = center - radius * np.cos(theta)
     p[:, up] = p[:, up] + radius * np.sin(theta) + lift
+    return p
+
+
+def wave_across(points, amplitude, along: int = 0, out: int = 1) -> np.ndarray:
+    """A sheet's rows (``points`` sharing every coordinate but ``along``) each bent into one
+    full sine period of ``amplitude`` (per point, the same along a row) in direction ``out``,
+    the row's length kept: its particles go at their rest distances along the curve, so the
+    row spans less the deeper its wave (a shape cloth can take without stretching)."""
+    p = np.array(points, dtype=float)
+    amplitude = np.broadcast_to(np.asarray(amplitude, float), (len(p),))
+    rest = np.delete(p, along, axis=1).round(12)
+    _, row = np.unique(np.c_[rest, amplitude.round(12)], axis=0, return_inverse=True)
+    t = np.linspace(0.0, 1.0, 4001)
+    for r in np.unique(row):
+        members = np.flatnonzero(row.ravel() == r)
+        s = p[members, along]
+        lo, length, a = s.min(), np.ptp(s), amplitude[members[0]]
+        if length == 0 or a == 0:
+            continue
+        wave = a * np.sin(2 * np.pi * t)
+
+        def arc(span):
+            return np.r_[0.0, np.cumsum(np.hypot(np.diff(span * t), np.diff(wave)))]
+
+        span = brentq(lambda w: arc(w)[-1] - length, 1e-9 * length, length)
+        at = np.interp(s - lo, arc(span), t)
+        p[members, along] = lo + length / 2 + span * (at - 0.5)
+        p[members, out] += a * np.sin(2 * np.pi * at)
     return p

@@ -19,10 +19,15 @@ Strategies:
 * ``tracking+soft``: the same with the keyframe weights 100 times lower in the first round
   (x10 per round back to the problem's), so that the first round can trade the landing for
   lower forces and the multipliers bring it back;
-* ``tracking+ipopt``: the tracking guess, then IPOPT.
+* ``tracking+ipopt``: the tracking guess, then IPOPT;
+* ``tracking+lower_effort``: the tracking guess, then
+  :func:`~casadi_keyframe.constrained.lower_effort` (the landing held within 1 mm and 5 cm/s
+  rms as a constraint while the control cost falls; ``--effort-steps`` kept steps at most,
+  on the last ``--effort-window`` steps).
 
     .venv/bin/python benchmarks/cape_blend_strategies.py [--rows 8 --cols 6] [--window 1.0]
-        [--maxiter 100] [--rounds 3] [--growth 10] [--only passive tracking ...]
+        [--maxiter 100] [--rounds 3] [--growth 10] [--effort-steps 5] [--effort-window 12]
+        [--only passive tracking ...]
 
 Each strategy gets ``--maxiter`` L-BFGS-B iterations in all (split over rounds or stages).
 """
@@ -36,6 +41,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from casadi_keyframe import load_problem, solve  # noqa: E402
 from casadi_keyframe.augmented_lagrangian import solve_augmented  # noqa: E402
+from casadi_keyframe.constrained import lower_effort  # noqa: E402
 from casadi_keyframe.scenes.capes import clip_report  # noqa: E402
 
 WIDTH = 0.6  # m, the cape's width (cape_model's default)
@@ -53,8 +59,9 @@ def free_misses(prob, traj) -> dict:
             "rms_v": float(np.sqrt((dv ** 2).mean()))}
 
 
-def run(name, build, maxiter, rounds=3, growth=10.0):
-    """Build the strategy's problem and solve it; a row of figures."""
+def run(name, build, maxiter, rounds=3, growth=10.0, effort=(5, 12)):
+    """Build the strategy's problem and solve it; a row of figures (``effort``:
+    lower_effort's kept steps at most and window)."""
     per_round = max(maxiter // rounds, 1)
     if name == "swapped":
         prob = build(guess="passive", adjoint="swapped")
@@ -63,8 +70,10 @@ def run(name, build, maxiter, rounds=3, growth=10.0):
     else:
         prob = build(guess="tracking" if name.startswith("tracking") else "passive")
     start_misses = free_misses(prob, prob.simulate(prob.initial_controls()))
-    start = time.perf_counter()
-    if name in ("passive", "swapped", "tracking"):
+    start, cpu = time.perf_counter(), time.process_time()
+    if name == "tracking+lower_effort":
+        res = lower_effort(prob, maxiter=effort[0], window=effort[1])
+    elif name in ("passive", "swapped", "tracking"):
         res = solve(prob, maxiter=maxiter, quiet=True)
     elif name.endswith("ipopt"):
         res = solve(prob, "ipopt", maxiter=maxiter, quiet=True)
@@ -73,12 +82,13 @@ def run(name, build, maxiter, rounds=3, growth=10.0):
     else:
         res = solve_augmented(prob, rounds=rounds, weight_growth=growth,
                               multipliers=name != "schedule", maxiter=per_round, quiet=True)
-    seconds = time.perf_counter() - start
+    seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
     score = build(guess="passive") if name == "tracking+soft" else prob  # default weights
     view = prob.view
     report = clip_report(prob.model, res.trajectory, view.character,
                          view.animation.shifted(-view.t_a))
     return {**report, "strategy": name, "nit": res.nit, "nfev": res.nfev, "seconds": seconds,
+            "cpu": cpu, "start_control": prob.control_cost(prob.initial_controls())[0],
             "objective": score.objective(res.x), "control": res.breakdown["control_cost"],
             **free_misses(prob, res.trajectory), "start": start_misses}
 
@@ -94,7 +104,9 @@ def main(argv=None):
     ap.add_argument("--only", nargs="*", default=["passive", "swapped", "ipopt", "continuation",
                                                   "schedule", "multipliers", "tracking",
                                                   "tracking+multipliers", "tracking+soft",
-                                                  "tracking+ipopt"])
+                                                  "tracking+ipopt", "tracking+lower_effort"])
+    ap.add_argument("--effort-steps", type=int, default=5, help="lower_effort's maxiter")
+    ap.add_argument("--effort-window", type=int, default=12, help="lower_effort's window")
     args = ap.parse_args(argv)
 
     def build(**kw):
@@ -105,14 +117,15 @@ def main(argv=None):
           f"{args.maxiter} iterations per strategy, rounds {args.rounds} x{args.growth:g}")
     print(f"{'strategy':22s} {'start rms':>9s} {'nit':>4s} {'nfev':>5s} {'s':>6s} "
           f"{'objective':>10s} {'control':>8s} {'rms x m':>8s} {'/width':>7s} {'max x':>7s} "
-          f"{'rms v':>7s} {'stretch':>7s} {'in body':>7s}")
+          f"{'rms v':>7s} {'stretch':>7s} {'in body':>7s} {'cpu s':>6s} {'control/start':>13s}")
     for name in args.only:
-        r = run(name, build, args.maxiter, args.rounds, args.growth)
+        r = run(name, build, args.maxiter, args.rounds, args.growth,
+                (args.effort_steps, args.effort_window))
         print(f"{name:22s} {r['start']['rms_x']:9.3g} {r['nit']:4d} {r['nfev']:5d} "
               f"{r['seconds']:6.0f} {r['objective']:10.4g} {r['control']:8.3g} "
               f"{r['rms_x']:8.3g} {r['width_fraction']:7.2%} {r['max_x']:7.3g} "
-              f"{r['rms_v']:7.3g} {r['max_stretch']:7.3g} {100 * r['penetration']:5.2g}cm",
-              flush=True)
+              f"{r['rms_v']:7.3g} {r['max_stretch']:7.3g} {100 * r['penetration']:5.2g}cm "
+              f"{r['cpu']:6.0f} {r['control'] / r['start_control'] - 1:+13.1%}", flush=True)
 
 
 if __name__ == "__main__":

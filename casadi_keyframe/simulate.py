@@ -50,19 +50,24 @@ def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = 
     return traj if tangent is None else (traj, dx, dv)
 
 
-def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None):
+def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop: int = 0):
     """Eq. (5): the frame gradients ``gx, gv`` ``(steps + 1, n, dim)`` pulled back to
     ``(dphi/d external (steps, n, dim), dphi/ds_0 as a State)``.
 
-    ``step_vjp`` is the backward step (default: the integrator's exact one).
+    ``step_vjp`` is the backward step (default: the integrator's exact one).  ``stop > 0``
+    ends the pass at frame ``stop``: the external forces of steps ``stop ..`` get their
+    gradients, earlier ones zero, and the State returned is ``dphi/ds_stop`` without the
+    frames before it (``gx, gv`` there are not read).
     """
     step_vjp = integrator.step_vjp if step_vjp is None else step_vjp
     steps, dt = traj.steps, traj.dt
     work = integrator.init(model)
     work.records = traj.records
-    g_external = np.empty((steps,) + traj.x.shape[1:])
+    if not (isinstance(stop, (int, np.integer)) and 0 <= stop <= steps):
+        raise ValueError(f"backward: stop must be a frame in 0..{steps}, got {stop!r}")
+    g_external = np.zeros((steps,) + traj.x.shape[1:])
     a = State(gx[steps], gv[steps])
-    for n in range(steps - 1, -1, -1):
+    for n in range(steps - 1, stop - 1, -1):
         a, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1), traj.record(n),
                                     n, dt, a, work)
         a = State(a.x + gx[n], a.v + gv[n])

@@ -1,0 +1,221 @@
+"""Lower the control effort of controls that already hit their keyframes, keeping the hit.
+
+A start that lands (a tracking guess, an earlier solve) sits where the keyframe penalty
+curves so sharply, and the cloth's linearized steps jump so often (a spring's stiffness
+changes as it crosses its rest length), that gradient methods on the penalty objective make
+no progress.  :func:`lower_effort` treats the keyframes as a constraint instead: a
+sequential quadratic step on the controls of the last ``window`` steps before the last
+keyframe,
+
+    minimise  0.5 (u + d)^T Q (u + d) + 0.5 damping d^T Q d   subject to   r + J d = 0,
+
+with Q the control terms' Hessian (they are quadratic, :class:`~.objectives.Smoothness`),
+r the keyframes' weighted residual (positions and velocities of the free particles, the
+problem's own weights) and J its Jacobian, built row by row from adjoint sweeps seeded at
+the keyframe frames (:func:`~casadi_keyframe.simulate.backward` stopped at the window,
+reusing the forward pass's factorisations).  A step is kept if the control cost falls and
+every keyframe's rms position and velocity miss stays within the tolerances; otherwise the
+damping grows (the step shrinks towards the pure re-landing) and the step is tried again.
+The dynamics are only piecewise smooth, so the landing is kept to those tolerances, not
+exactly.
+"""
+from __future__ import annotations
+
+import time
+
+import casadi as ca
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from .adjoints import Adjoint
+from .controls import StepForces
+from .objectives import StateKeyframe
+from .optimize import CONVERGED, FAILED, LIMIT, Result
+from .simulate import backward
+from .state import SimulationError
+
+
+class KeyframeConstraint:
+    """The keyframes of ``problem`` at frames after ``first`` as a residual over their free
+    particles, ``r = sqrt(weight) (state - target)`` stacked, with its Jacobian's transpose
+    applied to a vector by one adjoint sweep (:meth:`vjp`)."""
+
+    def __init__(self, problem, first: int = 0):
+        self.problem, self.first = problem, int(first)
+        others = [t.label for t in (problem.objective_terms.state_terms
+                                    + problem.objective_terms.trajectory_terms)
+                  if not isinstance(t, StateKeyframe)]
+        if others:
+            raise ValueError(f"{problem.name}: lower_effort holds StateKeyframe terms only; "
+                             f"the objective also has {others}: remove them or solve the "
+                             "problem with solve()")
+        model = problem.model
+        free = model.free_mask().reshape(model.n, model.dim).all(axis=1)
+        self.rows = []  # (frame, "x" or "v", particles, target, sqrt(weight))
+        for t in problem.objective_terms.state_terms:
+            if t.frame <= self.first:
+                continue  # the window's controls cannot move it
+            keep = free[t.particles]
+            for kind, target, weight in (("x", t.position_target, t.position_weight),
+                                         ("v", t.velocity_target, t.velocity_weight)):
+                if target is not None and weight > 0 and keep.any():
+                    self.rows.append((t.frame, kind, t.particles[keep], target[keep],
+                                      np.sqrt(weight)))
+        if not self.rows:
+            raise ValueError(f"{problem.name}: no keyframe with free particles after frame "
+                             f"{self.first}: nothing for the controls to hold")
+        self.size = sum(idx.size * model.dim for _, _, idx, _, _ in self.rows)
+
+    def residual(self, traj) -> np.ndarray:
+        return np.concatenate([(s * ((traj.x if kind == "x" else traj.v)[frame][idx]
+                                     - target)).ravel()
+                               for frame, kind, idx, target, s in self.rows])
+
+    def vjp(self, traj, mu) -> np.ndarray:
+        """``J^T mu``: the derivative of ``mu . r`` in the controls (zero before ``first``)."""
+        p = self.problem
+        gx, gv = np.zeros_like(traj.x), np.zeros_like(traj.v)
+        at = 0
+        for frame, kind, idx, _, s in self.rows:
+            k = idx.size * p.model.dim
+            (gx if kind == "x" else gv)[frame][idx] += s * mu[at:at + k].reshape(idx.size, -1)
+            at += k
+        g_ext, g_start = backward(p.integrator, p.model, traj, gx, gv, stop=self.first)
+        return p.controls.pullback(g_ext, g_start.v)
+
+    def misses(self, traj) -> list:
+        """Per keyframe row: ``(kind, rms miss over its free particles)``."""
+        return [(kind, float(np.sqrt(np.mean(np.sum(((traj.x if kind == "x" else traj.v)
+                                                      [frame][idx] - target) ** 2, axis=1)))))
+                for frame, kind, idx, target, _ in self.rows]
+
+
+def control_hessian(problem) -> sp.csc_matrix:
+    """The control terms' Hessian Q (sparse; constant, for quadratic terms such as
+    :class:`~.objectives.Smoothness`), from their CasADi expression."""
+    U = ca.MX.sym("U", problem.size)
+    value = 0
+    for term in problem.objective_terms.control_terms:
+        value += term.symbolic(U, problem.controls, problem.dt)
+    H = ca.hessian(ca.MX(value), U)[0]
+    fn = ca.Function("control_hessian", [U], [H])
+    rows, cols = fn.sparsity_out(0).get_triplet()
+    data = np.asarray(fn(np.zeros(problem.size)).nonzeros()).ravel()
+    return sp.csc_matrix((data, (rows, cols)), shape=(problem.size,) * 2)
+
+
+def lower_effort(problem, *, window: int = 12, position_tolerance: float = 1e-3,
+                 velocity_tolerance: float = 0.05, maxiter: int = 10, tries: int = 6,
+                 damping: float = 0.0, u0=None, time_limit: float | None = None,
+                 quiet: bool = True) -> Result:
+    """Lower the control cost of ``u0`` (default: the problem's guess) while every
+    StateKeyframe stays hit: rms miss over its free particles at most ``position_tolerance``
+    (m) and ``velocity_tolerance`` (m/s), by the damped sequential quadratic steps of the
+    module docstring on the controls of the last ``window`` steps before the last keyframe.
+
+    Per iteration: one adjoint sweep over the window per residual row (6 per free particle
+    of a full-state keyframe) and up to ``tries`` trial simulations; ``damping`` is the
+    first trial's (it then grows 4x + 1 per rejected trial and shrinks 3x after a kept
+    step).  Needs per-step forces (:class:`~.controls.StepForces`), a positive definite
+    control Hessian on the window (Smoothness with ``alpha > 0``), an objective of
+    StateKeyframe and control terms only, and a start within the tolerances.
+
+    Returns a :class:`~.optimize.Result` (method "lower_effort"): status 0 when no trial
+    step lowers the cost within the tolerances (or ``maxiter`` steps were kept), 1 at
+    ``time_limit`` (seconds), 2 when the first iteration keeps no step; ``history`` has one
+    record per kept step.
+    """
+    start = time.perf_counter()
+    if not isinstance(problem.controls, StepForces):
+        raise ValueError(f"{problem.name}: lower_effort needs per-step forces (StepForces), "
+                         f"got {type(problem.controls).__name__}")
+    for name, value in (("window", window), ("maxiter", maxiter), ("tries", tries)):
+        if not (isinstance(value, (int, np.integer)) and value >= 1):
+            raise ValueError(f"lower_effort: {name} must be a whole number >= 1, got {value!r}")
+    for name, value in (("position_tolerance", position_tolerance),
+                        ("velocity_tolerance", velocity_tolerance), ("damping", damping)):
+        if not (np.isfinite(value) and value >= 0):
+            raise ValueError(f"lower_effort: {name} must be a number >= 0, got {value!r}")
+    last = max(t.frame for t in problem.objective_terms.state_terms)
+    first = max(last - window, 0)
+    constraint = KeyframeConstraint(problem, first)
+    block = problem.size // problem.steps
+    cols = np.arange(first * block, last * block)  # the window's controls
+    Q = control_hessian(problem)
+    try:
+        Q_window = spla.splu(Q[cols][:, cols].tocsc())
+        if not np.all(Q_window.U.diagonal() > 0):
+            raise RuntimeError
+    except RuntimeError:
+        raise ValueError(f"{problem.name}: the control terms' Hessian is singular on the "
+                         "window; lower_effort needs Smoothness with alpha > 0") from None
+    tolerances = {"x": position_tolerance, "v": velocity_tolerance}
+
+    def within(traj):
+        return all(miss <= tolerances[kind] for kind, miss in constraint.misses(traj))
+
+    u = problem.initial_controls() if u0 is None else problem.controls.check(u0).copy()
+    traj = problem.simulate(u)
+    if not within(traj):
+        raise ValueError(f"{problem.name}: the start misses its keyframes by "
+                         f"{constraint.misses(traj)} (rms m, m/s), beyond the tolerances "
+                         f"{tolerances}: lower_effort keeps a landing, it does not find one; "
+                         "start from controls that land (a guess, a solve's result)")
+    cost = problem.control_cost(u)[0]
+    history, nfev, sweeps, kept = [], 1, 0, 0
+    status, message = CONVERGED, f"{maxiter} steps kept (maxiter)"
+    for it in range(maxiter):
+        if time_limit is not None and time.perf_counter() - start >= time_limit:
+            status, message = LIMIT, f"time limit reached ({time_limit:g} s)"
+            break
+        step = _step_operator(constraint, traj, Q_window, cols)
+        sweeps += constraint.size
+        r, g = constraint.residual(traj), (Q @ u)[cols]
+        for trial in range(tries):
+            trial_u = u.copy()
+            trial_u[cols] += step(g, r, damping)
+            nfev += 1
+            try:
+                trial_traj = problem.simulate(trial_u)
+            except SimulationError:
+                trial_traj = None
+            trial_cost = problem.control_cost(trial_u)[0]
+            if trial_traj is not None and trial_cost < cost and within(trial_traj):
+                u, traj, cost = trial_u, trial_traj, trial_cost
+                damping /= 3.0
+                kept += 1
+                history.append({"iteration": kept, "control_cost": cost, "damping": damping,
+                                "misses": constraint.misses(traj), "nfev": nfev,
+                                "seconds": time.perf_counter() - start})
+                break
+            damping = 4.0 * damping + 1.0
+        else:
+            status = CONVERGED if kept else FAILED
+            message = (f"no step of {tries} tried lowers the control cost with the keyframes "
+                       f"within {tolerances} (damping up to {damping:.3g})")
+            break
+    f, jac = Adjoint()(problem, u)
+    return Result(x=u, fun=float(f), jac=jac, nit=kept, nfev=nfev,
+                  success=status == CONVERGED, status=status,
+                  message=f"{message}; {sweeps} adjoint sweeps over {last - first} steps",
+                  method="lower_effort", gradient="adjoint", trajectory=traj,
+                  history=history, timings={"wall_seconds": time.perf_counter() - start},
+                  breakdown=problem.breakdown(u, traj))
+
+
+def _step_operator(constraint, traj, Q_window, cols):
+    """The damped step ``d(g, r, damping)`` at ``traj``: J from one adjoint sweep per
+    residual row, the constraint block ``J Q^-1 J^T`` inverted on its well-conditioned part
+    (eigenvalues below 1e-12 of the largest dropped: directions the window cannot steer)."""
+    identity = np.eye(constraint.size)
+    JT = np.stack([constraint.vjp(traj, e)[cols] for e in identity], axis=1)
+    QiJT = Q_window.solve(JT)
+    vals, vecs = np.linalg.eigh(JT.T @ QiJT)
+    keep = vals > 1e-12 * vals.max()
+    pinv = (vecs[:, keep] / vals[keep]) @ vecs[:, keep].T
+
+    def step(g, r, damping):
+        gi = Q_window.solve(g) / (1.0 + damping)
+        return -gi + QiJT @ (pinv @ (JT.T @ gi - r))
+    return step

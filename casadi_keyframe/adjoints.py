@@ -75,7 +75,7 @@ def unrolled_objective(problem, U):
             J += t.symbolic(X, V)
         if n > 0:
             for t in problem.objective_terms.trajectory_terms:
-                J += t.symbolic(X, V, problem.dt)
+                J += t.symbolic(X, V, problem.dt, n)
         if n < problem.steps:
             E = ca.DM(problem.external[n].T)
             if forces is not None:

@@ -363,7 +363,7 @@ class Smoothness(ControlTerm):
 class TrajectoryTerm(_Addable):
     """A term on every frame of the motion (not a keyframe): ``value(traj)``,
     ``accumulate(traj, gx, gv)`` (its derivative added into every frame) and
-    ``symbolic(X, V, dt)`` for one frame of the unrolled CasADi route."""
+    ``symbolic(X, V, dt, n)`` for frame n of the unrolled CasADi route."""
 
     def bind(self, model, steps: int) -> None:
         pass
@@ -371,19 +371,31 @@ class TrajectoryTerm(_Addable):
 
 class StrainLimit(TrajectoryTerm):
     """A cloth that does not tear: ``0.5 weight dt sum_n sum_springs max(0, s - limit)^2``
-    over frames 1..N, with ``s = |x_j - x_i| / rest`` a spring's stretch.  Zero while every
-    spring stays below ``limit`` times its rest length, and C^1 (its derivative is the
-    hinge's), so it limits strain softly and leaves motions within the limit alone; a
-    Riemann sum of a time integral, so a weight means the same at any dt.  Its value counts
-    in a result's ``keyframe_error`` (the objective less the control cost)."""
+    over frames 1..N (or those up to time ``until``, seconds), with ``s = |x_j - x_i| /
+    rest`` a spring's stretch.  Zero while every spring stays below ``limit`` times its rest
+    length, and C^1 (its derivative is the hinge's), so it limits strain softly and leaves
+    motions within the limit alone; a Riemann sum of a time integral, so a weight means the
+    same at any dt.  Its value counts in a result's ``keyframe_error`` (the objective less
+    the control cost)."""
 
     label = "StrainLimit"
 
-    def __init__(self, limit: float = 1.1, weight: float = 1e3):
+    def __init__(self, limit: float = 1.1, weight: float = 1e3, until: float | None = None):
         if not (np.isfinite(limit) and limit >= 1) or not (np.isfinite(weight) and weight >= 0):
             raise ValueError(f"StrainLimit needs limit >= 1 and weight >= 0, got {limit}, "
                              f"{weight}")
-        self.limit, self.weight = float(limit), float(weight)
+        if until is not None and not (np.isfinite(until) and until > 0):
+            raise ValueError(f"StrainLimit: until is a time in seconds > 0 (None: every "
+                             f"frame), got {until!r}")
+        self.limit, self.weight, self.until = float(limit), float(weight), until
+
+    def counts(self, n: int, dt: float) -> bool:
+        """Whether frame ``n`` (of step ``dt``) is one the limit holds on."""
+        return n >= 1 and (self.until is None or n * dt <= self.until * (1 + 1e-9))
+
+    def _frames(self, traj) -> int:
+        """How many frames from frame 1 on count."""
+        return sum(self.counts(n, traj.dt) for n in range(1, traj.x.shape[0]))
 
     def bind(self, model, steps: int) -> None:
         springs = getattr(model, "springs", None)
@@ -397,11 +409,11 @@ class StrainLimit(TrajectoryTerm):
         return d, length, np.maximum(length / self._rest - self.limit, 0.0)
 
     def value(self, traj) -> float:
-        _, _, excess = self._excess(traj.x[1:])
+        _, _, excess = self._excess(traj.x[1:1 + self._frames(traj)])
         return float(0.5 * self.weight * traj.dt * np.sum(excess ** 2))
 
     def accumulate(self, traj, gx, gv) -> float:
-        d, length, excess = self._excess(traj.x[1:])
+        d, length, excess = self._excess(traj.x[1:1 + self._frames(traj)])
         scale = self.weight * traj.dt * excess / (self._rest * np.maximum(length, 1e-300))
         pull = scale[..., None] * d  # d value / d x_j per frame and spring
         frames, n = pull.shape[0], traj.x.shape[1]
@@ -409,12 +421,14 @@ class StrainLimit(TrajectoryTerm):
         into_j, into_i = (self._j + offset).ravel(), (self._i + offset).ravel()
         for k in range(3):
             col = pull[..., k].ravel()
-            gx[1:, :, k] += (np.bincount(into_j, col, minlength=frames * n)
+            gx[1:1 + frames, :, k] += (np.bincount(into_j, col, minlength=frames * n)
                              - np.bincount(into_i, col, minlength=frames * n)).reshape(frames, n)
         return float(0.5 * self.weight * traj.dt * np.sum(excess ** 2))
 
-    def symbolic(self, X, V, dt):
-        """This frame's share, ``0.5 weight dt sum max(0, s - limit)^2`` (X: 3 x n)."""
+    def symbolic(self, X, V, dt, n):
+        """Frame ``n``'s share, ``0.5 weight dt sum max(0, s - limit)^2`` (X: 3 x n)."""
+        if not self.counts(n, dt):
+            return 0
         d = X[:, self._j.tolist()] - X[:, self._i.tolist()]
         length = ca.sqrt(ca.sum1(d ** 2))
         excess = ca.fmax(length / ca.DM(self._rest).T - self.limit, 0)

@@ -37,8 +37,25 @@ def test_zero_below_the_limit_and_its_derivative():
     assert np.sum(gx * d) == pytest.approx((plus - minus) / (2 * h), rel=1e-6)
 
 
-def test_the_adjoint_route_equals_casadi_with_the_term():
-    prob = swing(limit=1.0, weight=50.0)
+def test_until_counts_the_frames_up_to_a_time_only():
+    model = ClothModel.grid(4, 4)
+    x = model.rest_positions[None] + 0.08 * np.random.default_rng(2).standard_normal((7, 16, 3))
+    traj = Trajectory(x, np.zeros_like(x), 0.1)
+    early, every = StrainLimit(weight=10.0, until=0.3), StrainLimit(weight=10.0)
+    for term in (early, every):
+        term.bind(model, 6)
+    head = Trajectory(x[:4], np.zeros_like(x[:4]), 0.1)  # frames 0..3: t <= 0.3 s
+    assert early.value(traj) == pytest.approx(every.value(head)) and early.value(traj) > 0
+    gx, gv = np.zeros_like(x), np.zeros_like(x)
+    early.accumulate(traj, gx, gv)
+    assert gx[1:4].any() and not gx[4:].any()
+    with pytest.raises(ValueError, match="until is a time"):
+        StrainLimit(until=0)
+
+
+@pytest.mark.parametrize("until", [None, 0.1])
+def test_the_adjoint_route_equals_casadi_with_the_term(until):
+    prob = swing(limit=1.0, weight=50.0, until=until)
     u = 0.05 * np.random.default_rng(1).standard_normal(prob.size)
     f_adj, g_adj = prob.objective_and_gradient(u, "adjoint")
     f_ad, g_ad = prob.objective_and_gradient(u, "casadi")

@@ -69,13 +69,20 @@ crossfade of the two shapes and its last two steps put it on the walk's state
 (:mod:`casadi_keyframe.scenes.cape_tracking`).  That blend is clean (26 x
 16: stretch 1.16 and no particle in the body, where the passive blend reaches 1.49 and 1.2
 cm; 24 m/s^2 rms, 286 m/s^2 on one particle in the landing step) but it is a guess, not an
-optimum, and no optimizer here lowers its forces: on the keyframe the gradient is the
+optimum, and no penalty search lowers its forces: on the keyframe the gradient is the
 control cost's alone and points off the forces that keep the landing, where the keyframe
 term curves so sharply (about 1e5 N^-2 along it, 8 x 6) that the best step gains some 1e-11,
 below L-BFGS-B's stopping test.  It stops after 1-4 iterations, also with multipliers or
 with the keyframe weights 100 times lower in a first round; IPOPT takes 31 and lowers the
 control cost by 0.4 % while leaving the keyframe 0.4 mm (8 x 6: control cost 0.0246 in
-every case).  Do not add ``continuation``: the guess resampled to 2 dt no longer lands, and
+every case).  Holding the landing as a constraint does it:
+:func:`casadi_keyframe.constrained.lower_effort` (quadratic steps on the last 12 steps'
+forces, the keyframe's Jacobian from one adjoint sweep per component) lowers the 26 x 16
+guess's control cost from 0.0204 to 0.0158 (-22.8 %) in one kept step and 417 s of CPU,
+the landing 0.77 mm and 1.6 cm/s off over the free particles, stretch 1.13 and no particle
+in the body, as the guess (8 x 6: -36 % in 5 steps, 57 s).  The dynamics are only piecewise
+smooth (the landing jumps by ~0.4 mm rms for relative control changes of 1e-6), which is
+why it holds a tolerance, not the exact landing.  Do not add ``continuation``: the guess resampled to 2 dt no longer lands, and
 the solve ends 18 cm off (13 x 8).  ``guess="passive"`` starts from zero forces, as the
 paper did.
 

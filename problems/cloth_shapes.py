@@ -10,15 +10,17 @@ asked the bottom row to stretch 1.59 times, so no physical motion came nearer th
 rms.  ``SOLVE`` first solves a 6 x 6 sheet of the same cloth (``resolutions``), whose
 forces, carried to the finer mesh, start its search.
 
-Which gradient gets there (12 x 12, ``benchmarks/cloth_figures.py``; rms miss of each
-keyframe, largest spring stretch, iterations, CPU seconds on this 2-core machine):
+Which gradient gets there (12 x 12, ``benchmarks/cloth_figures.py``, one BLAS thread; rms
+miss of each keyframe, largest spring stretch, iterations on each mesh, CPU seconds):
 
-    ==================  =========================  =======  ==========  =====
-    route               rms miss (frames 40/80/120) stretch  iterations  CPU s
-    ==================  =========================  =======  ==========  =====
-    exact adjoint       2.4 / 12.1 / 2.5 mm        1.16     92 + 26     63
-    swapped (paper's)   SWAPPED_ROW
-    ==================  =========================  =======  ==========  =====
+    =================  ===========================  =======  ==========  =====
+    route              rms miss (frames 40/80/120)  stretch  iterations  CPU s
+    =================  ===========================  =======  ==========  =====
+    exact adjoint      2.4 / 12.1 / 2.5 mm          1.16     92 + 26     50
+    swapped (paper's)  19 / 58 / 23 mm              1.16     15 + 16     35
+    =================  ===========================  =======  ==========  =====
+
+The swapped search ends with L-BFGS-B's line search failing on the 12 x 12 sheet.
 """
 import numpy as np
 

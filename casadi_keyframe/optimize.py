@@ -330,7 +330,10 @@ class _Search:
         if ev.failures:
             raise SimulationError(f"the simulation fails at the starting controls{where} "
                                   f"({ev.last_failure})"
-                                  + ("; start the continuation at a finer dt" if where else ""), 0)
+                                  + ("" if not where else "; start the continuation at a "
+                                     "finer dt or mesh" if k == 0 else "; the controls "
+                                     "carried from the previous stage fail here: start the "
+                                     "continuation at a finer dt or mesh"), 0)
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
         run = _lbfgsb if self.method == "lbfgsb" else _ipopt

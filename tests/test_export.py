@@ -89,7 +89,7 @@ def test_usd_cloth_round_trip_and_compliance(cloth):
         np.testing.assert_array_equal(np.array(points.Get(n)), x.astype(np.float32))
     assert set(mesh.GetFaceVertexCountsAttr().Get()) == {3}
     children = {p.GetName() for p in stage.GetPrimAtPath("/Result/Targets").GetChildren()}
-    assert children == {"CenterOfMass_4", "ParticleKeyframe_8", "Ring"}
+    assert children == {"CenterOfMass_5", "ParticleKeyframe_9", "Ring"}
     assert stage.GetPrimAtPath("/Result/Colliders/Plane0").IsValid()
     assert validate(path) == []
 

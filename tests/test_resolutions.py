@@ -98,11 +98,11 @@ def test_carrying_refuses_what_it_does_not_know():
 
 
 def test_solve_goes_coarse_to_fine_and_names_each_mesh(tmp_path):
-    prob = toss(6, steps=40)  # keyframes at frames 18 and 32: on the grid of 2 dt too
+    prob = toss(6, steps=30)  # keyframes at frames 16 and 28: on the grid of 2 dt too
     r = solve(prob, maxiter=6, quiet=True, resolutions=[{"rows": 3, "cols": 3}],
               continuation=[2 * prob.dt], checkpoint=tmp_path / "best.npz")
-    assert [(s["particles"], s["steps"]) for s in r.stages] == [(9, 20), (9, 40), (36, 20),
-                                                                 (36, 40)]
+    assert [(s["particles"], s["steps"]) for s in r.stages] == [(9, 15), (9, 30), (36, 15),
+                                                                 (36, 30)]
     assert {h["particles"] for h in r.history if h["stage"] == 3} == {36}
     assert r.x.size == prob.size and r.fun == pytest.approx(prob.objective(r.x), rel=1e-12)
     assert np.load(tmp_path / "best.npz")["u"].size == prob.size

@@ -36,7 +36,7 @@ def test_solve_writes_a_self_contained_viewer(solved):
 
 
 def test_frames_caption_and_toggles():
-    p = load_problem("cloth_toss", rows=4, cols=4, steps=10)
+    p = load_problem("cloth_toss", rows=4, cols=4, steps=10, ring_at=0.4)  # the ring at frame 4
     traj = p.simulate(records=False)
     fig = figure(scene_of(p, traj))
     assert len(fig.frames) == traj.steps + 1

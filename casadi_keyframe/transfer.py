@@ -93,10 +93,9 @@ def carry_to_mesh(source, u, target) -> np.ndarray:
         steps = target.steps
         forces = np.zeros((steps, source.model.n, 3))
         forces[:, source.controls.idx] = u.reshape(steps, -1, 3)
-        per_mass, weights = forces / source.model.masses[:, None], target.model.masses
+        per_mass = forces / source.model.masses[:, None]
     else:
         per_mass = source.controls.velocity_offset(u)[None]
-        weights = target.model.masses
     mass = source.model.masses[source.controls.idx]
     mean = np.einsum("skd,k->sd", per_mass[:, source.controls.idx], mass) / mass.sum()
     P = mesh_interpolation(source.model.rest_positions, source.model.faces,
@@ -104,10 +103,10 @@ def carry_to_mesh(source, u, target) -> np.ndarray:
     idx = target.controls.idx
     P = _among(P[idx], source.controls.idx)
     moved = np.stack([P @ field[source.controls.idx] for field in per_mass])  # (s, k, 3)
-    m = weights[idx]
+    m = target.model.masses[idx]
     moved += (mean - np.einsum("skd,k->sd", moved, m) / m.sum())[:, None, :]
     out = moved * m[:, None] if kind is StepForces else moved[0]
-    return target.controls.check(out.ravel())
+    return np.clip(target.controls.check(out.ravel()), *target.bounds())
 
 
 def _among(P, controlled) -> sp.csr_matrix:

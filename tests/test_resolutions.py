@@ -170,3 +170,12 @@ def test_cli_refuses_coarse_meshes_with_rounds(capsys):
     assert "do not combine" in capsys.readouterr().err
     assert main(["solve", "cloth_shapes", "--set", "rows=4", "--resolution", "rowz=3"]) == 2
     assert "rowz" in capsys.readouterr().err
+
+
+def test_carried_controls_stay_within_the_targets_bounds():
+    coarse, fine = toss(3), toss(5)  # the centre particle is on both meshes
+    top = fine.bounds()[1][0]
+    spike = np.zeros((9, 3))
+    spike[4, 2] = top  # at the bound: the momentum correction would lift it past
+    moved = carry_to_mesh(coarse, spike.ravel(), fine).reshape(25, 3)
+    assert moved[12, 2] == top and np.all(moved <= top)

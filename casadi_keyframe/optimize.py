@@ -5,7 +5,8 @@ Both return a :class:`Result` in scipy's vocabulary (``status`` included, see
 :class:`~.interrupts.Interrupted`) stops the solve and returns the best controls seen so
 far with status 3; ``time_limit=`` stops it with status 1; with ``checkpoint=`` the best is
 also on disk after every iteration, written atomically.  ``continuation=`` solves at coarse
-time steps first, then refines (see :func:`solve`).
+time steps first, ``resolutions=`` on coarser meshes, then refines (see :func:`solve`; the
+stages themselves: :mod:`.stages`).
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from .interrupts import NAMES, Interrupted, catching, check, handled
 from .io import as_checkpoint
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS, ipopt_outcome, lbfgsb_outcome
 from .state import SimulationError, Trajectory
-from .transfer import carry_to_mesh
+from .stages import carry, stage_name, stage_problems
 
 METHODS = ("lbfgsb", "ipopt")
 __all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "Result", "solve",
@@ -188,16 +189,16 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options or {}, quiet, as_checkpoint(checkpoint),
                      time_limit)
-    u = None if u0 is None else _carry(problem, problem.controls.check(u0), problems[0])
+    u = None if u0 is None else carry(problem, problem.controls.check(u0), problems[0])
     stages = []
     for k, p in enumerate(problems):
         ev = _Evaluator(p, strategy, search.checkpoint, stage=k,
-                        export=lambda v, p=p: _carry(p, v, problem))
+                        export=lambda v, p=p: carry(p, v, problem))
         stages.append(search.run(p, ev, p.initial_controls() if u is None else u,
                                  (k, len(problems))))
         if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
-        u = _carry(p, ev.best_u, problems[k + 1])
+        u = carry(p, ev.best_u, problems[k + 1])
     return _result(problem, p, ev, strategy, search, stages, len(problems))
 
 
@@ -207,14 +208,14 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
     if p is problem:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
     else:
-        u = _carry(p, ev.best_u, problem)
+        u = carry(p, ev.best_u, problem)
         fun, jac = evaluate_final(problem, strategy, u)
         if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
             status = LIMIT
             message = f"time limit reached ({search.time_limit:g} s) before converging"
         message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} "
-                   f"({_stage_name(p)}): its best controls, carried to the problem "
-                   f"({_stage_name(problem)}), kept")
+                   f"({stage_name(p)}): its best controls, carried to the problem "
+                   f"({stage_name(problem)}), kept")
     traj = problem.simulate(u)
     return Result(x=u, fun=fun, jac=jac, nit=sum(s["nit"] for s in stages),
                   nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
@@ -226,72 +227,6 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
                            "failed_simulations": sum(s["failed_simulations"] for s in stages),
                            "stage_seconds": [s["seconds"] for s in stages]},
                   breakdown=problem.breakdown(u, traj), stages=stages)
-
-
-def stage_problems(problem, continuation, resolutions=None) -> list:
-    """The problems a continuation solves in turn, coarse to fine; the last is ``problem``.
-
-    For every mesh of ``resolutions`` (see :func:`coarser_meshes`) and then ``problem``, the
-    time stages of ``continuation`` on that mesh.  ``continuation`` None means one stage per
-    mesh.  Otherwise its time steps must decrease strictly and end at ``problem.dt``
-    (appended if missing), each dividing the horizon into whole steps with every keyframe on
-    its grid (else ValueError, from ``resampled``).
-    """
-    meshes = coarser_meshes(problem, resolutions) + [problem]
-    return [stage for mesh in meshes for stage in _time_stages(mesh, continuation)]
-
-
-def coarser_meshes(problem, resolutions) -> list:
-    """The problems of ``resolutions`` (None or a list of problems or build-override dicts),
-    checked to be the same kind of problem on ever finer meshes, all coarser than
-    ``problem``."""
-    if resolutions is None:
-        return []
-    if isinstance(resolutions, (dict, str)) or not hasattr(resolutions, "__iter__"):
-        raise ValueError(f"resolutions must be a list of coarser problems or of build "
-                         f"overrides such as {{'rows': 12, 'cols': 12}}, got {resolutions!r}")
-    meshes = [problem.at_resolution(**r) if isinstance(r, dict) else r for r in resolutions]
-    sizes = []
-    for r, mesh in zip(resolutions, meshes):
-        if not isinstance(mesh, type(problem)):
-            raise ValueError(f"resolutions: {r!r} is neither a problem nor a dict of build "
-                             "overrides")
-        if mesh.horizon != problem.horizon or type(mesh.controls) is not type(problem.controls):
-            raise ValueError(f"resolutions: {mesh.name} on {mesh.model.n} particles is not the "
-                             f"same problem as {problem.name} ({mesh.steps} steps of "
-                             f"{mesh.dt:.6g} s, {mesh.controls.label}; the problem: "
-                             f"{problem.steps} of {problem.dt:.6g} s, {problem.controls.label})")
-        sizes.append(mesh.model.n)
-    if any(b <= a for a, b in zip(sizes, sizes[1:] + [problem.model.n])):
-        raise ValueError(f"resolutions must go coarse to fine, each mesh with fewer particles "
-                         f"than the next and than the problem's {problem.model.n}; got "
-                         f"{sizes} particles")
-    return meshes
-
-
-def _time_stages(problem, continuation) -> list:
-    """``problem`` at each time step of ``continuation`` (see :func:`stage_problems`)."""
-    if continuation is None:
-        return [problem]
-    try:
-        dts = [float(dt) for dt in continuation]
-    except (TypeError, ValueError):
-        raise ValueError(f"continuation must be a list of time steps in seconds, coarse to "
-                         f"fine, got {continuation!r}") from None
-    if not dts:
-        raise ValueError("continuation is empty: give time steps coarse to fine, e.g. "
-                         f"[{4 * problem.dt:.6g}, {2 * problem.dt:.6g}], or leave it out")
-    if abs(dts[-1] - problem.dt) <= 1e-9 * problem.dt:
-        dts[-1] = problem.dt
-    else:
-        dts.append(problem.dt)
-    if any(fine >= coarse for coarse, fine in zip(dts, dts[1:])):
-        raise ValueError(
-            f"{problem.name}: continuation time steps must decrease strictly, coarse to fine, "
-            f"and end at the problem's dt = {problem.dt:.6g} s (appended if missing); got "
-            f"{[float(f'{d:.6g}') for d in continuation]}.  To solve at a finer step, build the "
-            "problem with that dt")
-    return [problem.resampled(dt) for dt in dts[:-1]] + [problem]
 
 
 class _Search:
@@ -324,7 +259,7 @@ class _Search:
 
     def _search(self, problem, ev, u0, stage):
         k, count = stage
-        where = "" if count == 1 else f" of stage {k} ({_stage_name(problem)})"
+        where = "" if count == 1 else f" of stage {k} ({stage_name(problem)})"
         f0, _ = ev(u0)
         ev.start = (float(f0), float(f0 - problem.control_cost(u0)[0]))
         if ev.failures:
@@ -372,19 +307,6 @@ class _InMetric:
     @property
     def interrupted(self):
         return self.ev.interrupted
-
-
-def _stage_name(problem) -> str:
-    return f"{problem.model.n} particles, dt = {problem.dt:.6g} s"
-
-
-def _carry(source, u, target):
-    """Controls ``u`` of problem ``source`` on the grid (and mesh) of problem ``target``."""
-    if source is target:
-        return u
-    if source.model is target.model:
-        return source.controls.resample(u, target.steps)
-    return carry_to_mesh(source, u, target)
 
 
 def evaluate_final(problem, strategy, u):

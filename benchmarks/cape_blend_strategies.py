@@ -20,6 +20,8 @@ Strategies:
   (x10 per round back to the problem's), so that the first round can trade the landing for
   lower forces and the multipliers bring it back;
 * ``tracking+ipopt``: the tracking guess, then IPOPT;
+* ``coarse+ipopt``: the passive start with IPOPT on a cape of half the rows and columns
+  first (``solve(..., resolutions=...)``), its forces carried to the full mesh;
 * ``tracking+lower_effort``: the tracking guess, then
   :func:`~casadi_keyframe.constrained.lower_effort` (the landing held within 1 mm and 5 cm/s
   rms as a constraint while the control cost falls; ``--effort-steps`` kept steps at most,
@@ -59,9 +61,10 @@ def free_misses(prob, traj) -> dict:
             "rms_v": float(np.sqrt((dv ** 2).mean()))}
 
 
-def run(name, build, maxiter, rounds=3, growth=10.0, effort=(5, 12)):
+def run(name, build, maxiter, rounds=3, growth=10.0, effort=(5, 12), coarse=None):
     """Build the strategy's problem and solve it; a row of figures (``effort``:
-    lower_effort's kept steps at most and window)."""
+    lower_effort's kept steps at most and window; ``coarse``: the build overrides of
+    coarse+ipopt's first mesh)."""
     per_round = max(maxiter // rounds, 1)
     if name == "swapped":
         prob = build(guess="passive", adjoint="swapped")
@@ -75,6 +78,8 @@ def run(name, build, maxiter, rounds=3, growth=10.0, effort=(5, 12)):
         res = lower_effort(prob, maxiter=effort[0], window=effort[1])
     elif name in ("passive", "swapped", "tracking"):
         res = solve(prob, maxiter=maxiter, quiet=True)
+    elif name == "coarse+ipopt":
+        res = solve(prob, "ipopt", maxiter=maxiter, quiet=True, resolutions=[coarse])
     elif name.endswith("ipopt"):
         res = solve(prob, "ipopt", maxiter=maxiter, quiet=True)
     elif name == "continuation":
@@ -104,7 +109,8 @@ def main(argv=None):
     ap.add_argument("--only", nargs="*", default=["passive", "swapped", "ipopt", "continuation",
                                                   "schedule", "multipliers", "tracking",
                                                   "tracking+multipliers", "tracking+soft",
-                                                  "tracking+ipopt", "tracking+lower_effort"])
+                                                  "tracking+ipopt", "tracking+lower_effort",
+                                                  "coarse+ipopt"])
     ap.add_argument("--effort-steps", type=int, default=5, help="lower_effort's maxiter")
     ap.add_argument("--effort-window", type=int, default=12, help="lower_effort's window")
     args = ap.parse_args(argv)
@@ -120,12 +126,18 @@ def main(argv=None):
           f"{'rms v':>7s} {'stretch':>7s} {'in body':>7s} {'cpu s':>6s} {'control/start':>13s}")
     for name in args.only:
         r = run(name, build, args.maxiter, args.rounds, args.growth,
-                (args.effort_steps, args.effort_window))
+                (args.effort_steps, args.effort_window),
+                {"rows": max(args.rows // 2, 2), "cols": max(args.cols // 2, 3)})
         print(f"{name:22s} {r['start']['rms_x']:9.3g} {r['nit']:4d} {r['nfev']:5d} "
               f"{r['seconds']:6.0f} {r['objective']:10.4g} {r['control']:8.3g} "
               f"{r['rms_x']:8.3g} {r['width_fraction']:7.2%} {r['max_x']:7.3g} "
               f"{r['rms_v']:7.3g} {r['max_stretch']:7.3g} {100 * r['penetration']:5.2g}cm "
-              f"{r['cpu']:6.0f} {r['control'] / r['start_control'] - 1:+13.1%}", flush=True)
+              f"{r['cpu']:6.0f} {change(r['control'], r['start_control']):>13s}", flush=True)
+
+
+def change(value: float, start: float) -> str:
+    """``"-22.8%"``: the control cost's change from a start that has one ("-" from zero)."""
+    return f"{value / start - 1:+.1%}" if start > 0 else "-"
 
 
 if __name__ == "__main__":

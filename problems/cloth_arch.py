@@ -19,8 +19,8 @@ At the default 15 x 15 (``benchmarks/cloth_figures.py``, one BLAS thread; rms mi
     =================  ========  =======  ==========  =====
     route              rms miss  stretch  iterations  CPU s
     =================  ========  =======  ==========  =====
-    exact adjoint      5.9 mm    1.01     58          37
-    swapped (paper's)  20.7 mm   1.01     78          58
+    exact adjoint      5.9 mm    1.01     58          38
+    swapped (paper's)  44.8 mm   1.01     38          27
     =================  ========  =======  ==========  =====
 
 Both stop on L-BFGS-B's relative-reduction test.  Coarse to fine (8 x 8 first) ended
@@ -31,24 +31,26 @@ import numpy as np
 from casadi_keyframe.controls import StepForces
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.colliders import Plane
-from casadi_keyframe.objectives import StateKeyframe, Smoothness
+from casadi_keyframe.objectives import StateKeyframe, Smoothness, StrainLimit
 from casadi_keyframe.scenes.cloths import bend_into_arch, cloth_problem, weight_support
 from casadi_keyframe.views import ClothView
 
 SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
-          "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)"}
+          "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
+          "strain_limit": "[1, inf)", "strain_weight": "[0, inf)"}
 
 
 def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,
-          size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4):
+          size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4,
+          strain_limit: float = 1.2, strain_weight: float = 1e3):
     ground = Plane((0.0, 0.0, 0.0))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
                             origin=(0.0, 0.0, ground.contact.thickness), colliders=[ground])
     target = bend_into_arch(model.rest_positions, axis=0, up=2)
     objective = (StateKeyframe(steps, x=target, v=np.zeros_like(target),
                                position_weight=weight / model.n, velocity_weight=weight / model.n)
-                 + Smoothness(alpha))
+                 + Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
     controls = StepForces()
     controls.bind(model.n, 3, steps)
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective, name="cloth_arch",

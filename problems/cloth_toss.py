@@ -42,8 +42,8 @@ how far the sheet has turned at the flip frame, iterations per mesh, CPU seconds
     =================  ============  =============  =======  ======  ==============  =====
     route              ring (COM)    corners (rms)  stretch  turned  iterations      CPU s
     =================  ============  =============  =======  ======  ==============  =====
-    exact adjoint      1.6 cm        0.095 m        1.20     179     26 + 48 + 23    230
-    swapped (paper's)  6.2 cm        0.78 m         1.17     2       7 + 5 + 4       60
+    exact adjoint      1.6 cm        0.095 m        1.20     179     26 + 48 + 23    220
+    swapped (paper's)  6.2 cm        0.78 m         1.17     2       7 + 5 + 4       67
     =================  ============  =============  =======  ======  ==============  =====
 
 (iterations on the 12 x 12, 25 x 25 and 50 x 50 meshes; both stop on L-BFGS-B's

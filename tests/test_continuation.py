@@ -189,10 +189,12 @@ def test_cloth_continuation_reaches_the_direct_objective_in_fewer_fine_iteration
     """5 x 5 cloth_shapes, 48 steps of 1/60 s, keyframes at frames 16, 32, 48; stages 1/15,
     1/30, 1/60 s; the exact adjoint (the swapped one stalls the direct solve after a few
     iterations, see the module docstring of problems/cloth_shapes.py)."""
-    prob = load_problem("cloth_shapes", rows=5, cols=5, steps=48)
-    # Measured with modified PCG; the searches' paths depend on roundoff, and with CHOLMOD
-    # (the default solver since) the continuation ends in another local minimum (objective
-    # 0.079 against the direct solve's 0.068 at 40 iterations): the claim is for this path.
+    prob = load_problem("cloth_shapes", rows=5, cols=5, steps=48, strain_weight=0)
+    # Measured with modified PCG and without the strain limit; the searches' paths depend on
+    # roundoff and on the objective, and with CHOLMOD (the default solver since) the
+    # continuation ends in another local minimum (objective 0.079 against the direct solve's
+    # 0.068 at 40 iterations), with the strain limit on (the default since) at 0.0218 against
+    # 0.0161: the claim is for this path, not a rule (see notebooks/optimizer_convergence).
     prob.integrator = LinearizedBackwardEuler("cg")
     maxiter = 40
     direct = solve(prob, maxiter=maxiter, quiet=True)

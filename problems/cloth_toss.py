@@ -24,8 +24,9 @@ interpolated onto the finer mesh; the 12 x 12 search finds the turn in seconds.
 Staying physical.  ``StrainLimit(strain_limit, strain_weight)`` keeps springs under 1.2
 times their length; without it the throw found stretches them 1.46 times in its first steps.
 The clip used to go on to 72 steps (1.2 s, the same keyframes), the sheet landing on the
-ground tilted at 6 m/s, and that landing tore it: each particle crosses the ground's 1 cm contact layer within one
-step of 1/60 s before the penalty spring sees it, and the spring then throws it out again.
+ground tilted at 6 m/s, and that landing tore it: each particle crosses the ground's 1 cm
+contact layer within one step of 1/60 s before the penalty spring sees it, and the spring
+then throws it out again.
 A rigid spin alone (25 x 25, no optimization) stretched springs 5.0 times on landing, 1.65 at
 dt / 2, 1.19 at dt / 4; thicker, softer or more damped ground contact (3-5 cm, 200 N/m,
 100 N s/m) still 2.9-3.5; the optimized 50 x 50 toss 4.95, next to the integrator's
@@ -50,8 +51,8 @@ how far the sheet has turned at the flip frame, iterations per mesh, CPU seconds
 relative-reduction test).  With the swapped adjoint the sheet never turns over.
 
 The exact adjoint is the default.  At 6 x 6 (the 72-step clip, before the strain limit) the
-paper's swapped adjoint stalled L-BFGS-B too (6 iterations, objective 10.6, corners 0.71 m off; exact: objective 1.6, corners 0.17 m
-off): the velocity patterns the springs absorb in the first steps are exactly where it is
+paper's swapped adjoint stalled L-BFGS-B too (6 iterations, objective 10.6, corners 0.71 m
+off; exact: objective 1.6, corners 0.17 m off): the velocity patterns the springs absorb in the first steps are exactly where it is
 wrong (cosine 0.46 to the exact gradient at random 0.3 m/s perturbations).  ``--gradient
 swapped`` runs the paper's method.
 """

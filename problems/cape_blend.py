@@ -86,8 +86,8 @@ the landing 0.77 mm and 1.6 cm/s off over the free particles, stretch 1.13 and n
 in the body, as the guess (8 x 6: -36 % in 5 steps, 57 s).  The dynamics are only piecewise
 smooth (the landing jumps by ~0.4 mm rms for relative control changes of 1e-6), which is
 why it holds a tolerance, not the exact landing.  Do not add ``continuation``: the guess
-resampled to 2 dt no longer lands, and the solve ends 18 cm off (13 x 8).  ``guess="passive"`` starts from zero forces, as the
-paper did.
+resampled to 2 dt no longer lands, and the solve ends 18 cm off (13 x 8).
+``guess="passive"`` starts from zero forces, as the paper did.
 
 The tracking guess's choices, measured on the 26 x 16 cape: crossfading to the fall clip's
 own cape, which topples over the head, instead of holding its shape at ``t_a`` pulls the

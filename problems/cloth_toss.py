@@ -52,9 +52,9 @@ relative-reduction test).  With the swapped adjoint the sheet never turns over.
 
 The exact adjoint is the default.  At 6 x 6 (the 72-step clip, before the strain limit) the
 paper's swapped adjoint stalled L-BFGS-B too (6 iterations, objective 10.6, corners 0.71 m
-off; exact: objective 1.6, corners 0.17 m off): the velocity patterns the springs absorb in the first steps are exactly where it is
-wrong (cosine 0.46 to the exact gradient at random 0.3 m/s perturbations).  ``--gradient
-swapped`` runs the paper's method.
+off; exact: objective 1.6, corners 0.17 m off): the velocity patterns the springs absorb in
+the first steps are exactly where it is wrong (cosine 0.46 to the exact gradient at random
+0.3 m/s perturbations).  ``--gradient swapped`` runs the paper's method.
 """
 import numpy as np
 

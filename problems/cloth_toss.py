@@ -19,7 +19,7 @@ Coarse to fine.  Searched directly, the 50 x 50 sheet never turns over (26 itera
 corners 0.98 m off): a rigid spin is one smooth velocity field among 7500 controls, most of
 them patterns the springs absorb.  ``SOLVE`` therefore solves 12 x 12 and 25 x 25 sheets of
 the same cloth first (``resolutions``), each search starting from the last one's velocities
-interpolated onto the finer mesh; the 12 x 12 search finds the turn in seconds.
+interpolated onto the finer mesh; the 12 x 12 search finds the turn in under 20 s.
 
 Staying physical.  ``StrainLimit(strain_limit, strain_weight)`` keeps springs under 1.2
 times their length; without it the throw found stretches them 1.46 times in its first steps.

@@ -82,9 +82,7 @@ def unrolled_objective(problem, U):
                 E = E + forces[n]
             S = problem.integrator.step_parameters(problem.model, n * problem.dt, problem.dt)
             X, V = step(X, V, E, problem.dt, S)
-    for term in problem.objective_terms.control_terms:
-        J += term.symbolic(U, problem.controls, problem.dt)
-    return J
+    return J + problem.control_expression(U)
 
 
 class CasADiReverse:

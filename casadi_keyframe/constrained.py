@@ -95,10 +95,7 @@ def control_hessian(problem) -> sp.csc_matrix:
     """The control terms' Hessian Q (sparse; constant, for quadratic terms such as
     :class:`~.objectives.Smoothness`), from their CasADi expression."""
     U = ca.MX.sym("U", problem.size)
-    value = 0
-    for term in problem.objective_terms.control_terms:
-        value += term.symbolic(U, problem.controls, problem.dt)
-    H = ca.hessian(ca.MX(value), U)[0]
+    H = ca.hessian(problem.control_expression(U), U)[0]
     fn = ca.Function("control_hessian", [U], [H])
     rows, cols = fn.sparsity_out(0).get_triplet()
     data = np.asarray(fn(np.zeros(problem.size)).nonzeros()).ravel()

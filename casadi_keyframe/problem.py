@@ -225,12 +225,16 @@ class ControlProblem:
         return out
 
     # -- the control terms, compiled -------------------------------------------------------
-    def _compile_control_terms(self) -> ca.Function:
-        U = ca.MX.sym("U", self.size)
+    def control_expression(self, U) -> ca.MX:
+        """The control terms' value as a CasADi expression of the controls ``U`` (MX)."""
         val = 0
         for term in self.objective_terms.control_terms:
             val += term.symbolic(U, self.controls, self.dt)
-        val = ca.MX(val) if not isinstance(val, ca.MX) else val
+        return ca.MX(val) if not isinstance(val, ca.MX) else val
+
+    def _compile_control_terms(self) -> ca.Function:
+        U = ca.MX.sym("U", self.size)
+        val = self.control_expression(U)
         return ca.Function("control_cost", [U], [val, ca.gradient(val, U)])
 
 

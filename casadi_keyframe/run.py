@@ -131,7 +131,8 @@ def _solve(spec: SolveRun, caught, done) -> int:
               else "guess" if prob.has_guess else "passive")
     start_controls = prob.initial_controls() if u0 is None else u0
     try:
-        start = prob.breakdown(start_controls)
+        start_trajectory = prob.simulate(start_controls, records=False)
+        start = prob.breakdown(start_controls, start_trajectory)
     except SimulationError as err:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
@@ -156,7 +157,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
         print(f"  pictures not drawn; draw them with 'casadi-keyframe render {out}'")
     else:
         draw(prob, result.trajectory, result, out, animation=spec.animation,
-             start=start_controls)
+             start=start_trajectory)
         print(f"  pictures drawn in {out}/")
         _write_outputs(spec, result.trajectory)
     _hint(result.status, spec)
@@ -311,7 +312,8 @@ def format_misses(misses) -> str:
 
 def draw(problem, trajectory, result, out, *, animation: bool = True, start=None) -> None:
     """convergence.png (if ``result`` has a history), keyframes.png, animation.gif and, given
-    the ``start`` controls of a cloth's search, start_and_result.png (the two side by side)."""
+    the ``start`` trajectory of a cloth's search, start_and_result.png (the two side by
+    side)."""
     from . import render
 
     out = Path(out)
@@ -319,8 +321,7 @@ def draw(problem, trajectory, result, out, *, animation: bool = True, start=None
         render.convergence(result, out / "convergence.png")
     render.snapshot(problem, trajectory, out / "keyframes.png")
     if start is not None and render.renderer(problem) is render.cloth:
-        render.cloth.side_by_side(problem, {"start": problem.simulate(start, records=False),
-                                            "result": trajectory},
+        render.cloth.side_by_side(problem, {"start": start, "result": trajectory},
                                   out / "start_and_result.png")
     if animation:
         render.animate(problem, trajectory, out / "animation.gif")

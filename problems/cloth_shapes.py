@@ -4,7 +4,7 @@ positions: forward, into a wave, then back.
 Per-step control forces on the free particles; each keyframe gives every particle's position.
 Passive, the sheet hangs exactly in its plane (compressed across its width as it sags), so
 the solve starts on a flat state; the cloth model's Choi-Ko law keeps the gradient there
-meaningful (see :mod:`casadi_keyframe.models.cloth`).  The wave keeps each row's length
+meaningful (see :mod:`casadi_keyframe.models.springs`).  The wave keeps each row's length
 (:func:`~casadi_keyframe.scenes.cloths.wave_across`): a sine laid over the rest positions
 asked the bottom row to stretch 1.59 times, so no physical motion came nearer than 3.4 cm
 rms.  ``SOLVE`` first solves a 6 x 6 sheet of the same cloth (``resolutions``), whose

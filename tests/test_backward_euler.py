@@ -8,7 +8,7 @@ from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, Smoothness, St
 from casadi_keyframe.adjoints import FiniteDifference
 from casadi_keyframe.integrators import BackwardEuler, LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.models.cloth import Attachment
+from casadi_keyframe.models import Attachment
 from casadi_keyframe.models.colliders import Contact, Plane, Sphere
 from casadi_keyframe.simulate import simulate
 
@@ -32,7 +32,7 @@ def test_newton_solves_the_implicit_step(solver, most):
     u = 0.05 * np.random.default_rng(0).standard_normal(prob.size)
     traj = prob.simulate(u)
     model, dt, ext = prob.model, prob.dt, prob.controls.external(u)
-    contact = [np.abs(model.contact_forces(x, v, n * dt)).max() for n, (x, v) in
+    contact = [np.abs(model.forces(x, v, n * dt, role="contact")).max() for n, (x, v) in
                enumerate(zip(traj.x, traj.v))]
     assert max(contact) > 0.1  # the scene really touches something
     for n in range(prob.steps):

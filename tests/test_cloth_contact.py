@@ -8,7 +8,7 @@ import scipy.sparse as sp
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.simulate import simulate
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.models.cloth import Attachment
+from casadi_keyframe.models import Attachment
 from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
 
 
@@ -43,7 +43,7 @@ def test_contact_forces_and_jacobians_match_casadi():
     x, v = jammed_state(model)
     t = 0.3
     f_sym, _, D_sym, K_step, D_step = casadi_derivatives(model, x, v, t)
-    contact = model.contact_forces(x, v, t)
+    contact = model.forces(x, v, t, role="contact")
     assert np.abs(contact).max() > 1.0  # the state really is in contact
     np.testing.assert_allclose(model.forces(x, v, t), f_sym.T, atol=1e-9)
     K, D = model.jacobians(x, v, t)
@@ -68,7 +68,7 @@ def test_contact_stiffness_is_df_dx_without_curvature_terms():
     """K + (spring transverse + sphere curvature + self-contact transverse terms) = df/dx."""
     from test_cloth_model import transverse_blocks
 
-    from casadi_keyframe.models.cloth import pair_block_matrices
+    from casadi_keyframe.models.blocks import pair_block_matrices
     sphere = Sphere((0.3, 0.3, -0.25), 0.3)
     contact = Contact(500.0, 0.5, 0.4, 0.1)
     model = ClothModel.grid(4, 4, plane="xy", colliders=[sphere, Plane((0, 0, -0.05))],
@@ -84,7 +84,7 @@ def test_contact_stiffness_is_df_dx_without_curvature_terms():
     bend = k * ramp(h - (r - sphere.radius), width)[:, None] * curvature(d, r)
     assert np.abs(bend).max() > 1.0  # the sphere's curvature term is really there
     dropped += sp.block_diag([b.reshape(3, 3) for b in bend]).toarray()
-    i, j = model.interactions(x)
+    i, j = model.family("self-contact").find(x)
     dp = x[j] - x[i]
     rp = np.sqrt(np.einsum("pk,pk->p", dp, dp) + 1e-12)
     assert i.size
@@ -97,9 +97,9 @@ def test_self_contact_forces_sum_to_zero_and_skip_springs():
     model = ClothModel.grid(4, 4, plane="xy", params=None, self_contact=Contact(thickness=0.5),
                             colliders=[])
     x, v = jammed_state(model, 1)
-    fc = model.contact_forces(x, v)
+    fc = model.forces(x, v, role="contact")
     np.testing.assert_allclose(fc.sum(0), 0, atol=1e-10)
-    i, j = model.interactions(x)
+    i, j = model.family("self-contact").find(x)
     joined = set(zip(model.springs.i.tolist(), model.springs.j.tolist()))
     assert i.size and not {(a, b) for a, b in zip(i, j)} & (joined | {(b, a) for a, b in joined})
 

@@ -7,6 +7,7 @@ import scipy.sparse as sp
 
 from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, Smoothness, StateKeyframe, StepForces
 from casadi_keyframe.adjoints import FiniteDifference
+from casadi_keyframe.models.base import ForceJacobians, Model
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
@@ -57,8 +58,9 @@ def test_swapped_adjoint_is_a_descent_direction_close_to_exact():
     assert prob.objective(u - 1e-3 * ga / np.linalg.norm(ga)) < f0
 
 
-class LinearModel:
-    """f = K x + D v with constant symmetric K, D: linearized and full backward Euler coincide."""
+class LinearModel(Model, ForceJacobians):
+    """f = K x + D v with constant symmetric K, D: linearized and full backward Euler coincide.
+    A model with sparse Jacobians only (no blocks): the step takes the general route."""
 
     def __init__(self, n, pinned=()):
         rng = np.random.default_rng(0)
@@ -73,24 +75,20 @@ class LinearModel:
         free[self.pinned] = False
         return free.ravel()
 
-    def prescribed_velocity(self, x, t, dt):
-        return np.zeros((self.n, 3))
-
-    def scene_parameters(self, t):
-        return np.zeros(0)
-
-    attachment_targets = scene_parameters
-    attachments = ()
-
-    def interactions(self, x):
-        return None
-
     def forces(self, x, v, t=0.0, interactions=None):
         return (self.K @ x.ravel() + self.D @ v.ravel()).reshape(self.n, 3)
 
     def jacobians(self, x, v, t=0.0, with_df_dx=False, interactions=None):
         K, D = sp.csc_matrix(self.K), sp.csc_matrix(self.D)
         return (K, D, K) if with_df_dx else (K, D)
+
+    def linearization_vjp(self, x, v, t, lam, w, q, dt, interactions=None):
+        """Linear forces: ``lam . (dt f + ...)`` has the gradients ``dt K^T lam``, ``dt D^T lam``."""
+        lam = lam.ravel()
+        return (dt * (self.K.T @ lam)).reshape(self.n, 3), (dt * (self.D.T @ lam)).reshape(self.n, 3)
+
+    def linearization_jvp(self, x, v, t, w, q, dt, dx, dv, interactions=None):
+        return (dt * (self.K @ dx.ravel() + self.D @ dv.ravel())).reshape(self.n, 3)
 
     def symbolic_forces(self, X, V, S=None):
         f = ca.mtimes(ca.DM(self.K), ca.vec(X)) + ca.mtimes(ca.DM(self.D), ca.vec(V))
@@ -130,7 +128,7 @@ def swapped_and_exact(dt, seed=0, amp=0.05, **kw):
 
 
 def test_hand_exact_adjoint_equals_casadi_with_moving_contacts_and_attachments():
-    from casadi_keyframe.models.cloth import Attachment
+    from casadi_keyframe.models import Attachment
     from casadi_keyframe.models.colliders import Capsule, Contact, Sphere
     bodies = [Sphere(lambda t: np.array([0.5, 0.5, -0.33 + 0.2 * t]), 0.3),
               Capsule((0.0, 0.1, -0.1), lambda t: np.array([1.0, 0.2 + t, -0.06]), 0.05)]
@@ -144,7 +142,7 @@ def test_hand_exact_adjoint_equals_casadi_with_moving_contacts_and_attachments()
                           objective=obj + Smoothness(1e-4))
     u = 0.1 * np.random.default_rng(0).standard_normal(prob.size)
     traj = prob.simulate(u)
-    assert np.abs(model.contact_forces(traj.x[6], traj.v[6], 0.2)).max() > 0.1  # in contact
+    assert np.abs(model.forces(traj.x[6], traj.v[6], 0.2, role="contact")).max() > 0.1  # in contact
     f_hand, g_hand = prob.objective_and_gradient(u, "adjoint")
     f_ad, g_ad = prob.objective_and_gradient(u, "casadi")
     assert abs(f_hand - f_ad) < 1e-9 * abs(f_ad)
@@ -164,7 +162,7 @@ def test_swapped_adjoint_with_contact_at_default_dt_and_its_order():
         errors.append(relative_error_and_cosine(ga, ge)[0])
         if dt == dts[0]:
             traj = prob.simulate(u)
-            touching = [np.abs(prob.model.contact_forces(x, v)).max() > 0 for x, v in
+            touching = [np.abs(prob.model.forces(x, v, role="contact")).max() > 0 for x, v in
                         zip(traj.x, traj.v)]
             assert np.mean(touching) > 0.5  # the collider is in contact most of the time
             assert relative_error_and_cosine(ga, ge)[1] >= 0.99

@@ -3,8 +3,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from casadi_keyframe.models.cloth import (SHEAR, STRETCH, ClothModel, ClothParams,
-                                          pair_block_matrices, sinc_inverse, spring_kernels)
+from casadi_keyframe.models import ClothModel, ClothParams
+from casadi_keyframe.models.blocks import pair_block_matrices
+from casadi_keyframe.models.springs import SHEAR, STRETCH, sinc_inverse, spring_kernels
 
 
 @pytest.fixture(scope="module")
@@ -90,14 +91,14 @@ def test_from_mesh_of_the_grid_triangles():
 
 def test_internal_forces_sum_to_zero(grid45):
     x, v = perturbed(grid45)
-    f = grid45.spring_forces(x, v)
+    f = grid45.forces(x, v, role="internal")
     assert np.abs(f).max() > 1.0
     np.testing.assert_allclose(f.sum(axis=0), 0.0, atol=1e-10)
 
 
 def test_rest_state_feels_only_gravity(grid45):
     x, v = grid45.rest_positions, np.zeros((grid45.n, 3))
-    np.testing.assert_allclose(grid45.spring_forces(x, v), 0.0, atol=1e-12)
+    np.testing.assert_allclose(grid45.forces(x, v, role="internal"), 0.0, atol=1e-12)
     np.testing.assert_allclose(grid45.forces(x, v),
                                grid45.masses[:, None] * np.array([0, 0, -9.81]), atol=1e-12)
 
@@ -115,7 +116,7 @@ def transverse_blocks(model, x):
     d = x[s.j] - x[s.i]
     r = np.sqrt(np.einsum("pk,pk->p", d, d) + eps ** 2)
     force = spring_kernels(eps)["force"].map(s.i.size)
-    f = np.array(force(d.T, np.zeros_like(d.T), *[a.T for a in model._spring_params])).T
+    f = np.array(force(d.T, np.zeros_like(d.T), *[a.T for a in model.family("springs").parameters_per_spring])).T
     m = np.einsum("pk,pk->p", f, d) * r / np.einsum("pk,pk->p", d, d)  # f = m d / r
     outer = np.einsum("pa,pb->pab", d, d) / r[:, None, None] ** 3
     return (np.minimum(m, 0)[:, None, None] * (np.eye(3) / r[:, None, None] - outer)).reshape(-1, 9)

@@ -10,7 +10,7 @@ from casadi_keyframe.integrators.linearized_backward_euler import step_matrices
 from casadi_keyframe.linear import cholmod_available
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.blocks import GrowingPattern
-from casadi_keyframe.models.cloth import Attachment
+from casadi_keyframe.models import Attachment
 from casadi_keyframe.models.colliders import Capsule, Contact, Sphere
 from casadi_keyframe.objectives import CenterOfMassKeyframe
 
@@ -55,12 +55,13 @@ def test_the_busy_sheet_meets_new_self_contacts(controls):
     prob = busy_problem("direct")
     traj = prob.simulate(controls)
     work = prob.integrator.init(prob.model)
-    pairs = [prob.model.interactions(x) for x in traj.x]
+    found = [prob.model.interactions(x) for x in traj.x]
+    pairs = [prob.model.family("self-contact").find(x) for x in traj.x]
     assert all(p[0].size for p in pairs)
     keys = [set(zip(*p)) for p in pairs]
     assert any(b - a for a, b in zip(keys, keys[1:]))  # pairs appear during the run
-    for x, v, p in zip(traj.x, traj.v, pairs):
-        prob.integrator.step_system(prob.model, x, v, 0.0, prob.dt, work, interactions=p)
+    for x, v, f in zip(traj.x, traj.v, found):
+        prob.integrator.step_system(prob.model, x, v, 0.0, prob.dt, work, interactions=f)
     assert 1 <= work.pattern.growths < len(pairs)
 
 
@@ -141,6 +142,9 @@ def test_a_pattern_grows_only_for_new_pairs():
     first = grown.pattern
     grown.values(blocks)
     assert grown.growths == 1 and grown.pattern is first
-    without = model.jacobian_blocks(x, v, 0.0, interactions=(contacts[0][:1], contacts[1][:1]))
+    k = model.families.index(model.family("self-contact"))
+    i, j = contacts[k]
+    fewer = contacts[:k] + ((i[:1], j[:1]),) + contacts[k + 1:]
+    without = model.jacobian_blocks(x, v, 0.0, interactions=fewer)
     grown.values(without[0])  # fewer pairs: the pattern stays
     assert grown.growths == 1 and grown.pattern is first

@@ -15,7 +15,7 @@ import pytest
 
 import casadi_keyframe.kernels as kernels
 from casadi_keyframe.kernels import MappedKernel, cache_dir
-from casadi_keyframe.models.cloth import spring_kernels
+from casadi_keyframe.models.springs import spring_kernels
 
 needs_compiler = pytest.mark.skipif(shutil.which("gcc") is None and shutil.which("cc") is None,
                                     reason="no C compiler")

@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..geometry import capsule_grid, circle, grid_triangles, plane_patch
-from ..models.cloth import mesh_edges
+from ..models.topology import mesh_edges
 
 CLOTH, CLIP, BLEND, AGENT, HIGHLIGHT = "#6a8fc7", "#8d9bb0", "#e1812c", "#4c72b0", "#e1812c"
 TARGET, BODY, RING, COM, REGION = "#d62728", "#9a9a9a", "#e1812c", "#7b4ea3", "#3a923a"

@@ -38,10 +38,10 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..linear import ModifiedPCG, SolveError, SolveInfo, SparseLU
-from ..state import SimulationError, State, check_state
+from ..models.base import ForceJacobians
+from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
-from .linearized_backward_euler import (check_stretch, prescribed_velocity_symbolic,
-                                        step_matrices)
+from .linearized_backward_euler import step_matrices
 
 
 def residual_jacobian(model, xp, vp, t, dt, interactions=None):
@@ -72,6 +72,7 @@ class BackwardEuler(Integrator):
     """
 
     name = "backward_euler"
+    requires = ForceJacobians
 
     def __init__(self, solver: str = "direct", tol: float = 1e-12, newton_tol: float = 1e-10,
                  max_newton: int = 50):
@@ -86,6 +87,7 @@ class BackwardEuler(Integrator):
         self.newton_tol, self.max_newton = newton_tol, int(max_newton)
 
     def init(self, model) -> Workspace:
+        self.check_model(model)
         return Workspace(self.jacobian_solver.init(model.free_mask()))
 
     def step(self, model, state, external, n, dt, work=None):
@@ -113,8 +115,7 @@ class BackwardEuler(Integrator):
                 break
             if np.abs(delta).max() <= self.newton_tol * max(1.0, np.abs(vp).max()):
                 x1 = x + dt * vp
-                check_state(x1, vp, step)
-                check_stretch(model, x1, step)
+                model.check_state(x1, vp, step)
                 return State(x1, vp), NewtonStep(it, tuple(solves))
         raise SimulationError(
             f"step {step}: Newton's method did not converge in {self.max_newton} iterations "
@@ -166,20 +167,20 @@ class BackwardEuler(Integrator):
     @staticmethod
     def step_parameters(model, t: float, dt: float) -> np.ndarray:
         """The symbolic step's S for the step from t: the scene and attachments at t + dt."""
-        return np.concatenate([model.scene_parameters(t + dt), model.attachment_targets(t + dt)])
+        return np.concatenate([model.scene_parameters(t + dt), model.constraint_targets(t + dt)])
 
     def symbolic_step(self, model) -> ca.Function:
         """``(X, V, E, dt, S) -> (X+, V+)``: CasADi's Newton rootfinder on the step's residual,
         differentiated by the implicit function theorem (exact); for small systems."""
         n, d = model.n, model.dim
         n_scene = model.scene_parameters(0.0).size
-        n_s = n_scene + model.attachment_targets(0.0).size
+        n_s = n_scene + model.constraint_targets(0.0).size
         Vp, X, V, E = (ca.SX.sym(s, d, n) for s in ("Vp", "X", "V", "E"))
         dt, S = ca.SX.sym("dt"), ca.SX.sym("S", n_s)
         f = model.symbolic_forces(X + dt * Vp, Vp, S[:n_scene])
         mass = ca.repmat(ca.DM(model.masses).T, d, 1)
         residual = mass * (Vp - V) - dt * (f + E)
-        target = prescribed_velocity_symbolic(model, X, S[n_scene:], dt)
+        target = model.prescribed_velocity_symbolic(X, S[n_scene:], dt)
         free = ca.DM(model.free_mask().reshape(n, d).T.astype(float))
         residual = free * residual + (1 - free) * (Vp - target)
         G = ca.Function("be_residual", [ca.vec(Vp), X, V, E, dt, S], [ca.vec(residual)])

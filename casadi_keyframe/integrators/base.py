@@ -7,7 +7,8 @@ and the gradient strategies (:mod:`casadi_keyframe.adjoints`) choose which backw
 runs.  Its three numeric methods share their arguments:
 
 Arguments:
-    model: the particle system (the :class:`~casadi_keyframe.models.Model` protocol).
+    model: the particle system (a :class:`~casadi_keyframe.models.base.Model` with the
+        capability the scheme names in ``requires``).
     state / start, end: :class:`~casadi_keyframe.state.State` at frames n and n+1.
     external: the external force of step n, ``(particles, dim)`` newtons.
     n, dt: the step's index (it starts at ``t = n dt``) and its size in seconds.
@@ -31,6 +32,8 @@ function for the reverse-mode reference.
 from __future__ import annotations
 
 import numpy as np
+
+from ..models.base import Model
 
 
 class Workspace:
@@ -57,10 +60,22 @@ class Integrator:
     """Base of the schemes: the shared contract (module docstring) and a default ``init``."""
 
     name = "integrator"
+    requires: type = Model  # the model capability the scheme's steps use
+
+    def check_model(self, model) -> None:
+        """Refuse a model that does not declare the capability this scheme needs."""
+        if not (isinstance(model, Model) and isinstance(model, self.requires)):
+            raise TypeError(f"{self.name} steps models that declare {self.requires.__name__} "
+                            f"(casadi_keyframe.models.base); {type(model).__name__} does not")
 
     def init(self, model) -> Workspace:
         """A fresh :class:`Workspace` for one pass over ``model``."""
+        self.check_model(model)
         return Workspace()
+
+    def release(self, trajectory) -> None:
+        """Hand back what ``trajectory``'s records keep for derivative passes, once none is
+        to come (nothing here; a scheme that keeps factorisations returns them)."""
 
     def step(self, model, state, external, n: int, dt: float, work: Workspace | None = None):
         raise NotImplementedError

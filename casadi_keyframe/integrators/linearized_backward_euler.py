@@ -59,6 +59,7 @@ and ``q = dv`` held (the model's :meth:`linearization_jvp`), then ``dv_{n+1} = d
 from __future__ import annotations
 
 import warnings
+import weakref
 from dataclasses import dataclass
 
 import casadi as ca
@@ -66,8 +67,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..linear import SolveError, SolveInfo, System, linear_solver
+from ..models.base import BlockJacobians, ForceJacobians
 from ..models.blocks import GrowingPattern, SparseJacobian
-from ..state import SimulationError, State, check_state
+from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 
 
@@ -77,29 +79,6 @@ def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):
     (unclamped, damping included)."""
     K, D, *df_dx = model.jacobians(x, v, t, with_df_dx=with_df_dx, interactions=interactions)
     return ((sp.diags(mass_diagonal(model)) - dt * D - dt * dt * K).tocsr(), K, *df_dx)
-
-
-def prescribed_velocity_symbolic(model, X, targets, dt):
-    """``d x n`` end-of-step velocities of the constrained particles (SX): zero for pinned
-    ones, ``(target - x) / dt`` for attached ones, ``targets`` the flat attachment targets
-    (:meth:`model.attachment_targets`); zero for free particles (unused)."""
-    v = ca.SX.zeros(model.dim, model.n)
-    at = 0
-    for a in model.attachments:
-        k, idx = a.particles.size, a.particles.tolist()
-        v[:, idx] = (ca.reshape(targets[at:at + 3 * k], 3, k) - X[:, idx]) / dt
-        at += 3 * k
-    return v
-
-
-def check_stretch(model, x, step: int, limit: float = 5.0) -> None:
-    """A spring stretched ``limit`` times its rest length means the step has blown up."""
-    stretch = model.max_stretch(x) if hasattr(model, "max_stretch") else 0.0
-    if stretch > limit:
-        raise SimulationError(
-            f"cloth blew up at step {step}: a spring is {stretch:.3g} times its rest length; "
-            "reduce dt, the contact stiffness or the speed of moving colliders, or bound "
-            "the controls", step)
 
 
 @dataclass(frozen=True)
@@ -137,6 +116,7 @@ class LinearizedBackwardEuler(Integrator):
     """
 
     name = "linearized_backward_euler"
+    requires = ForceJacobians
 
     def __init__(self, solver="auto", tol: float = 1e-10, adjoint=None,
                  adjoint_tol: float = 1e-8, max_factor_memory: float = 2 * 2 ** 30):
@@ -150,14 +130,31 @@ class LinearizedBackwardEuler(Integrator):
             raise ValueError(f"max_factor_memory must be >= 0 bytes, got {max_factor_memory}")
         options = {"tol": tol} if solver in ("cg", "auto") else {}
         self.linear_solver = linear_solver(solver, **options)
+        self._plans = weakref.WeakKeyDictionary()  # per model: analyses kept across passes
         self.solver = getattr(self.linear_solver, "name", type(self.linear_solver).__name__)
         self.tol, self.adjoint_tol = tol, adjoint_tol
         self.max_factor_memory = max_factor_memory
 
     def init(self, model) -> StepWorkspace:
-        pattern = (GrowingPattern(model.step_pattern) if hasattr(model, "jacobian_blocks")
+        self.check_model(model)
+        pattern = (GrowingPattern(model.step_pattern) if isinstance(model, BlockJacobians)
                    else None)
-        return StepWorkspace(self.linear_solver.init(model.free_mask()), pattern)
+        return StepWorkspace(self.plan(model), pattern)
+
+    def plan(self, model):
+        """The linear solver's plan for ``model``, made at the first pass and kept while the
+        model lives, so every pass over it reuses the analyses of its patterns."""
+        plan = self._plans.get(model)
+        if plan is None:
+            plan = self._plans[model] = self.linear_solver.init(model.free_mask())
+        return plan
+
+    def release(self, trajectory) -> None:
+        """Give the factorisations a forward pass kept in ``trajectory``'s records back to the
+        plan (after its last backward or tangent pass), so the next pass reuses them."""
+        for record in trajectory.records:
+            if record.factor is not None:
+                record.factor.release()
 
     def step_system(self, model, x, v, t, dt, work, with_df_dx=False, interactions=None):
         """``(System of A, K[, df/dx])`` at (x, v, t), K and df/dx with a ``matvec``: the
@@ -203,8 +200,7 @@ class LinearizedBackwardEuler(Integrator):
         work.warm = dv
         v1 = v + dv.reshape(v.shape)
         x1 = x + dt * v1
-        check_state(x1, v1, n + 1)
-        check_stretch(model, x1, n + 1)
+        model.check_state(x1, v1, n + 1)
         return State(x1, v1), LinearizedStep(contacts, info, factor if keep else None)
 
     def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
@@ -246,7 +242,8 @@ class LinearizedBackwardEuler(Integrator):
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
         later = work.records[n + 1] if n + 1 < len(work.records) else None  # step n+1's A
         contacts = model.interactions(end.x) if later is None else later.interactions
-        if later is not None and later.factor is not None and work.pattern is not None:
+        if (later is not None and later.factor is not None and later.factor.usable
+                and work.pattern is not None):
             df_dx = model.force_jacobian_blocks(end.x, end.v, t, contacts)
             factor = later.factor
         else:
@@ -259,7 +256,7 @@ class LinearizedBackwardEuler(Integrator):
 
     def _step_factor(self, model, start, t, dt, work, record, n):
         """Step n's prepared matrix A (kept by the forward pass, or made again) and its K."""
-        if record.factor is not None and work.pattern is not None:
+        if record.factor is not None and record.factor.usable and work.pattern is not None:
             K, _ = model.jacobian_blocks(start.x, start.v, t, interactions=record.interactions)
             return record.factor, K
         A, K = self.step_system(model, start.x, start.v, t, dt, work,
@@ -293,7 +290,7 @@ class LinearizedBackwardEuler(Integrator):
     @staticmethod
     def step_parameters(model, t: float, dt: float) -> np.ndarray:
         """The symbolic step's S at time t: the scene then, attachment targets at t + dt."""
-        return np.concatenate([model.scene_parameters(t), model.attachment_targets(t + dt)])
+        return np.concatenate([model.scene_parameters(t), model.constraint_targets(t + dt)])
 
     def symbolic_step(self, model) -> ca.Function:
         """``(X, V, E, dt, S) -> (X+, V+)``: the linearized step in CasADi, for exact reverse
@@ -305,7 +302,7 @@ class LinearizedBackwardEuler(Integrator):
         """
         n, d = model.n, model.dim
         n_scene = model.scene_parameters(0.0).size
-        n_s = n_scene + model.attachment_targets(0.0).size
+        n_s = n_scene + model.constraint_targets(0.0).size
         X, V, E = (ca.SX.sym(s, d, n) for s in "XVE")
         dt, S = ca.SX.sym("dt"), ca.SX.sym("S", n_s)
         scene = S[:n_scene]
@@ -314,7 +311,7 @@ class LinearizedBackwardEuler(Integrator):
         mass = np.repeat(model.masses, d)
         A = ca.diag(ca.DM(mass)) - dt * D - dt * dt * K
         b = dt * (f + ca.vec(E) + dt * ca.mtimes(K, ca.vec(V)))
-        v_new = prescribed_velocity_symbolic(model, X, S[n_scene:], dt)
+        v_new = model.prescribed_velocity_symbolic(X, S[n_scene:], dt)
         system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, ca.vec(v_new - V)])
         Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
         dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)

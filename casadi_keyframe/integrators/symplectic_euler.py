@@ -23,7 +23,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..state import State, check_state
+from ..models.base import ForceDerivatives
+from ..state import State
 from .base import Integrator
 
 
@@ -31,13 +32,14 @@ class SymplecticEuler(Integrator):
     """Explicit symplectic Euler for models with ``forces``, ``forces_vjp`` and ``forces_jvp``."""
 
     name = "symplectic_euler"
+    requires = ForceDerivatives
 
     def step(self, model, state, external, n, dt, work=None):
         pairs = model.interactions(state.x)
         f = model.forces(state.x, state.v, n * dt, pairs)
         v1 = state.v + dt * (1.0 / model.masses)[:, None] * (f + external)
         x1 = state.x + dt * v1
-        check_state(x1, v1, n + 1)
+        model.check_state(x1, v1, n + 1)
         return State(x1, v1), pairs
 
     def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):

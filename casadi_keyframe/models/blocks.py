@@ -115,6 +115,14 @@ class BlockPattern:
                               self.indptr.copy()), shape=(self.size, self.size))
 
 
+def pair_block_matrices(i: np.ndarray, j: np.ndarray, n: int, *blocks: np.ndarray) -> list:
+    """One ``3n x 3n`` CSC matrix per ``(P, 9)`` row-major block array ``B``: ``-B`` at (i,i),
+    (j,j) and ``+B`` at (i,j), (j,i), for pairs that change every step (self-contacts); the
+    pattern is built once for all of them."""
+    pattern = BlockPattern(i, j, n, particle_blocks=False)
+    return [pattern.matrix(b) for b in blocks]
+
+
 class GrowingPattern:
     """The pattern of one pass's step matrices: a fixed pattern (the springs', restricted to
     the free components) plus every extra pair (self-contact) met so far.  It grows when a

@@ -27,13 +27,14 @@ force evaluation costs O(N) for a flock of bounded density.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
 from ..kernels import MappedKernel, pair_difference, pair_incidence, scatter_pairs
+from .base import ForceDerivatives, Model
 
 CUTOFFS = ("smooth", "hard")
 
@@ -145,39 +146,34 @@ class PairTape:
         return cls(i.astype(dtype), j.astype(dtype))
 
 
-@dataclass(eq=False)
-class FlockModel:
+class FlockModel(Model, ForceDerivatives):
     """An immutable flock of ``len(masses)`` agents in ``dim`` (2 or 3) dimensions."""
 
-    masses: np.ndarray
-    dim: int = 2
-    params: FlockParams = field(default_factory=FlockParams)
-    jit: bool | None = None
-
-    def __post_init__(self):
-        m = np.asarray(self.masses, dtype=float)
+    def __init__(self, masses, dim: int = 2, params: FlockParams | None = None,
+                 jit: bool | None = None):
+        m = np.array(masses, dtype=float)
         if m.ndim != 1 or m.size < 1:
             raise ValueError("masses must be a non-empty 1-D array (one mass per agent)")
         if not np.all(np.isfinite(m)) or np.any(m <= 0):
             raise ValueError("every agent mass must be positive and finite")
-        if self.dim not in (2, 3):
-            raise ValueError(f"a flock lives in 2 or 3 dimensions, got dim={self.dim}")
-        self.masses = m
-        self._kernels = pair_kernels(self.dim, self.params)
-        self._force, self._vjp, self._jvp = (MappedKernel(self._kernels[k], jit=self.jit)
-                                             for k in ("force", "vjp", "jvp"))
+        if dim not in (2, 3):
+            raise ValueError(f"a flock lives in 2 or 3 dimensions, got dim={dim}")
+        m.flags.writeable = False
+        params = FlockParams() if params is None else params
+        kernels = pair_kernels(dim, params)
+        for name, value in (("masses", m), ("dim", dim), ("params", params), ("jit", jit),
+                            ("_kernels", kernels)):
+            object.__setattr__(self, name, value)
+        for k in ("force", "vjp", "jvp"):
+            object.__setattr__(self, f"_{k}", MappedKernel(kernels[k], jit=jit))
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"a FlockModel is immutable: build a new one instead of setting "
+                             f"{name!r}")
 
     @property
     def n(self) -> int:
         return self.masses.size
-
-    def free_mask(self) -> np.ndarray:
-        """Every velocity component is free: a flock has no pinned agents."""
-        return np.ones(self.n * self.dim, bool)
-
-    def scene_parameters(self, t: float) -> np.ndarray:
-        """Nothing in a flock's forces depends on time: an empty vector."""
-        return np.zeros(0)
 
     # -- numeric -----------------------------------------------------------------------
     def neighbour_pairs(self, x: np.ndarray) -> PairTape:

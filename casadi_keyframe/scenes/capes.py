@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..integrators import LinearizedBackwardEuler
-from ..models.cloth import Attachment, ClothModel, ClothParams
+from ..models import Attachment, ClothModel, ClothParams
 from ..models.colliders import Contact, Plane
 from ..simulate import simulate
 from .animations import Animation, Walk, fall, walk

@@ -1,0 +1,158 @@
+r"""Mass-spring cloth's springs with the Choi-Ko (2002) buckling response.
+
+For a spring (i, j) of rest length ``L`` let ``d = x_j - x_i``, ``dv = v_j - v_i``, the
+regularised length ``r = sqrt(|d|^2 + eps^2)`` and ``u = d / r``.  The force on particle i is
+
+* tension, ``r >= L``:      ``f_i = k_t (r - L) u``                 (pulls i toward j)
+* compression, ``r < L``:   ``f_i = -k_b kappa^2 u``               (pushes the ends apart)
+* damping, always:          ``f_i += c ((dv . u) u)``
+
+and j feels ``-f_i``, so internal forces sum to zero.  Under compression the spring is
+assumed to buckle into a circular arc of length L with chord r, so its curvature solves
+``r / L = sinc(kappa L / 2)`` (``sinc(y) = sin(y) / y``), i.e. ``kappa^2 = 4 y^2 / L^2``
+with ``y = sinc^{-1}(s)``, ``s = r / L``.  ``z = y^2`` is analytic in ``w = 1 - s`` on
+[0, 1] (``z ~ 6 w`` near rest), so it is fitted once as ``z(w) = w P(w)`` with P a
+degree-10 polynomial (:data:`SINC_INV_COEFFS`, |y error| < 1e-5): the force vanishes at
+``r = L`` exactly and no square root appears in the kernel.
+
+No strut-like resistance before buckling.  The law's radial stiffness jumps at ``r = L``
+from ``k_t`` to the buckling slope ``24 k_b / L^3``, so the linearized step's matrix jumps
+when a spring passes its rest length (the objective is only piecewise smooth there).  A
+compressive force that resisted like a strut instead (stiffness ``k_t`` over a few percent of
+strain) gives every compressed spring a transverse stiffness ``m / r < 0`` large enough to
+make a flat, compressed sheet (a sheet hanging in its plane) a buckling saddle: the passive
+sheet stays exactly planar, and the gradient of any keyframe objective grows by orders of
+magnitude per second of simulated time along it
+(``tests/test_cloth_model.py::test_flat_hanging_sheet_has_a_meaningful_gradient``).  Real
+cloth buckles at a tiny load, which is what the Choi-Ko law says.
+
+Spring kinds (:data:`SPRING_KINDS`) and their stiffnesses come from the cloth's
+:class:`~.cloth.ClothParams`: stretch and shear springs take ``k_t`` from ``stretch`` and
+``shear``; bend springs (skip one particle, or across an interior edge) have
+``k_t = 24 bend / L^3``, the slope of the buckling force at ``r = L``, so their force is C^1
+across the rest length.  Every kind buckles with ``k_b = bend``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import casadi as ca
+import numpy as np
+
+from ..kernels import interaction_kernels
+from .interaction import PairInteraction
+
+SPRING_KINDS = ("stretch", "shear", "bend")
+STRETCH, SHEAR, BEND = range(3)
+# a spring within this relative distance of its rest length counts as at rest (tension
+# branch): the law's kink there must not be decided by round-off, which differs between the
+# numeric and symbolic routes for states at rest up to it (a sheet at rest, or translating)
+REST_TOLERANCE = 1e-9
+
+
+def _fit_sinc_inverse(degree: int = 10) -> np.ndarray:
+    """Coefficients of P (highest power first) with ``sinc^{-1}(1 - w)^2 ~= w P(w)``."""
+    y = np.pi * (1 - np.cos(np.linspace(0, np.pi, 4001)[1:])) / 2  # dense at both ends
+    w = 1 - np.sin(y) / y
+    return np.polyfit(w, y ** 2 / w, degree)
+
+
+SINC_INV_COEFFS = _fit_sinc_inverse()
+
+
+def sinc_inverse_squared(s):
+    """``y^2`` with ``sinc(y) = s`` for s in [0, 1]; numpy arrays or CasADi expressions."""
+    w = 1 - s
+    acc = 0 * w + SINC_INV_COEFFS[0]
+    for c in SINC_INV_COEFFS[1:]:  # Horner
+        acc = acc * w + c
+    return w * acc
+
+
+def sinc_inverse(s: np.ndarray) -> np.ndarray:
+    """``y`` in [0, pi] with ``sin(y) / y = s``, for s in [0, 1] (numpy)."""
+    return np.sqrt(np.maximum(sinc_inverse_squared(np.asarray(s, dtype=float)), 0.0))
+
+
+def spring_law(d, dv, L, k_t, k_b, c, eps: float):
+    """``(f_i, K)`` of one spring as CasADi expressions (see the module docstring): the force
+    on particle i and the stiffness ``K ~ df_i/dd`` the implicit step uses.
+
+    With magnitude ``m(r)`` and ``f_i = m u``: ``df_i/dd = m' u u^T + m (I/r - d d^T/r^3)``.
+    Under compression ``m < 0`` and the transverse term is negative: it says a compressed
+    spring would rather rotate than shorten, and at fine resolution it makes the step matrix
+    ``M - dt D - dt^2 K`` indefinite.  As Choi and Ko, K keeps it only under tension
+    (``max(m, 0)``); ``m' >= 0`` on both branches, so K is negative semi-definite and the
+    step matrix positive definite for every dt.
+    """
+    r = ca.sqrt(ca.dot(d, d) + eps ** 2)
+    u = d / r
+    m = ca.if_else(r >= L * (1 - REST_TOLERANCE), k_t * (r - L),
+                   -k_b * 4 * sinc_inverse_squared(r / L) / L ** 2)
+    force = m * u + c * ca.dot(dv, u) * u
+    stiffness = (ca.mtimes(u, ca.jacobian(m, d))
+                 + ca.fmax(m, 0) * (ca.SX.eye(3) / r - ca.mtimes(d, d.T) / r ** 3))
+    return force, stiffness
+
+
+def spring_kernels(eps: float) -> dict[str, ca.Function]:
+    """``force(d, dv, L, k_t, k_b, c) -> f_i``, ``jac(...) -> (vec K, vec D)`` (row-major) and
+    the derivative kernels (see :func:`~casadi_keyframe.kernels.interaction_kernels`), K from
+    :func:`spring_law`.  As Baraff and Witkin, the damping force's position derivative (not
+    symmetric) is left out of K, so K is symmetric."""
+    d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
+    scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
+    force, stiffness = spring_law(d, dv, *scalars, eps)
+    return interaction_kernels("cloth_spring", d, dv, scalars, force, stiffness)
+
+
+@dataclass(frozen=True)
+class Springs:
+    """Springs as parallel arrays: endpoints ``i``, ``j``, ``rest`` length (m) and ``kind``
+    (index into SPRING_KINDS)."""
+
+    i: np.ndarray
+    j: np.ndarray
+    rest: np.ndarray
+    kind: np.ndarray
+
+    def count(self, kind: str) -> int:
+        return int(np.sum(self.kind == SPRING_KINDS.index(kind)))
+
+    def stretch(self, x: np.ndarray) -> np.ndarray:
+        """Every spring's length over its rest length at positions ``x`` (``(..., n, 3)``)."""
+        d = x[..., self.j, :] - x[..., self.i, :]
+        return np.linalg.norm(d, axis=-1) / self.rest
+
+
+class ChoiKoSprings(PairInteraction):
+    """The cloth's springs as a family: the Choi-Ko law over fixed pairs.
+
+    ``stiffness`` is ``(stretch, shear, bend)`` of :class:`~.cloth.ClothParams`, ``damping``
+    the along-spring damping c, ``eps`` the length regularisation."""
+
+    name = "springs"
+    role = "internal"
+
+    def __init__(self, springs: Springs, n: int, *, stiffness: tuple, damping: float,
+                 eps: float, jit: bool | None = None):
+        super().__init__(spring_kernels(eps), n, jit)
+        stretch, shear, bend = stiffness
+        self.springs = springs
+        k_t = np.choose(springs.kind, [stretch, shear, 0.0]).astype(float)
+        k_t = np.where(springs.kind == BEND, 24 * bend / springs.rest ** 3, k_t)
+        size = springs.rest.size
+        self.parameters_per_spring = (springs.rest[:, None], k_t[:, None],
+                                      np.full((size, 1), bend), np.full((size, 1), damping))
+        for a in self.parameters_per_spring:
+            a.flags.writeable = False
+        self._ij = (springs.i, springs.j)
+
+    def pairs(self, found):
+        return self._ij
+
+    def pair_parameters(self, i, j):
+        return list(self.parameters_per_spring)
+
+    def all_pairs(self):
+        return self._ij

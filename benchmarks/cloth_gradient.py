@@ -1,7 +1,7 @@
 """Cloth forward pass and gradients per linear solver, for k x k hanging sheets.
 
-For each size and each solver (``--solvers``, default cholmod, direct, cg: CHOLMOD, SuperLU
-and the modified PCG with Jacobi preconditioner that was the default before), one fresh
+For each size and each solver (``--solvers``, default auto, cholmod, direct, cg: the default
+path users get, CHOLMOD, SuperLU and the modified PCG with Jacobi preconditioner), one fresh
 subprocess with one BLAS thread builds the problem, runs it once (kernels compiled), then
 ``--repeat`` rounds of: forward pass (objective only), gradient with the swapped adjoint,
 gradient with the exact hand adjoint.  It prints medians of CPU seconds
@@ -9,15 +9,16 @@ gradient with the exact hand adjoint.  It prints medians of CPU seconds
 how much the process's peak RSS grew over the gradients (from after a first forward pass
 without records: kernels compiled, nothing kept) and what the forward pass kept of
 factorisations for the adjoint (the solver's estimate), then checks the targets: at 50 x 50
-forward <= 3.5 s CPU, swapped gradient <= 1.4 x and exact <= 1.6 x forward; at 100 x 100 the
-fastest solver >= 3 x faster than CG in forward and gradients.
+forward <= 3.5 s CPU, swapped gradient <= 1.4 x and exact <= 1.6 x forward (on the default
+path, "auto": <= 1.35 x and <= 1.5 x); at 100 x 100 the fastest solver >= 3 x faster than
+CG in forward and gradients.
 
 The sheet (1 m, 1 kg) hangs from its two top corners; a sphere of radius 0.2 m starts 3 cm
 clear of it and presses into it at 6 cm/s; the controls are random forces of 1 m/s^2 rms
 acceleration on every particle; 100 steps of 1/60 s.
 
     .venv/bin/python benchmarks/cloth_gradient.py [--sizes 20 50 100] [--steps 100]
-        [--repeat 3] [--solvers cholmod direct cg] [--collider sphere|none]
+        [--repeat 3] [--solvers auto cholmod direct cg] [--collider sphere|none]
         [--max-factor-gb 2]
 """
 import argparse
@@ -105,9 +106,11 @@ def verdicts(results: dict) -> list[str]:
     for (k, solver), r in results.items():
         if k == 50 and "error" not in r and solver != "cg":
             fwd, sw, ex = r["forward_cpu"], r["swapped_cpu"], r["exact_cpu"]
-            ok = fwd <= 3.5 and sw <= 1.4 * fwd and ex <= 1.6 * fwd
+            swap_max, exact_max = (1.35, 1.5) if solver == "auto" else (1.4, 1.6)
+            ok = fwd <= 3.5 and sw <= swap_max * fwd and ex <= exact_max * fwd
             lines.append(f"50x50 {solver}: forward {fwd:.2f} s (<= 3.5), swapped {sw / fwd:.2f}x "
-                         f"(<= 1.4), exact {ex / fwd:.2f}x (<= 1.6): {'met' if ok else 'MISSED'}")
+                         f"(<= {swap_max}), exact {ex / fwd:.2f}x (<= {exact_max}): "
+                         f"{'met' if ok else 'MISSED'}")
     for k in sorted({k for k, _ in results}):
         cg = results.get((k, "cg"))
         rows = [(s, r) for (kk, s), r in results.items()
@@ -127,7 +130,7 @@ def main():
     ap.add_argument("--sizes", type=int, nargs="+", default=[20, 50, 100])
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--repeat", type=int, default=3)
-    ap.add_argument("--solvers", nargs="+", default=["cholmod", "direct", "cg"])
+    ap.add_argument("--solvers", nargs="+", default=["auto", "cholmod", "direct", "cg"])
     ap.add_argument("--collider", choices=["sphere", "none"], default="sphere")
     ap.add_argument("--max-factor-gb", type=float, default=2.0,
                     help="the integrator's max_factor_memory in GiB (default: its own, 2)")

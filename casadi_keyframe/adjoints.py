@@ -38,6 +38,7 @@ class Adjoint:
         value, gx, gv = problem.state_cost(traj)
         g_ext, g0 = backward(problem.integrator, problem.model, traj, gx, gv,
                              step_vjp=self.backward_step(problem.integrator))
+        problem.integrator.release(traj)
         c_val, c_grad = problem.control_cost(u)
         return value + c_val, problem.controls.pullback(g_ext, g0.v) + c_grad
 

@@ -104,6 +104,45 @@ def test_cholesky_equals_lu_and_keeps_what_it_is_asked_to(pinned):
 
 
 @needs_cholmod
+def test_a_released_factor_goes_back_to_the_pool():
+    A, free = spd(60), np.ones(60, bool)
+    plan = SparseCholesky().init(free)
+    system = dataclasses.replace(System.from_matrix(A, free), structure=object())
+    first = plan.factor(system, keep=True)
+    made = plan.analyses
+    b = np.ones(60)
+    x = first.solve(b)[0]
+    first.release()
+    assert not first.usable
+    with pytest.raises(RuntimeError, match="released"):
+        first.solve(b)
+    second = plan.factor(system, keep=True)  # the released analysis, refactorised
+    assert plan.analyses == made and second.usable
+    np.testing.assert_allclose(second.solve(b)[0], x, rtol=1e-12)
+
+
+@needs_cholmod
+def test_the_default_path_analyses_a_cloth_pattern_once_across_gradients():
+    """Under solver="auto" a cloth's step pattern is analysed by the first gradient only: the
+    forward pass keeps one factor per step, the backward pass solves with them and releases
+    them, and the next gradient refactorises the same analyses numerically."""
+    from casadi_keyframe.integrators import LinearizedBackwardEuler
+    from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
+    prob = swing_problem(hanging_sheet(6), 10, 1 / 60, LinearizedBackwardEuler())
+    u = 0.01 * np.random.default_rng(0).standard_normal(prob.size)
+    plan = prob.integrator.plan(prob.model)
+    counts = []
+    for route in ("adjoint", "adjoint", "swapped", "swapped", "adjoint"):
+        before = plan.analyses
+        prob.objective_and_gradient(u, route)
+        counts.append(plan.analyses - before)
+    # one per kept step, one to size the factors; the swapped route's last step (no step
+    # after it kept a factor) factors once more, in the shared analysis
+    assert counts == [prob.steps + 1, 0, 1, 0, 0]
+    assert prob.integrator.plan(prob.model) is plan
+
+
+@needs_cholmod
 def test_cholesky_refuses_an_indefinite_matrix():
     with pytest.raises(SolveError, match="not positive definite"):
         SparseCholesky().init(np.ones(3, bool)).factor(sp.diags([1.0, -2.0, 3.0]))

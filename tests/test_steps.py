@@ -2,6 +2,7 @@
 ``step_jvp`` against CasADi forward mode on one step, the dot-product test
 ``<J t, c> = <t, J^T c>`` on whole trajectories, and every gradient route against every
 other on a small flock and a small cloth."""
+import functools
 import warnings
 
 import casadi as ca
@@ -11,8 +12,9 @@ import pytest
 from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, FiniteDifference,
                              Smoothness, State, StateKeyframe, StepForces)
 from casadi_keyframe.integrators import BackwardEuler, LinearizedBackwardEuler
+from casadi_keyframe.linear import cholmod_available
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.models.cloth import Attachment
+from casadi_keyframe.models import Attachment
 from casadi_keyframe.models.colliders import Contact, Plane, Sphere
 from casadi_keyframe.simulate import backward, simulate
 from conftest import small_flock
@@ -35,9 +37,19 @@ def cloth_problem(integrator, steps=8, dt=1 / 30):
                           steps=steps, dt=dt, controls=StepForces(), objective=obj)
 
 
+def linearized(solver):
+    """Linearized backward Euler with one linear solver; CG solves to round-off here, so the
+    step's derivatives can be held to 1e-10 like the direct solvers'."""
+    if solver == "cholmod" and not cholmod_available():
+        pytest.skip("CHOLMOD (cvxopt) is not installed")
+    tol = {"tol": 1e-13, "adjoint_tol": 1e-13} if solver == "cg" else {}
+    return cloth_problem(LinearizedBackwardEuler(solver, **tol))
+
+
 SYSTEMS = {
     "symplectic_euler": lambda: small_flock(),
-    "linearized_backward_euler": lambda: cloth_problem(LinearizedBackwardEuler("direct")),
+    **{f"linearized_backward_euler[{solver}]": functools.partial(linearized, solver)
+       for solver in ("auto", "cholmod", "direct", "cg")},
     "backward_euler": lambda: cloth_problem(BackwardEuler("direct", newton_tol=1e-13)),
 }
 

@@ -1,13 +1,14 @@
 """Linear solvers for the implicit step ``A dv = b`` with some components held fixed, as
 objects in the manner of lineax.
 
-A solver object holds settings only.  ``solver.init(free)`` gives the plan for one pass (the
-free and constrained components; a factorisation's pattern analyses, kept per pattern);
-``plan.factor(A, keep=False)`` prepares one matrix (a factorisation, or CG's
-preconditioner; ``A`` a :class:`System` or a scipy matrix); the result solves ``A x = b``
-and ``A^T x = b`` and reports a :class:`SolveInfo` with every solution, so the adjoint pass
-can reuse what the forward pass built.  ``nbytes`` on a prepared matrix says what keeping it
-costs.
+A solver object holds settings only.  ``solver.init(free)`` gives a plan, which holds the
+state (the free and constrained components; a factorisation's pattern analyses, kept per
+pattern) for as many passes as its owner keeps it; ``plan.factor(A, keep=False)`` prepares
+one matrix (a factorisation, or CG's preconditioner; ``A`` a :class:`System` or a scipy
+matrix); the result solves ``A x = b`` and ``A^T x = b`` and reports a :class:`SolveInfo`
+with every solution, so the adjoint pass can reuse what the forward pass built.  ``nbytes``
+on a prepared matrix says what keeping it costs; ``release()`` gives a kept one's analysis
+back to its plan once it is no longer needed.
 
 * :class:`SparseCholesky` ("cholmod"): CHOLMOD's supernodal Cholesky (needs cvxopt); SPD A.
 * :class:`SparseLU` ("direct"): scipy's SuperLU; SPD A, or any non-singular A with
@@ -32,22 +33,27 @@ __all__ = ["Auto", "CholeskyFactor", "CholeskyPlan", "Factored", "JacobiPrecondi
 
 
 class Auto:
-    """Picks a solver per system when a pass starts (:meth:`init`): CHOLMOD when cvxopt is
-    installed and the free block has at most ``cholmod_max`` unknowns, else SuperLU up to
-    ``lu_max`` unknowns, else modified PCG (with ``tol``), whose memory is the matrix's."""
+    """Picks a solver per free-block size (:meth:`choose`, the same object for the same size):
+    CHOLMOD when cvxopt is installed and the free block has at most ``cholmod_max`` unknowns,
+    else SuperLU up to ``lu_max`` unknowns, else modified PCG (with ``tol``), whose memory is
+    the matrix's."""
 
     name = "auto"
 
     def __init__(self, tol: float = 1e-10, cholmod_max: int = 400_000, lu_max: int = 40_000):
         self.tol, self.cholmod_max, self.lu_max = tol, cholmod_max, lu_max
+        self._chosen: dict[int, object] = {}
 
     def choose(self, size: int):
-        """The solver for a free block of ``size`` unknowns."""
-        if cholmod_available() and size <= self.cholmod_max:
-            return SparseCholesky()
-        if size <= self.lu_max:
-            return SparseLU()
-        return ModifiedPCG(self.tol)
+        """The solver for a free block of ``size`` unknowns (kept: asked again, the same)."""
+        if size not in self._chosen:
+            if cholmod_available() and size <= self.cholmod_max:
+                self._chosen[size] = SparseCholesky()
+            elif size <= self.lu_max:
+                self._chosen[size] = SparseLU()
+            else:
+                self._chosen[size] = ModifiedPCG(self.tol)
+        return self._chosen[size]
 
     def init(self, free: np.ndarray) -> Plan:
         return self.choose(int(np.count_nonzero(free))).init(free)

@@ -6,8 +6,6 @@ operator that is not positive definite as soon as it meets the evidence.  Needs 
 the matrix only, so it is the solver for systems too large to factor."""
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
 from .system import Factored, Plan, SolveError, SolveInfo
@@ -27,13 +25,15 @@ class ModifiedPCG:
         self.tol, self.maxiter = tol, maxiter
 
     def init(self, free: np.ndarray) -> "PCGPlan":
-        return PCGPlan(np.asarray(free, bool), self)
+        return PCGPlan(free, self)
 
 
-@dataclass(frozen=True)
 class PCGPlan(Plan):
-    solver: ModifiedPCG
     worth_keeping = False  # reuse saves one assembly, next to hundreds of iterations
+
+    def __init__(self, free: np.ndarray, solver: ModifiedPCG):
+        super().__init__(free)
+        self.solver = solver
 
     def factor(self, A, keep: bool = False) -> "JacobiPreconditioned":
         """The matrix with its Jacobi preconditioner; refuses a non-positive diagonal.

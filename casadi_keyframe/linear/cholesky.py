@@ -3,16 +3,18 @@ factorisation (Chen, Davis, Hager and Rajamanickam, 2008), through the cvxopt pa
 wheels bundle CHOLMOD with OpenBLAS.
 
 The analysis (fill-reducing ordering, elimination tree, supernodes) depends only on the
-sparsity pattern: a plan keeps one per :attr:`System.structure` and refactorises numerically
-for every new matrix of that pattern.  A factorisation that must outlive the next one (kept
-for the adjoint pass) gets its own analysis (``factor(A, keep=True)``); the others share
-the plan's, and using one after a later factorisation has replaced it raises.  A kept
-factor nothing refers to any more hands its analysis (and its memory) back to the solver
-object, so the next pass over the same pattern refactorises numerically only.
+sparsity pattern.  A CHOLMOD factor object holds one analysis and one numeric factorisation,
+so the plan keeps, per :attr:`System.structure`, a factor object shared by the factorisations
+nobody keeps (each refactorises it numerically; using an older one after a newer one raises)
+and a pool of factor objects for the factorisations that must outlive the next one
+(``factor(A, keep=True)``, kept for the adjoint pass).  A kept factor goes back to the pool
+when its owner releases it (:meth:`CholeskyFactor.release`, after the backward pass), so the
+next pass over the same pattern refactorises numerically only.  The solver object holds
+settings only; the plan holds this state and lives as long as its owner keeps it.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from collections import OrderedDict
 
 import numpy as np
 
@@ -23,6 +25,8 @@ try:
 except ImportError:  # optional: linear_solver("auto") falls back to SuperLU
     _cholmod = None
 
+KEPT_PATTERNS = 4  # the analyses a plan keeps: the fixed pattern and the latest grown ones
+
 
 def available() -> bool:
     """Whether CHOLMOD (the cvxopt package) can be imported."""
@@ -31,7 +35,7 @@ def available() -> bool:
 
 class SparseCholesky:
     """CHOLMOD's supernodal Cholesky of the free block (module docstring); refuses a matrix
-    that is not positive definite."""
+    that is not positive definite.  Settings only: :meth:`init` makes the state."""
 
     name = "cholmod"
 
@@ -39,29 +43,17 @@ class SparseCholesky:
         if _cholmod is None:
             raise ImportError("solver 'cholmod' needs the cvxopt package (it bundles CHOLMOD): "
                               "pip install cvxopt, or use solver='direct' (SuperLU)")
-        self._spare = (None, [])  # (structure, analyses of dropped kept factors)
-
-    def _take_spare(self, structure):
-        held, spare = self._spare
-        return spare.pop() if structure is not None and held is structure and spare else None
-
-    def _give_back(self, structure, symbolic) -> None:
-        held, spare = self._spare
-        if structure is None:
-            return
-        if held is not structure:
-            self._spare = (structure, [])
-        self._spare[1].append(symbolic)
 
     def init(self, free: np.ndarray) -> "CholeskyPlan":
-        return CholeskyPlan(np.asarray(free, bool), self)
+        return CholeskyPlan(np.asarray(free, bool))
 
 
 class Analysis:
-    """One pattern's analysis: where A_ff's lower triangle sits in its CSC data, a CHOLMOD
-    matrix of that pattern to load values into, and the shared symbolic factorisation."""
+    """One pattern's analyses: where A_ff's lower triangle sits in its CSC data, a CHOLMOD
+    matrix of that pattern to load values into, the shared factor object and the pool of
+    factor objects free for kept factorisations."""
 
-    def __init__(self, block):
+    def __init__(self, block, plan):
         col = np.repeat(np.arange(block.shape[1]), np.diff(block.indptr))
         lower = np.flatnonzero(block.indices >= col)
         rows, cols = block.indices[lower], col[lower]
@@ -69,55 +61,74 @@ class Analysis:
                         block.shape)
         self.lower = lower[np.asarray(probe.V, dtype=np.intp).ravel()]  # CHOLMOD's order
         self.matrix = probe
+        self.plan = plan
         self.shared = None
         self.generation = 0
+        self.pool = []
         self.factor_nbytes = None
 
     def load(self, block) -> None:
         self.matrix.V = _dense(block.data[self.lower])
 
+    def symbolic(self):
+        """A new factor object of this pattern (one CHOLMOD analysis, counted)."""
+        self.plan.analyses += 1
+        return _cholmod.symbolic(self.matrix)
+
     def measure(self) -> None:
         """Set :attr:`factor_nbytes` (12 bytes per entry of L) from a throwaway factor of the
         loaded matrix: reading a factor's entries spoils it for solves."""
-        factor = _cholmod.symbolic(self.matrix)
+        factor = self.symbolic()
         _cholmod.numeric(self.matrix, factor)
         self.factor_nbytes = 12 * len(_cholmod.getfactor(factor).V)
 
 
-@dataclass(frozen=True)
 class CholeskyPlan(Plan):
-    solver: SparseCholesky
-    analyses: dict = field(default_factory=dict, compare=False)
+    """A pass's or a series of passes' CHOLMOD state: the analyses of the patterns met (at
+    most :data:`KEPT_PATTERNS`, most recent first kept) and ``analyses``, how many CHOLMOD
+    analyses it has made."""
+
+    def __init__(self, free: np.ndarray):
+        super().__init__(free)
+        self.patterns: OrderedDict = OrderedDict()
+        self.analyses = 0
+
+    def _analysis(self, system) -> Analysis:
+        structure = system.structure
+        if structure is None:
+            return Analysis(system.free_block, self)
+        analysis = self.patterns.get(structure)
+        if analysis is None:
+            analysis = self.patterns[structure] = Analysis(system.free_block, self)
+            while len(self.patterns) > KEPT_PATTERNS:
+                self.patterns.popitem(last=False)
+        else:
+            self.patterns.move_to_end(structure)
+        return analysis
 
     def factor(self, A, keep: bool = False) -> "CholeskyFactor":
         """The Cholesky factor of A's free block; one that is not positive definite raises
-        SolveError.  ``keep``: the factor stays valid after later ones (own analysis)."""
+        SolveError.  ``keep``: the factor stays valid after later ones until released."""
         system = self.system(A)
-        block = system.free_block
-        analysis = self.analyses.get(system.structure) if system.structure is not None else None
-        if analysis is None:
-            analysis = Analysis(block)
-            if system.structure is not None:
-                self.analyses.clear()  # a pattern that grew replaces the old one
-                self.analyses[system.structure] = analysis
-        analysis.load(block)
+        analysis = self._analysis(system)
+        analysis.load(system.free_block)
+        generation = None
         if keep:
-            symbolic = (self.solver._take_spare(system.structure)
-                        or _cholmod.symbolic(analysis.matrix))
+            symbolic = analysis.pool.pop() if analysis.pool else analysis.symbolic()
         else:
             if analysis.shared is None:
-                analysis.shared = _cholmod.symbolic(analysis.matrix)
+                analysis.shared = analysis.symbolic()
             symbolic = analysis.shared
-        generation = None
-        if symbolic is analysis.shared:  # every earlier factor sharing it is now stale
-            analysis.generation += 1
+            analysis.generation += 1  # every earlier factor sharing it is now stale
             generation = analysis.generation
         try:
             _cholmod.numeric(analysis.matrix, symbolic)
         except ArithmeticError:
+            if keep:
+                analysis.pool.append(symbolic)
             raise SolveError("the step matrix is not positive definite (Cholesky failed): "
                              "stiff compression or contact at this dt; reduce dt") from None
-        if generation is None and analysis.factor_nbytes is None:
+        if keep and analysis.factor_nbytes is None:
             analysis.measure()
         return CholeskyFactor(system, self, symbolic, analysis, generation)
 
@@ -127,9 +138,21 @@ class CholeskyFactor(Factored):
         super().__init__(system, plan)
         self.factor, self.analysis, self.generation = factor, analysis, generation
 
-    def __del__(self):
-        if self.generation is None:  # a kept factor: its analysis serves the next pass
-            self.plan.solver._give_back(self.system.structure, self.factor)
+    @property
+    def kept(self) -> bool:
+        return self.generation is None
+
+    def release(self) -> None:
+        """Hand a kept factor's analysis back to its plan's pool (it cannot solve after)."""
+        if self.kept and self.factor is not None:
+            self.analysis.pool.append(self.factor)
+            self.factor = None
+
+    @property
+    def usable(self) -> bool:
+        if self.kept:
+            return self.factor is not None
+        return self.generation == self.analysis.generation
 
     @property
     def nbytes(self) -> int:
@@ -138,7 +161,10 @@ class CholeskyFactor(Factored):
         return self.analysis.factor_nbytes or 0
 
     def _solve_free(self, rhs, transpose: bool, x0, tol):
-        if self.generation is not None and self.generation != self.analysis.generation:
+        if self.kept and self.factor is None:
+            raise RuntimeError("this Cholesky factor was released to its plan; solve before "
+                               "releasing, or factor again")
+        if not self.usable:
             raise RuntimeError("this Cholesky factor was overwritten by a later factorisation "
                                "of the same plan; factor(A, keep=True) keeps one")
         x = _dense(rhs)

@@ -10,8 +10,6 @@ analysis, so every matrix is analysed afresh.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 import scipy.sparse.linalg as spla
 
@@ -27,12 +25,13 @@ class SparseLU:
         self.symmetric = symmetric
 
     def init(self, free: np.ndarray) -> "LUPlan":
-        return LUPlan(np.asarray(free, bool), self)
+        return LUPlan(free, self)
 
 
-@dataclass(frozen=True)
 class LUPlan(Plan):
-    solver: SparseLU
+    def __init__(self, free: np.ndarray, solver: SparseLU):
+        super().__init__(free)
+        self.solver = solver
 
     def factor(self, A, keep: bool = False) -> "LUFactors":
         """SuperLU factors of A's free block; a singular A raises SolveError.  (Every

@@ -57,14 +57,15 @@ class System:
         return cls(block, A.dot, A.T.tocsr().dot, None, symmetric)
 
 
-@dataclass(frozen=True)
 class Plan:
-    """What a solver keeps for every matrix of one pass: the free components.
-    ``worth_keeping``: whether a prepared matrix saves enough work when reused (a derivative
-    pass) to be kept in memory."""
+    """What a solver keeps for the matrices of one or more passes: the free components (and,
+    for a factorisation, its analyses).  ``worth_keeping``: whether a prepared matrix saves
+    enough work when reused (a derivative pass) to be kept in memory."""
 
-    free: np.ndarray
     worth_keeping = True
+
+    def __init__(self, free: np.ndarray):
+        self.free = np.asarray(free, bool)
 
     @property
     def free_index(self) -> np.ndarray:
@@ -85,6 +86,14 @@ class Factored:
 
     #: bytes this prepared matrix holds beyond the System (what keeping it costs)
     nbytes = 0
+
+    @property
+    def usable(self) -> bool:
+        """Whether it can still solve (not released, not overwritten)."""
+        return True
+
+    def release(self) -> None:
+        """Give what a kept factorisation holds back to its plan (nothing here)."""
 
     def solve(self, b, z=None, *, x0=None, tol: float | None = None):
         """``(x, SolveInfo)`` of ``A x = b`` with ``x = z`` on the constrained components

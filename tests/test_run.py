@@ -202,7 +202,7 @@ def test_atomic_files_are_whole_or_absent(tmp_path):
 
 
 def test_misses_say_what_their_rms_is_over():
-    from casadi_keyframe.run import format_misses
+    from casadi_keyframe.report import format_misses
 
     line = format_misses([{"term": "StateKeyframe@60", "particles": 416,
                            "rms_position_error": 0.01}, {"term": "RegionTarget@50",

@@ -12,7 +12,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..geometry import body_geometry, moves
-from ..objectives import CenterOfMassKeyframe, RegionTarget
+from ..models.base import PhysicalReport, Surface
+from ..report import format_misses
 from ..views import BlendView, ClothView, FlockView
 
 
@@ -45,7 +46,7 @@ class Body:
 def bodies(model, times, prefix: str = "") -> list[Body]:
     """The colliders of ``model`` at each of ``times``."""
     out = []
-    for i, body in enumerate(getattr(model, "colliders", ())):
+    for i, body in enumerate(model.colliders):
         geo = [body_geometry(body, t) for t in times]
         kind = geo[0][0]
         radius = np.array([g[3] if kind == "round" else 0.0 for g in geo])
@@ -67,22 +68,13 @@ class Target:
 
 
 def targets(problem) -> list[Target]:
-    """The targets of the problem's keyframe terms that have a position to show."""
-    out, n = [], problem.model.n
-    for term in problem.objective_terms.state_terms:
-        if isinstance(term, RegionTarget):
-            outline = term.shape.outline()
-            out.append(Target(term.label, term.frame, "outline", points3(outline)))
-        elif term.position_target is not None:
-            pts = points3(np.atleast_2d(term.position_target))
-            whole = (not isinstance(term, CenterOfMassKeyframe) and hasattr(problem.model, "faces")
-                     and np.unique(term.particles).size == n)
-            if whole:
-                shape = np.empty((n, 3))
-                shape[term.particles] = pts
-                pts = shape
-            out.append(Target(term.label, term.frame, "shape" if whole else "points", pts))
-    return out
+    """The targets of the problem's keyframe terms that have a position to show (their
+    markers; a whole-body target is a "shape" where the model has a surface)."""
+    surface = isinstance(problem.model, Surface)
+    kinds = {"shape": "shape" if surface else "points", "particles": "points",
+             "center": "points", "outline": "outline"}
+    return [Target(m.label, m.frame, kinds[m.kind], points3(m.points))
+            for m in problem.objective_terms.markers()]
 
 
 @dataclass
@@ -129,18 +121,16 @@ def scene_of(problem, trajectory) -> Scene:
     model, view = problem.model, problem.view
     times = trajectory.times
     scene = Scene(problem.name, float(trajectory.dt), points3(trajectory.x),
-                  np.asarray(model.faces, int) if hasattr(model, "faces") else None,
+                  np.asarray(model.faces, int) if isinstance(model, Surface) else None,
                   bodies(model, times), targets(problem), dim=model.dim,
                   misses=misses(problem, trajectory))
-    if hasattr(model, "max_stretch"):
+    if isinstance(model, PhysicalReport):
         scene.stretch = np.array([model.max_stretch(x) for x in trajectory.x])
     if isinstance(view, FlockView):
         scene.highlight = view.highlight
     if isinstance(view, ClothView):
         scene.ring, scene.camera = view.ring, view.camera
-    if hasattr(model, "attachments"):
-        scene.marked = np.concatenate([np.asarray(model.pinned, int)]
-                                      + [a.particles for a in model.attachments]).astype(int)
+    scene.marked = model.prescribed_particles()
     if isinstance(view, BlendView):
         scene.clips = [clip_of(view, kind, trajectory.steps, trajectory.dt)
                        for kind in ("fall", "walk")]
@@ -161,8 +151,6 @@ def clip_of(view: BlendView, kind: str, steps: int, dt: float) -> Clip:
 
 def misses(problem, trajectory) -> dict:
     """``{frame: "term: miss ...; ..."}`` at each keyframe frame."""
-    from ..run import format_misses
-
     by_frame: dict[int, list] = {}
     for term in problem.objective_terms.state_terms:
         by_frame.setdefault(int(term.frame), []).append(term.miss(trajectory))

@@ -24,7 +24,7 @@ from ..run import exit_code
 from .grid import points
 from .progress import Progress, format_seconds
 from .runner import check_workers, connect, run_specs
-from .table import best_per_group, write_tables
+from .table import best_per_group, value_of, write_tables
 from .tasks import ERROR, read_row
 from .tasks import failed as is_failed
 
@@ -222,7 +222,10 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
         else:
             rows.append(row)
     files = write_tables(rows, plan.out, plan.keys) if rows else []
-    picture = sweep_plot(rows, plan.keys, plan.figure, plan.out / "sweep.png")
+    drawn = [r for r in rows if value_of(r, plan.figure) is not None]
+    picture = sweep_plot({key: [r.get(key) for r in drawn] for key in plan.keys},
+                         [value_of(r, plan.figure) for r in drawn], plan.figure,
+                         plan.out / "sweep.png")
     files += [picture] if picture else []
     failed = [r["point"] for r in rows if is_failed(r)]
     best = best_per_group(rows, plan.figure, plan.group_by)

@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from .shapes import Shape
+from .views import Marker
 
 
 class Objective:
@@ -48,15 +49,15 @@ class Objective:
         return [t for t in self.terms if isinstance(t, TrajectoryTerm)]
 
     def bound(self, model, steps: int) -> "Objective":
-        """A copy whose state and trajectory terms are bound to ``model`` over ``steps``
-        (checked and compiled, see :meth:`StateTerm.bind`); the terms given stay as they
-        were."""
-        out = Objective([t.at_frame(t.frame) if isinstance(t, StateTerm)
-                         else copy.copy(t) if isinstance(t, TrajectoryTerm) else t
-                         for t in self.terms])
-        for term in out.state_terms + out.trajectory_terms:
-            term.bind(model, steps)
-        return out
+        """The objective of the state and trajectory terms bound to ``model`` over ``steps``
+        (checked and compiled copies, see :meth:`StateTerm.bind`); the terms given stay as
+        they were."""
+        return Objective([t.bind(model, steps) if isinstance(t, (StateTerm, TrajectoryTerm))
+                          else t for t in self.terms])
+
+    def markers(self) -> list:
+        """What the bound keyframe terms show (:class:`~.views.Marker`), term by term."""
+        return [m for t in self.state_terms if (m := t.marker()) is not None]
 
     def retimed(self, frame_of) -> "Objective":
         """The same objective with every state term moved to frame ``frame_of(term)`` (for a
@@ -75,32 +76,46 @@ class _Addable:
 
 
 class StateTerm(_Addable):
-    """A term that looks at the state of one frame."""
+    """A term that looks at the state of one frame.
+
+    A term is written as the user gives it; :meth:`bind` returns a copy checked against a
+    system and compiled, which remembers the term it was made from (:attr:`unbound`)."""
 
     frame: int
 
+    @property
+    def unbound(self) -> "StateTerm":
+        """The term as it was given (itself, if it is not a bound copy)."""
+        return self.__dict__.get("_unbound", self)
+
     def at_frame(self, frame: int) -> "StateTerm":
         """An unbound copy of this term, with the same targets and weights, at ``frame``."""
-        out = copy.copy(self)
-        for name in [k for k in vars(out) if k.startswith("_")]:  # what bind() made
-            del out.__dict__[name]
+        out = copy.copy(self.unbound)
         out.frame = frame
         return out
 
-    def bind(self, model, steps: int) -> None:
-        """Check the term against the system and compile its function."""
+    def bind(self, model, steps: int) -> "StateTerm":
+        """A copy of the term checked against the system and compiled; the term itself stays
+        as it was."""
         if not (isinstance(self.frame, (int, np.integer)) and 0 <= self.frame <= steps):
             raise ValueError(f"{self.label}: keyframe frame {self.frame} is outside 0..{steps}; "
                              "pick a frame within the horizon or raise 'steps'")
-        self._check(model)
+        out = copy.copy(self.unbound)
+        out._unbound = self.unbound
+        out._check(model)
         X = ca.SX.sym("X", model.dim, model.n)
         V = ca.SX.sym("V", model.dim, model.n)
-        P = ca.SX.sym("P", self._params(model).size)
-        val = self._expr(X, V, P, model)
-        self._p = self._params(model)
-        name = "term_" + "".join(c if c.isalnum() else "_" for c in self.label)
-        self._fn = ca.Function(name, [X, V, P], [val, ca.gradient(val, X), ca.gradient(val, V)])
-        self._sym = ca.Function(name + "_value", [X, V, P], [val])
+        P = ca.SX.sym("P", out._params(model).size)
+        val = out._expr(X, V, P, model)
+        out._p = out._params(model)
+        name = "term_" + "".join(c if c.isalnum() else "_" for c in out.label)
+        out._fn = ca.Function(name, [X, V, P], [val, ca.gradient(val, X), ca.gradient(val, V)])
+        out._sym = ca.Function(name + "_value", [X, V, P], [val])
+        return out
+
+    def marker(self) -> Marker | None:
+        """What this (bound) term shows at its frame, or None if it has nothing to show."""
+        return None
 
     def accumulate(self, traj, gx, gv) -> float:
         """Add this term's state derivative into ``gx, gv``; return its value."""
@@ -196,9 +211,20 @@ class StateKeyframe(StateTerm):
 
     def _check(self, model):
         self._idx = _agents(self.agents, model.n, self.label)
+        self._n = model.n
         shape = (self._idx.size, model.dim)
         self._x = _target(self.x, shape, self.label, "position")
         self._v = _target(self.v, shape, self.label, "velocity")
+
+    def marker(self):
+        """Every particle's target ("shape") or some particles' ("particles")."""
+        if self._x is None:
+            return None
+        if np.unique(self._idx).size == self._n:
+            shape = np.empty((self._n, self._x.shape[1]))
+            shape[self._idx] = self._x
+            return Marker(self.label, self.frame, "shape", shape)
+        return Marker(self.label, self.frame, "particles", self._x, self._idx)
 
     def _params(self, model):
         zeros = np.zeros((self._idx.size, model.dim))
@@ -282,6 +308,9 @@ class CenterOfMassKeyframe(StateTerm):
         return 0.5 * (self.position_weight * ca.sumsqr(cx - P[:d])
                       + self.velocity_weight * ca.sumsqr(cv - P[d:]))
 
+    def marker(self):
+        return None if self._x is None else Marker(self.label, self.frame, "center", self._x)
+
     def center(self, traj, frame=None):
         return self._w @ traj.x[self.frame if frame is None else frame][self._idx]
 
@@ -321,6 +350,9 @@ class RegionTarget(StateTerm):
     def _expr(self, X, V, P, model):
         sd = self.shape.sd_function.map(self._idx.size)(X[:2, self._idx.tolist()])
         return 0.5 * self.weight * ca.sumsqr(ca.fmax(sd + self.margin, 0))
+
+    def marker(self):
+        return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx)
 
     def miss(self, traj):
         sd = self.shape.signed_distance(traj.x[self.frame][self._idx])
@@ -365,8 +397,9 @@ class TrajectoryTerm(_Addable):
     ``accumulate(traj, gx, gv)`` (its derivative added into every frame) and
     ``symbolic(X, V, dt, n)`` for frame n of the unrolled CasADi route."""
 
-    def bind(self, model, steps: int) -> None:
-        pass
+    def bind(self, model, steps: int) -> "TrajectoryTerm":
+        """The term checked against the system (a copy where it keeps what it found)."""
+        return self
 
 
 class StrainLimit(TrajectoryTerm):
@@ -397,11 +430,13 @@ class StrainLimit(TrajectoryTerm):
         """How many frames from frame 1 on count."""
         return sum(self.counts(n, traj.dt) for n in range(1, traj.x.shape[0]))
 
-    def bind(self, model, steps: int) -> None:
+    def bind(self, model, steps: int) -> "StrainLimit":
         springs = getattr(model, "springs", None)
         if springs is None:
             raise ValueError("StrainLimit needs a cloth (a model with springs)")
-        self._i, self._j, self._rest = springs.i, springs.j, springs.rest
+        out = copy.copy(self)
+        out._i, out._j, out._rest = springs.i, springs.j, springs.rest
+        return out
 
     def _excess(self, x):
         d = x[..., self._j, :] - x[..., self._i, :]

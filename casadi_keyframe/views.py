@@ -3,7 +3,9 @@
 A problem file passes one as ``ControlProblem(view=...)`` and the renderers in
 :mod:`casadi_keyframe.render` read it: :class:`FlockView` for a flock seen from above,
 :class:`ClothView` for a cloth in 3-D, :class:`BlendView` for fig. 6's blend drawn beside
-its source clips.  Plotting-free, so that a problem can hold one without importing matplotlib.
+its source clips.  Each keyframe term describes what it shows as a :class:`Marker`, which
+renderers and exporters draw without knowing the term's class.  Plotting-free, so that a
+problem can hold one without importing matplotlib.
 """
 from __future__ import annotations
 
@@ -14,6 +16,34 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .state import Trajectory
+
+
+MARKER_KINDS = ("shape", "particles", "center", "outline")
+
+
+@dataclass(frozen=True)
+class Marker:
+    """What a keyframe term shows at its ``frame``, labelled ``label``.
+
+    ``kind`` is "shape" (a target for every particle: ``points`` is ``(n, dim)`` in particle
+    order, drawn with the surface's faces where the model has a surface), "particles" (targets
+    of some particles: ``points`` ``(k, dim)`` for ``particles``), "center" (a centre-of-mass
+    target: ``points`` ``(1, dim)``) or "outline" (a region: its closed 2-D outline).
+    """
+
+    label: str
+    frame: int
+    kind: str
+    points: np.ndarray
+    particles: np.ndarray | None = None
+
+    def __post_init__(self):
+        if self.kind not in MARKER_KINDS:
+            raise ValueError(f"a marker's kind is one of {MARKER_KINDS}, got {self.kind!r}")
+        points = np.array(np.atleast_2d(self.points), dtype=float)
+        points.flags.writeable = False
+        object.__setattr__(self, "points", points)
+        object.__setattr__(self, "frame", int(self.frame))
 
 
 @dataclass(frozen=True)

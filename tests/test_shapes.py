@@ -49,7 +49,7 @@ def _term(shape, points, margin):
     """A region term bound to a flock of ``len(points)`` agents: value and x-gradient."""
     term = RegionTarget(0, shape, weight=1.5, margin=margin)
     model = FlockModel(np.ones(len(points)))
-    term.bind(model, 0)
+    term = term.bind(model, 0)
 
     def value_and_grad(x):
         traj = SimpleNamespace(x=[x], v=[np.zeros_like(x)])

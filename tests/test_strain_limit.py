@@ -18,7 +18,7 @@ def swing(**term):
 def test_zero_below_the_limit_and_its_derivative():
     model = ClothModel.grid(4, 4)
     term = StrainLimit(limit=1.05, weight=10.0)
-    term.bind(model, 3)
+    term = term.bind(model, 3)
     rng = np.random.default_rng(0)
     x = model.rest_positions[None] + np.zeros((4, 1, 1))
     rest = Trajectory(x.copy(), np.zeros_like(x), 0.1)
@@ -41,9 +41,8 @@ def test_until_counts_the_frames_up_to_a_time_only():
     model = ClothModel.grid(4, 4)
     x = model.rest_positions[None] + 0.08 * np.random.default_rng(2).standard_normal((7, 16, 3))
     traj = Trajectory(x, np.zeros_like(x), 0.1)
-    early, every = StrainLimit(weight=10.0, until=0.3), StrainLimit(weight=10.0)
-    for term in (early, every):
-        term.bind(model, 6)
+    early, every = (StrainLimit(weight=10.0, until=0.3).bind(model, 6),
+                    StrainLimit(weight=10.0).bind(model, 6))
     head = Trajectory(x[:4], np.zeros_like(x[:4]), 0.1)  # frames 0..3: t <= 0.3 s
     assert early.value(traj) == pytest.approx(every.value(head)) and early.value(traj) > 0
     gx, gv = np.zeros_like(x), np.zeros_like(x)

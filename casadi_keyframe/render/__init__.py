@@ -2,7 +2,7 @@
 
 ``animate`` writes a GIF and ``snapshot`` a PNG of small multiples at the keyframes, each
 handing over by problem kind: a blend between source clips to :mod:`.blend` (the clips and
-the blend side by side), a cloth (a model with ``faces``) to :mod:`.cloth` (3-D), a flock to
+the blend side by side), a cloth (a model with a surface) to :mod:`.cloth` (3-D), a flock to
 :mod:`.flock` (seen from above).  ``convergence`` writes a PNG of the optimizer's history.
 All draw with the Agg backend, close their figures and write each file whole or not at all
 (:mod:`.frames`).
@@ -10,6 +10,7 @@ All draw with the Agg backend, close their figures and write each file whole or 
 import matplotlib
 
 matplotlib.use("Agg")  # before any submodule imports pyplot
+from ..models.base import Surface  # noqa: E402
 from ..views import BlendView  # noqa: E402
 from . import blend, cloth, flock  # noqa: E402
 from .convergence import convergence  # noqa: E402
@@ -23,7 +24,7 @@ def renderer(problem):
     """The module that draws ``problem``: blend, cloth or flock."""
     if isinstance(problem.view, BlendView):
         return blend
-    if hasattr(problem.model, "faces"):
+    if isinstance(problem.model, Surface):
         return cloth
     return flock
 

@@ -77,7 +77,7 @@ def panel_box(problem, trajectory, panel: str, ks) -> Box:
     frames = [shown(problem, trajectory, panel, k) for k in ks]
     points = [s.x for s in frames]
     if panel == "blend":
-        points += [np.atleast_2d(t.position_target) for t in targets(problem)]
+        points += [m.points for m in targets(problem)]
     bodies = [[body_geometry(b, s.t) for b in s.model.colliders] for s in frames]
     return Box(points, bodies)
 

@@ -23,7 +23,6 @@ from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from ..geometry import body_geometry, capsule_grid, circle, plane_patch
-from ..objectives import StateKeyframe
 from ..views import ClothView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
@@ -117,7 +116,7 @@ class Box:
         """The box over all frames of a cloth problem's ``trajectory`` (and of ``more``
         trajectories of it), its targets, its ring and its colliders."""
         pts = [np.asarray(t.x).reshape(-1, 3) for t in (trajectory, *more)]
-        pts += [np.atleast_2d(t.position_target)[:, :3] for t in targets(problem)]
+        pts += [m.points[:, :3] for m in targets(problem)]
         ring = view_of(problem, ClothView).ring
         if ring:
             pts.append(circle(ring.center, ring.normal, ring.radius))
@@ -137,14 +136,15 @@ def same_scale(boxes: list) -> list:
 
 
 def targets(problem) -> list:
-    """The problem's terms with a position target (a RegionTarget, 2-D, has none)."""
-    return [t for t in problem.objective_terms.state_terms if t.position_target is not None]
+    """The markers of the problem's keyframes that have a position in space (a region's
+    outline, 2-D, has none)."""
+    return [m for m in problem.objective_terms.markers() if m.kind != "outline"]
 
 
 class ClothPanel:
     """One 3-D axes over fixed limits ``box`` seen from ``view``'s camera, with a
     centre-of-mass ``path`` and the view's ring drawn once; :meth:`show` draws one frame's
-    cloth and colliders, :meth:`show_targets` the keyframe ``terms`` due next."""
+    cloth and colliders, :meth:`show_targets` the keyframe markers ``terms`` due next."""
 
     def __init__(self, ax, model, box: Box, view: ClothView, *, path=None, terms=()):
         self.ax, self.model, self.box, self.ring = ax, model, box, view.ring
@@ -166,8 +166,7 @@ class ClothPanel:
     @property
     def marked(self) -> np.ndarray:
         """The model's pinned and attached particles, drawn as dots."""
-        return np.concatenate([np.asarray(self.model.pinned, int)]
-                              + [a.particles for a in self.model.attachments]).astype(int)
+        return self.model.prescribed_particles()
 
     def show(self, model, x, t: float, color=CLOTH):
         """Replace the frame's artists with ``model``'s cloth at positions ``x`` shaded
@@ -214,11 +213,11 @@ class ClothPanel:
                 self._add(Poly3DCollection([patch], facecolors=(0.5, 0.5, 0.5, 0.12),
                                            edgecolors=(0.4, 0.4, 0.4, 0.4), zorder=0))
 
-    def is_shape(self, term) -> bool:
-        """Whether ``term`` targets every particle's position, drawn as a wireframe (other
+    @staticmethod
+    def is_shape(marker) -> bool:
+        """Whether ``marker`` targets every particle's position, drawn as a wireframe (other
         targets are crosses)."""
-        return (isinstance(term, StateKeyframe)
-                and np.unique(term.particles).size == self.model.n)
+        return marker.kind == "shape"
 
     def show_targets(self, n: int):
         """Add the targets of the terms at the current or next keyframe (faded before it)."""
@@ -227,11 +226,10 @@ class ClothPanel:
         ahead = [t.frame for t in self.terms if t.frame >= n]
         frame = min(ahead) if ahead else max(t.frame for t in self.terms)
         alpha = 1.0 if frame == n else 0.35
-        for term in (t for t in self.terms if t.frame == frame):
-            target = np.atleast_2d(term.position_target)
-            if self.is_shape(term):
-                shape = np.empty((self.model.n, 3))
-                shape[term.particles] = target
+        for marker in (t for t in self.terms if t.frame == frame):
+            target = marker.points
+            if self.is_shape(marker):
+                shape = target
                 # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
                 lw = min(0.4, 120 / len(self.model.faces))
                 self._add(Poly3DCollection(shape[self.model.faces], facecolors="none", lw=lw,

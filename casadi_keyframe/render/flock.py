@@ -17,7 +17,6 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.patches import Polygon
 
-from ..objectives import CenterOfMassKeyframe, RegionTarget, StateKeyframe
 from ..views import FlockView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
@@ -34,11 +33,10 @@ class FlockPanel:
         self.ax, self.traj = ax, traj
         self.name = problem.name if name is None else name
         self.xy = np.asarray(traj.x)[:, :, :2]
-        terms = problem.objective_terms.state_terms
-        self.coms = sorted((t for t in terms if isinstance(t, CenterOfMassKeyframe)
-                            and t.position_target is not None), key=lambda t: t.frame)
-        self.regions = [t for t in terms if isinstance(t, RegionTarget)]
-        self.states = [t for t in terms if isinstance(t, StateKeyframe) and t.position_target is not None]
+        markers = problem.objective_terms.markers()
+        self.coms = sorted((m for m in markers if m.kind == "center"), key=lambda m: m.frame)
+        self.regions = [m for m in markers if m.kind == "outline"]
+        self.states = [m for m in markers if m.kind in ("shape", "particles")]
         self.com = mass_centers(problem.model.masses, self.xy)
         self.hl = np.zeros(self.xy.shape[1], bool)
         self.hl[list(view_of(problem, FlockView).highlight)] = True
@@ -48,8 +46,7 @@ class FlockPanel:
 
     def _limits(self):
         pts = np.vstack([self.xy.reshape(-1, 2), self.com]
-                        + [np.atleast_2d(t.position_target)[:, :2] for t in self.coms + self.states]
-                        + [t.shape.outline() for t in self.regions])
+                        + [m.points[:, :2] for m in self.coms + self.states + self.regions])
         lo, hi = pts.min(0), pts.max(0)
         pad = 0.06 * max(hi - lo) + 0.3
         self.ax.set_xlim(lo[0] - pad, hi[0] + pad)
@@ -62,22 +59,22 @@ class FlockPanel:
         ax = self.ax
         self.patches = []
         for t in self.regions:
-            out = t.shape.outline()
+            out = t.points[:, :2]
             patch = Polygon(out, closed=True, lw=1, ec=REGION, fc=REGION, zorder=1)
             top = (out[:, 0].min() + out[:, 0].max()) / 2, out[:, 1].max()
             label = ax.text(*top, f"n={t.frame}", color=REGION, fontsize=7, ha="center",
                             va="bottom")
             self.patches.append((t, ax.add_patch(patch), label))
         if self.coms:
-            path = np.array([t.position_target[:2] for t in self.coms])
+            path = np.array([m.points[0, :2] for m in self.coms])
             ax.plot(path[:, 0], path[:, 1], "--", color=COM, lw=0.8, alpha=0.6, zorder=2)
             self.com_marks = ax.scatter(path[:, 0], path[:, 1], marker="x", c=COM, s=40,
                                         zorder=3)
         self.com_line = ax.plot([], [], "-", color=COM, lw=1.0, alpha=0.5, zorder=2)[0]
         self.com_dot = ax.plot([], [], "P", color=COM, ms=8, mec="white", mew=0.8,
                                zorder=6)[0]
-        self.state_marks = [ax.scatter(*t.position_target[:, :2].T, s=60, facecolors="none",
-                                       edgecolors=PARTICLE, zorder=4) for t in self.states]
+        self.state_marks = [ax.scatter(*m.points[:, :2].T, s=60, facecolors="none",
+                                       edgecolors=PARTICLE, zorder=4) for m in self.states]
         self.trails = ax.add_collection(LineCollection([], lw=0.8, zorder=2))
         self.dots = ax.scatter(*self.xy[0, ~self.hl].T, s=12, c=AGENT, zorder=5, lw=0)
         self.hdots = ax.scatter(*self.xy[0, self.hl].T, s=45, c=HIGHLIGHT, ec="black",

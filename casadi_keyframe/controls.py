@@ -13,6 +13,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
+from .models.base import Surface
+
 
 def resample_steps(values, steps: int) -> np.ndarray:
     """Per-step values ``(old_steps, ...)`` carried to ``steps`` equal steps of the same horizon.
@@ -63,12 +65,12 @@ class Controls:
 
     def metric(self, model, dt: float):
         """The :class:`~.metrics.SmoothingMetric` the optimizer searches in (None without
-        smoothing).  Space smoothing needs a mesh (``model.faces``)."""
+        smoothing).  Space smoothing needs a mesh (a model with a surface)."""
         from .metrics import SmoothingMetric, mesh_laplacian, path_laplacian
 
         space = time = None
         if self.smoothing:
-            if getattr(model, "faces", None) is None:
+            if not isinstance(model, Surface):
                 raise ValueError("smoothing over space needs a mesh (a cloth); for a flock use "
                                  "time_smoothing")
             laplacian = mesh_laplacian(model.faces, model.rest_positions, self.idx)

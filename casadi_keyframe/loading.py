@@ -169,14 +169,26 @@ def load_problem(problem, **overrides) -> ControlProblem:
     return build_problem(load_module(problem), **overrides)
 
 
+@dataclass(frozen=True)
+class ProblemSource:
+    """Where a problem came from: its loaded problem file and the overrides it was built with."""
+
+    module: object
+    overrides: dict
+
+    def build(self, **more) -> ControlProblem:
+        """The problem built again with ``more`` overrides over the ones it had."""
+        return build_problem(self.module, **{**self.overrides, **more})
+
+
 def build_problem(module, **overrides) -> ControlProblem:
     """The problem of an already loaded problem file, ``overrides`` checked first; it can be
-    rebuilt with more overrides (:meth:`ControlProblem.at_resolution`)."""
+    rebuilt with more overrides (its :class:`ProblemSource`,
+    :meth:`ControlProblem.at_resolution`)."""
     prob = module.build(**check_overrides(module, overrides))
     if not isinstance(prob, ControlProblem):
         raise TypeError(f"{module.__file__}: build() must return a ControlProblem")
-    prob.rebuild = lambda **more: build_problem(module, **{**overrides, **more})
-    return prob
+    return prob.with_source(ProblemSource(module, dict(overrides)))
 
 
 def solve_defaults(module) -> dict:

@@ -7,6 +7,7 @@ import casadi as ca
 import numpy as np
 
 from .controls import Controls, resample_steps
+from .models.base import PhysicalReport
 from .objectives import Objective
 from .simulate import simulate
 from .state import Trajectory
@@ -19,12 +20,15 @@ class ControlProblem:
     ``x0, v0`` are ``(particles, dim)``; ``external`` is an optional stored force per step
     ``(steps, particles, dim)`` that is not optimised (the flock's wander, gravity).
     ``view`` says what pictures show beyond the model and keyframes (:mod:`.views`).
-    ``guess`` is an optional starting point for the optimizer (flat controls).
+    ``guess`` is an optional starting point for the optimizer (flat controls).  ``source``
+    is where the problem came from, when it was built from a problem file: an object whose
+    ``build(**overrides)`` builds it again with more overrides
+    (:class:`~casadi_keyframe.loading.ProblemSource`, see :meth:`at_resolution`).
     """
 
     def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
                  controls: Controls, objective, external=None, name: str = "problem",
-                 view: View | None = None, guess=None, scene=None):
+                 view: View | None = None, guess=None, source=None, scene=None):
         if not (isinstance(steps, (int, np.integer)) and steps >= 1):
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -50,7 +54,7 @@ class ControlProblem:
         self._control_fn = self._compile_control_terms()
         self.view = checked_view(view, scene)
         self._guess = None if guess is None else self.controls.check(guess).copy()
-        self.rebuild = None  # build(**overrides) of the problem file, set by build_problem
+        self.source = source
 
     # -- the simulation ------------------------------------------------------------------
     @property
@@ -97,17 +101,28 @@ class ControlProblem:
         e.g. ``rows=12, cols=12`` for a coarser mesh of the same cloth (``solve``'s
         ``resolutions``).  Only a problem as built from its file knows how: a problem changed
         since (``with_objective``, ``resampled``, ...) raises ValueError."""
-        if self.rebuild is None:
+        if self.source is None:
             raise ValueError(f"{self.name}: this problem was not built from a problem file, or "
                              "was changed since (with_objective, with_guess, resampled), so it "
                              "cannot be rebuilt at another resolution; build the coarser "
                              "problems yourself and pass them as resolutions")
-        return self.rebuild(**overrides)
+        return self.source.build(**overrides)
+
+    def with_source(self, source) -> "ControlProblem":
+        """The same problem, everything shared, recorded as built from ``source``."""
+        out = copy.copy(self)
+        out.source = source
+        return out
 
     def with_objective(self, objective) -> "ControlProblem":
         """The same problem (model, integrator, start, controls, view, guess shared) with
         another objective, e.g. a keyframe with a shifted target or a stiffer weight."""
         return self._rebuilt(objective=objective)
+
+    def with_controls(self, controls: Controls) -> "ControlProblem":
+        """The same problem with other controls (e.g. initial velocities instead of step
+        forces); the guess is dropped (it was for the old controls)."""
+        return self._rebuilt(controls=controls, guess=None)
 
     def with_guess(self, guess) -> "ControlProblem":
         """The same problem starting the optimizer from ``guess`` (flat controls), e.g.
@@ -220,7 +235,7 @@ class ControlProblem:
         out = {"objective": keyframe + control, "keyframe_error": keyframe,
                "control_cost": control, "control_norm": float(np.linalg.norm(u)),
                "misses": [t.miss(traj) for t in self.objective_terms.state_terms]}
-        if hasattr(self.model, "physical_report"):
+        if isinstance(self.model, PhysicalReport):
             out["physical"] = self.model.physical_report(traj.x, traj.dt)
         return out
 

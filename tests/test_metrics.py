@@ -12,13 +12,13 @@ from casadi_keyframe.optimize import _InMetric
 
 def toss(**controls):
     prob = load_problem("cloth_toss", rows=5, cols=5, steps=12)
-    return prob._rebuilt(controls=InitialVelocity(**controls))
+    return prob.with_controls(InitialVelocity(**controls))
 
 
 def shapes(**controls):
     prob = load_problem("cloth_shapes", rows=4, cols=4, steps=12)
     agents = prob.controls.agents
-    return prob._rebuilt(controls=StepForces(agents=agents, **controls))
+    return prob.with_controls(StepForces(agents=agents, **controls))
 
 
 @pytest.mark.parametrize("build, options", [
@@ -80,6 +80,6 @@ def test_refusals():
     with pytest.raises(ValueError, match="controls per step"):
         toss(time_smoothing=0.1)
     flock = load_problem("flock_path", agents=5, steps=20)
-    flock = flock._rebuilt(controls=StepForces(smoothing=0.5))
+    flock = flock.with_controls(StepForces(smoothing=0.5))
     with pytest.raises(ValueError, match="needs a mesh"):
         flock.controls.metric(flock.model, flock.dt)

@@ -34,7 +34,7 @@ from ..state import check_state
 class Model(abc.ABC):
     """A system of ``n`` particles of ``masses`` (kg) in ``dim`` dimensions.
 
-    Members every model gives:
+    Members every model gives (``colliders``, the bodies it touches, defaults to none):
 
     * ``forces(x, v, t, interactions)``: the total force, ``(n, dim)`` N;
     * ``symbolic_forces(X, V, S)``: the same as a CasADi expression (all interactions);
@@ -51,6 +51,7 @@ class Model(abc.ABC):
     n: int
     dim: int
     masses: np.ndarray
+    colliders: tuple = ()  # the analytic bodies the system touches
 
     @abc.abstractmethod
     def forces(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
@@ -72,6 +73,10 @@ class Model(abc.ABC):
     def free_mask(self) -> np.ndarray:
         """Flat bool mask over the ``n * dim`` components: False where prescribed."""
         return np.ones(self.n * self.dim, bool)
+
+    def prescribed_particles(self) -> np.ndarray:
+        """Indices of the particles with a prescribed component (pinned, attached)."""
+        return np.flatnonzero(~self.free_mask().reshape(self.n, self.dim).all(axis=1))
 
     def prescribed_velocity(self, x: np.ndarray, t: float, dt: float) -> np.ndarray:
         """``(n, dim)`` velocities of the prescribed components at the end of the step from
@@ -150,6 +155,10 @@ class BlockJacobians(ForceJacobians):
 
 class PhysicalReport(abc.ABC):
     """Whether a motion stays physical."""
+
+    @abc.abstractmethod
+    def max_stretch(self, x: np.ndarray) -> float:
+        """The largest spring length over rest length at positions ``x`` (1 at rest)."""
 
     @abc.abstractmethod
     def physical_report(self, x: np.ndarray, dt: float) -> dict:

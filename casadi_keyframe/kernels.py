@@ -180,6 +180,18 @@ class _Chunk:
                 r[lo:lo + count] = self.out_stage[j][:count]
 
 
+def _dense_outputs(kernel: ca.Function) -> ca.Function:
+    """``kernel`` with every output dense: a buffer holds an output's nonzeros only, and an
+    output that is structurally sparse (a constant damping block, say) would otherwise fill
+    the rows of its numpy array in the wrong places."""
+    if all(kernel.sparsity_out(j).is_dense() for j in range(kernel.n_out())):
+        return kernel
+    args = kernel.sx_in()
+    outs = kernel.call(args)
+    return ca.Function(kernel.name(), args, [ca.densify(o) for o in outs],
+                       kernel.name_in(), kernel.name_out())
+
+
 class MappedKernel:
     """Evaluate ``kernel`` over P interactions given as ``(P, k_i)`` arrays.
 
@@ -196,7 +208,7 @@ class MappedKernel:
         for i in range(kernel.n_in()):
             if kernel.size2_in(i) != 1:
                 raise ValueError(f"kernel input {i} must be a column vector")
-        self.kernel = kernel
+        self.kernel = _dense_outputs(kernel)
         self.jit = jit_available() if jit is None else jit
         self._chunks: list[_Chunk] = []
         self.n_out = kernel.n_out()

@@ -9,7 +9,7 @@ from casadi_keyframe.models.flock import PairTape, pair_kernels
 from casadi_keyframe import problem as problem_module
 from casadi_keyframe.simulate import backward, simulate
 from casadi_keyframe.state import Trajectory
-from conftest import small_flock
+from helpers import small_flock
 
 
 def random_state(n, dim, seed=0, size=8.0):
@@ -82,6 +82,19 @@ def test_mapped_kernel_jit_equals_virtual_machine_and_plain_call():
     np.testing.assert_allclose(vm, plain, atol=1e-14)
     if jit_available():
         np.testing.assert_allclose(MappedKernel(force, jit=True)(d, dv)[0], vm, atol=1e-12)
+
+
+def test_mapped_kernel_writes_a_structurally_sparse_output_densely():
+    """A buffer holds an output's nonzeros only: a constant diagonal block must still land
+    on the diagonal (it filled every entry before outputs were made dense)."""
+    x, c = ca.SX.sym("x", 3), ca.SX.sym("c")
+    kernel = ca.Function("damping", [x, c], [ca.reshape(-c * ca.SX.eye(3), 9, 1), x * c])
+    assert not kernel.sparsity_out(0).is_dense()
+    xs, cs = np.random.default_rng(6).standard_normal((5, 3)), np.full((5, 1), 0.2)
+    for jit in (False, True) if jit_available() else (False,):
+        block, scaled = MappedKernel(kernel, jit=jit)(xs, cs)
+        np.testing.assert_array_equal(block, np.tile(-0.2 * np.eye(3).ravel(), (5, 1)))
+        np.testing.assert_allclose(scaled, 0.2 * xs)
 
 
 def test_mapped_kernel_rejects_wrong_shapes():

@@ -4,27 +4,11 @@ Per-step control forces on every particle; the keyframe at the last frame asks f
 rolled into a half cylinder of the same arc length, its two ends on the ground, at rest.  The
 optimizer starts from forces that carry the sheet's weight: from zero forces a sheet resting
 on the ground must first outweigh the contact before it moves at all, so its gradient there
-is almost zero (measured: L-BFGS-B stalls with the sheet flat).
-
-The default gradient is the exact hand adjoint of the linearized step.  The sheet lies in
-stiff contact with the ground and bends through compressed springs, where the paper's
-swapped adjoint is poor (6 x 6 sheet, 40 steps: cosine to the exact gradient 0.68 at random
-0.01 N perturbations of the start, 0.46 at 0.03 N; L-BFGS-B stops with the line search
-failing at an 8.0 cm root-mean-square miss, against 1.3 cm with the exact adjoint).
-``--gradient swapped`` runs the paper's method.
-
-At the default 15 x 15 (``benchmarks/cloth_figures.py``, one BLAS thread; rms miss over the
-225 particles, largest spring stretch, iterations, CPU seconds):
-
-    =================  ========  =======  ==========  =====
-    route              rms miss  stretch  iterations  CPU s
-    =================  ========  =======  ==========  =====
-    exact adjoint      5.9 mm    1.01     58          38
-    swapped (paper's)  44.8 mm   1.01     38          27
-    =================  ========  =======  ==========  =====
-
-Both stop on L-BFGS-B's relative-reduction test.  Coarse to fine (8 x 8 first) ended
-7.5 mm off: no better than the direct solve here, so ``SOLVE`` does not ask for it.
+is almost zero.  The default gradient is the exact hand adjoint of the linearized step: the
+sheet lies in stiff contact and bends through compressed springs, where the paper's swapped
+adjoint is poor (``--gradient swapped`` runs it).  Coarse to fine did no better than the
+direct solve here, so ``SOLVE`` does not ask for it.  Measurements behind these choices:
+``docs/problem_notes.md``.
 """
 import numpy as np
 

@@ -5,22 +5,10 @@ Per-step control forces on the free particles; each keyframe gives every particl
 Passive, the sheet hangs exactly in its plane (compressed across its width as it sags), so
 the solve starts on a flat state; the cloth model's Choi-Ko law keeps the gradient there
 meaningful (see :mod:`casadi_keyframe.models.springs`).  The wave keeps each row's length
-(:func:`~casadi_keyframe.scenes.cloths.wave_across`): a sine laid over the rest positions
-asked the bottom row to stretch 1.59 times, so no physical motion came nearer than 3.4 cm
-rms.  ``SOLVE`` first solves a 6 x 6 sheet of the same cloth (``resolutions``), whose
-forces, carried to the finer mesh, start its search.
-
-Which gradient gets there (12 x 12, ``benchmarks/cloth_figures.py``, one BLAS thread; rms
-miss of each keyframe, largest spring stretch, iterations on each mesh, CPU seconds):
-
-    =================  ===========================  =======  ==========  =====
-    route              rms miss (frames 40/80/120)  stretch  iterations  CPU s
-    =================  ===========================  =======  ==========  =====
-    exact adjoint      2.4 / 12.1 / 2.5 mm          1.16     92 + 26     51
-    swapped (paper's)  19 / 58 / 23 mm              1.16     15 + 16     37
-    =================  ===========================  =======  ==========  =====
-
-The swapped search ends with L-BFGS-B's line search failing on the 12 x 12 sheet.
+(:func:`~casadi_keyframe.scenes.cloths.wave_across`), so a physical motion can reach it.
+``SOLVE`` first solves a 6 x 6 sheet of the same cloth (``resolutions``), whose forces,
+carried to the finer mesh, start its search.  Measurements behind these choices:
+``docs/problem_notes.md``.
 """
 import numpy as np
 

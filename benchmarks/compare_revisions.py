@@ -17,8 +17,9 @@ BLAS/OpenMP thread, and one kernel cache shared by both sides (``CASADI_KEYFRAME
 ``--cache``, else the variable's value, else a temporary folder removed afterwards).  Kernels
 are named by their content, so sharing is safe and a kernel is compiled at most once.
 
-The script's table is parsed generically: a row is a line whose first token is a key (the
-size) and whose other tokens are numbers or placeholders such as ``-``; the header is the
+The script's table is parsed generically: a row is a line whose first tokens are a key (the
+size, and any words after it such as a solver's name) and whose other tokens are numbers or
+placeholders such as ``-``; the header is the
 last other line before the first row.  Numeric columns are taken by position; a column is
 named by the header text above it when the two line up character by character, else only by
 its index.  The output lists, per row and numeric column, the median over rounds before and
@@ -60,9 +61,18 @@ def number(tok: str):
         return None
 
 
+def key_length(toks: list[str]) -> int:
+    """How many leading tokens name a row: the first and any words after it ("50x50 auto")."""
+    k = 1
+    while k < len(toks) and number(toks[k]) is None and any(c.isalnum() for c in toks[k]):
+        k += 1
+    return k
+
+
 def is_row(toks: list[str]) -> bool:
-    """A key followed by numbers and placeholders (tokens with no letter or digit)."""
-    rest = toks[1:]
+    """A key (one or more words) followed by numbers and placeholders (tokens with no letter
+    or digit)."""
+    rest = toks[key_length(toks):]
     return (len(rest) >= 1 and any(number(t) is not None for t in rest)
             and all(number(t) is not None or not any(c.isalnum() for c in t) for t in rest))
 
@@ -104,7 +114,7 @@ def parse(stdout: str) -> tuple[dict[str, list], list[str]]:
             continue
         if not names:
             names = column_names(header, line)
-        rows[toks[0]] = [number(t) for t in toks]
+        rows[" ".join(toks[:key_length(toks)])] = [number(t) for t in toks]
     return rows, names
 
 
@@ -127,7 +137,7 @@ def run(label: str, checkout: Path, script: list[str], cache: str) -> dict:
     if not rows:
         sys.exit(f"{label}: no table rows found in the output:\n{p.stdout}")
     return {"rows": rows, "names": names, "cpu": cpu, "wall": wall, "stdout": p.stdout,
-            "imported": imported[0] if imported else None}
+            "imported": imported[0] if imported and imported[0] != "None" else None}
 
 
 def fmt(x: float) -> str:
@@ -209,7 +219,10 @@ def main():
                 res = run(label, checkouts[label], script, cache)
                 if not runs[label]:
                     print(f"{label} imported {res['imported']}")
-                    if not (res["imported"] or "").startswith(str(checkouts[label]) + os.sep):
+                    if res["imported"] is None:  # the script imports it in its own children
+                        print(f"{label}: the script itself imported no casadi_keyframe; its "
+                              "subprocesses inherit PYTHONPATH = the checkout")
+                    elif not res["imported"].startswith(str(checkouts[label]) + os.sep):
                         sys.exit(f"{label} did not import casadi_keyframe from its checkout")
                 elif res["imported"] != runs[label][0]["imported"]:
                     sys.exit(f"{label} imported {res['imported']} in round {r + 1}")

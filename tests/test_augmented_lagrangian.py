@@ -102,7 +102,7 @@ def test_a_problem_without_state_keyframe_is_refused():
 
 
 def test_the_rounds_stop_at_an_interrupt_or_the_time_limit_and_say_so():
-    from conftest import InterruptAfter
+    from helpers import InterruptAfter
 
     from casadi_keyframe.optimize import INTERRUPTED, LIMIT
 

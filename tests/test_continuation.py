@@ -12,7 +12,7 @@ from casadi_keyframe.integrators import LinearizedBackwardEuler, SymplecticEuler
 from casadi_keyframe.models import FlockModel, FlockParams, wander_forces
 from casadi_keyframe.shapes import square
 
-from conftest import InterruptAfter
+from helpers import InterruptAfter
 
 FREE = FlockParams(avoid_strength=0.0, match_strength=0.0, center_strength=0.0)
 

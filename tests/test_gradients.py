@@ -4,7 +4,7 @@ import pytest
 
 from casadi_keyframe import FiniteDifference, InitialVelocity, StepForces
 
-from conftest import small_flock
+from helpers import small_flock
 
 
 def rel(a, b):

@@ -1,9 +1,11 @@
 """Every study notebook runs from top to bottom in quick mode (CASADI_KEYFRAME_QUICK=1)."""
 from pathlib import Path
 
-import nbformat
 import pytest
-from nbclient import NotebookClient
+
+nbformat = pytest.importorskip("nbformat", reason="the notebooks need the test extra: "
+                               "pip install -e '.[test]'")
+NotebookClient = pytest.importorskip("nbclient").NotebookClient
 
 NOTEBOOKS = sorted((Path(__file__).parent.parent / "notebooks").glob("*.ipynb"))
 

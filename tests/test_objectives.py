@@ -8,7 +8,7 @@ from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel
 from casadi_keyframe.shapes import Box, Disc, cross, square
 
-from conftest import small_flock
+from helpers import small_flock
 
 
 def test_shape_signed_distances():

@@ -12,7 +12,7 @@ from casadi_keyframe import Adjoint, SimulationError, load_problem, solve
 from casadi_keyframe.io import Checkpoint, read_run
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
 
-from conftest import InterruptAfter
+from helpers import InterruptAfter
 
 
 @pytest.fixture(scope="module")

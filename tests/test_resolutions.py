@@ -11,7 +11,7 @@ from casadi_keyframe import load_problem, solve
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.transfer import _closest_on_triangles, carry_to_mesh, mesh_interpolation
 
-from conftest import InterruptAfter
+from helpers import InterruptAfter
 
 
 def test_closest_points_match_a_dense_search():

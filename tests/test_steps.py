@@ -17,7 +17,7 @@ from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models import Attachment
 from casadi_keyframe.models.colliders import Contact, Plane, Sphere
 from casadi_keyframe.simulate import backward, simulate
-from conftest import small_flock
+from helpers import small_flock
 
 
 def cloth_scene():

@@ -64,7 +64,7 @@ class Controls:
     def metric(self, model, dt: float):
         """The :class:`~.metrics.SmoothingMetric` the optimizer searches in (None without
         smoothing).  Space smoothing needs a mesh (``model.faces``)."""
-        from .metrics import SmoothingMetric, mesh_laplacian, path_laplacian
+        from .optimize.metrics import SmoothingMetric, mesh_laplacian, path_laplacian
 
         space = time = None
         if self.smoothing:

@@ -57,7 +57,7 @@ cloth's earlier strut-like compression law, before issue 11 gave it the Choi-Ko 
     tracking guess (default), then L-BFGS-B    4e-7 m    stretch 1.07   0
 
 So from zero forces IPOPT gets closest, then the augmented Lagrangian
-(:func:`casadi_keyframe.augmented_lagrangian.solve_augmented`), and every one of them tears
+(:func:`casadi_keyframe.optimize.solve_augmented`), and every one of them tears
 the cape on the way: forces of the size that lands it stretch springs 2-4 times and push
 cloth into the body.  (On the full 26 x 16 cape: IPOPT 2.8 cm rms, 4.7 % of the width, in 59
 iterations, stretch 2.84; three rounds of multipliers 0.26 m.  With the Choi-Ko law and
@@ -79,7 +79,7 @@ below L-BFGS-B's stopping test.  It stops after 1-4 iterations, also with multip
 with the keyframe weights 100 times lower in a first round; IPOPT takes 31 and lowers the
 control cost by 0.4 % while leaving the keyframe 0.4 mm (8 x 6: control cost 0.0246 in
 every case).  Holding the landing as a constraint does it:
-:func:`casadi_keyframe.constrained.lower_effort` (quadratic steps on the last 12 steps'
+:func:`casadi_keyframe.optimize.lower_effort` (quadratic steps on the last 12 steps'
 forces, the keyframe's Jacobian from one adjoint sweep per component) lowers the 26 x 16
 guess's control cost from 0.0204 to 0.0158 (-22.8 %) in one kept step and 417 s of CPU,
 the landing 0.77 mm and 1.6 cm/s off over the free particles, stretch 1.13 and no particle

@@ -3,7 +3,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, Smoothness, StateKeyframe, StepForces
-from casadi_keyframe.augmented_lagrangian import solve_augmented
+from casadi_keyframe.optimize import solve_augmented
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.optimize import solve
 from casadi_keyframe.scenes.sheets import hanging_sheet

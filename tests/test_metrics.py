@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import InitialVelocity, StepForces, load_problem, solve
-from casadi_keyframe.metrics import mesh_laplacian
+from casadi_keyframe.optimize.metrics import mesh_laplacian
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.optimize import _InMetric
+from casadi_keyframe.optimize.search import _InMetric
 
 
 def toss(**controls):

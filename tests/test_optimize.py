@@ -153,7 +153,7 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
     """After progress, L-BFGS-B restarts once from its best point with no curvature memory:
     if not even that steepest-descent step lowers phi, the search has converged (to a kink
     or the round-off floor); a failure at the very first step stays a failure."""
-    import casadi_keyframe.optimize as optimize
+    import casadi_keyframe.optimize.search as optimize
     from scipy.optimize import OptimizeResult
 
     prob = load_problem("flock_path", agents=6, steps=20)

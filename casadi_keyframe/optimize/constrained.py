@@ -28,12 +28,13 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .adjoints import Adjoint
-from .controls import StepForces
-from .objectives import StateKeyframe
-from .optimize import CONVERGED, FAILED, LIMIT, Result
-from .simulate import backward
-from .state import SimulationError
+from ..adjoints import Adjoint
+from ..controls import StepForces
+from ..objectives import StateKeyframe
+from ..simulate import backward
+from ..state import SimulationError
+from .outcome import CONVERGED, FAILED, LIMIT
+from .search import Result
 
 
 class KeyframeConstraint:

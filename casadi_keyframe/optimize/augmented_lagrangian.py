@@ -1,4 +1,4 @@
-"""Hard keyframes by an augmented Lagrangian around :func:`~casadi_keyframe.optimize.solve`.
+"""Hard keyframes by an augmented Lagrangian around :func:`~.search.solve`.
 
 A keyframe weight w turns ``q_N = q*`` into a penalty, and the optimum of ``control cost +
 0.5 w |q_N - q*|^2`` misses by about (control cost's pull) / w.  Raising w shrinks the miss
@@ -17,9 +17,10 @@ import time
 
 import numpy as np
 
-from .adjoints import get_gradient
-from .objectives import Objective, StateKeyframe
-from .optimize import CONVERGED, INTERRUPTED, LIMIT, Result, evaluate_final, solve
+from ..adjoints import get_gradient
+from ..objectives import Objective, StateKeyframe
+from .outcome import CONVERGED, INTERRUPTED, LIMIT
+from .search import Result, evaluate_final, solve
 
 
 def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,

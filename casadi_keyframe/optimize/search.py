@@ -19,11 +19,11 @@ import numpy as np
 from scipy.optimize import minimize
 from tqdm.auto import tqdm
 
-from .adjoints import get_gradient
-from .interrupts import NAMES, Interrupted, catching, check, handled
-from .io import as_checkpoint
+from ..adjoints import get_gradient
+from ..interrupts import NAMES, Interrupted, catching, check, handled
+from ..io import as_checkpoint
+from ..state import SimulationError, Trajectory
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS, ipopt_outcome, lbfgsb_outcome
-from .state import SimulationError, Trajectory
 from .stages import carry, stage_name, stage_problems
 
 METHODS = ("lbfgsb", "ipopt")

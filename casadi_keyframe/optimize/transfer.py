@@ -14,7 +14,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .controls import InitialVelocity, StepForces
+from ..controls import InitialVelocity, StepForces
 
 def mesh_interpolation(vertices, faces, points) -> sp.csr_matrix:
     """``(len(points), len(vertices))`` barycentric weights of each point's closest point on

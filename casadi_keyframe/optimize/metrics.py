@@ -20,7 +20,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .models.cloth import mesh_edges
+from ..models.cloth import mesh_edges
 
 
 def mesh_laplacian(faces, positions, idx) -> sp.csc_matrix:

@@ -1,0 +1,18 @@
+"""The optimizer layer: :func:`solve` and what it is built from.
+
+* :mod:`.search`: :func:`solve`, one optimisation through its stages;
+* :mod:`.stages`: the problems a solve goes through, coarse to fine, and :mod:`.transfer`:
+  controls carried from one mesh of a cloth to another;
+* :mod:`.metrics`: the smooth metrics a search can run in;
+* :mod:`.outcome`: status codes and the methods' messages translated;
+* :mod:`.augmented_lagrangian`: :func:`solve_augmented`, hard keyframes in rounds;
+* :mod:`.constrained`: :func:`lower_effort`, less control effort with the keyframes held.
+"""
+from .augmented_lagrangian import solve_augmented
+from .constrained import lower_effort
+from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS
+from .search import METHODS, Result, solve
+from .stages import stage_problems
+
+__all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "STATUS", "Result",
+           "lower_effort", "solve", "solve_augmented", "stage_problems"]

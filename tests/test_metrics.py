@@ -7,7 +7,7 @@ import pytest
 from casadi_keyframe import InitialVelocity, StepForces, load_problem, solve
 from casadi_keyframe.optimize.metrics import mesh_laplacian
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.optimize.search import _InMetric
+from casadi_keyframe.optimize.evaluator import MetricView
 
 
 def toss(**controls):
@@ -46,7 +46,7 @@ def test_the_search_in_z_sees_the_same_objective_and_the_smoothed_gradient():
         return prob.objective_and_gradient(u)
 
     ev.interrupted, ev.best_u = None, None
-    seen = _InMetric(ev, metric)
+    seen = MetricView(ev, metric)
     z = 0.01 * np.random.default_rng(1).standard_normal(prob.size)
     f, g = seen(z)
     assert f == pytest.approx(prob.objective(metric.smooth(z)), rel=1e-12)

@@ -153,7 +153,7 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
     """After progress, L-BFGS-B restarts once from its best point with no curvature memory:
     if not even that steepest-descent step lowers phi, the search has converged (to a kink
     or the round-off floor); a failure at the very first step stays a failure."""
-    import casadi_keyframe.optimize.search as optimize
+    import casadi_keyframe.optimize.lbfgsb as lbfgsb
     from scipy.optimize import OptimizeResult
 
     prob = load_problem("flock_path", agents=6, steps=20)
@@ -168,11 +168,11 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
             return OptimizeResult(message="ABNORMAL: ", nit=nits[len(starts) - 1], nfev=3)
         return minimize
 
-    monkeypatch.setattr(optimize, "minimize", scripted([3, 0]))
+    monkeypatch.setattr(lbfgsb, "minimize", scripted([3, 0]))
     r = solve(prob, maxiter=50, quiet=True)
     assert len(starts) == 2 and np.array_equal(starts[1], r.x)  # restarted at the best
     assert r.status == CONVERGED and "no step along the steepest descent" in r.message
     starts.clear()
-    monkeypatch.setattr(optimize, "minimize", scripted([0, 0]))
+    monkeypatch.setattr(lbfgsb, "minimize", scripted([0, 0]))
     r = solve(prob, maxiter=50, quiet=True)
     assert len(starts) == 1 and r.status == FAILED

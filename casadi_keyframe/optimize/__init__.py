@@ -1,6 +1,9 @@
 """The optimizer layer: :func:`solve` and what it is built from.
 
 * :mod:`.search`: :func:`solve`, one optimisation through its stages;
+* :mod:`.result`: the :class:`Result` every search returns;
+* :mod:`.evaluator`: the memoised objective every method sees;
+* :mod:`.lbfgsb`, :mod:`.ipopt`: the search methods, one file each;
 * :mod:`.stages`: the problems a solve goes through, coarse to fine, and :mod:`.transfer`:
   controls carried from one mesh of a cloth to another;
 * :mod:`.metrics`: the smooth metrics a search can run in;
@@ -11,7 +14,8 @@
 from .augmented_lagrangian import solve_augmented
 from .constrained import lower_effort
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS
-from .search import METHODS, Result, solve
+from .result import Result
+from .search import METHODS, solve
 from .stages import stage_problems
 
 __all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "STATUS", "Result",

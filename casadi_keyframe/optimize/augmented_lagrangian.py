@@ -20,7 +20,9 @@ import numpy as np
 from ..adjoints import get_gradient
 from ..objectives import Objective, StateKeyframe
 from .outcome import CONVERGED, INTERRUPTED, LIMIT
-from .search import Result, evaluate_final, solve
+from .evaluator import evaluate_final
+from .result import Result
+from .search import solve
 
 
 def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,

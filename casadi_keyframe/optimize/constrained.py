@@ -34,7 +34,7 @@ from ..objectives import StateKeyframe
 from ..simulate import backward
 from ..state import SimulationError
 from .outcome import CONVERGED, FAILED, LIMIT
-from .search import Result
+from .result import Result
 
 
 class KeyframeConstraint:

@@ -3,7 +3,8 @@
 * :mod:`.search`: :func:`solve`, one optimisation through its stages;
 * :mod:`.result`: the :class:`Result` every search returns;
 * :mod:`.evaluator`: the memoised objective every method sees;
-* :mod:`.lbfgsb`, :mod:`.ipopt`: the search methods, one file each;
+* :mod:`.methods`: :data:`METHODS`, the table of search methods and their options;
+  :mod:`.lbfgsb`, :mod:`.ipopt`: the methods, one file each;
 * :mod:`.stages`: the problems a solve goes through, coarse to fine, and :mod:`.transfer`:
   controls carried from one mesh of a cloth to another;
 * :mod:`.metrics`: the smooth metrics a search can run in;
@@ -13,10 +14,11 @@
 """
 from .augmented_lagrangian import solve_augmented
 from .constrained import lower_effort
+from .methods import METHODS, Method
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS
 from .result import Result
-from .search import METHODS, solve
+from .search import solve
 from .stages import stage_problems
 
-__all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "STATUS", "Result",
-           "lower_effort", "solve", "solve_augmented", "stage_problems"]
+__all__ = ["CONVERGED", "FAILED", "INTERRUPTED", "LIMIT", "METHODS", "STATUS", "Method",
+           "Result", "lower_effort", "solve", "solve_augmented", "stage_problems"]

@@ -6,10 +6,16 @@ is kept referenced on the solver (one collected early makes IPOPT fail silently 
 ``Invalid_Number_Detected``), and ``stats()['return_status']`` says how it ended.
 
 ``options`` go to IPOPT over this module's defaults (limited-memory Hessian with 20 pairs,
-``max_iter``, ``tol``, silent).
+``max_iter``, ``tol``, silent).  Their names are IPOPT's own: IPOPT decides whether it
+knows a name (:func:`check_options` asks it before the search starts) and its option
+documentation gives the names to suggest (:func:`option_names`).
 """
 from __future__ import annotations
 
+import contextlib
+import functools
+import io
+import re
 import signal
 import time
 
@@ -18,6 +24,58 @@ import numpy as np
 
 from ..interrupts import Interrupted, catching
 from .outcome import ipopt_outcome
+
+
+def _made_with(ipopt_options: dict) -> tuple[str | None, str]:
+    """Make an IPOPT solver of a one-variable problem with these options (IPOPT reads and
+    checks its options then): ``(CasADi's error or None, what IPOPT printed)``."""
+    x = ca.MX.sym("x")
+    printed = io.StringIO()
+    try:
+        with contextlib.redirect_stdout(printed):  # CasADi prints through sys.stdout
+            ca.nlpsol("options", "ipopt", {"x": x, "f": x ** 2},
+                      {"ipopt": ipopt_options, "print_time": False})
+    except RuntimeError as err:
+        return str(err), printed.getvalue()
+    return None, printed.getvalue()
+
+
+@functools.cache
+def option_names() -> tuple[str, ...]:
+    """The option names IPOPT documents, advanced ones included, in its documentation's
+    order: read from IPOPT's ``print_options_documentation`` at first use.  (IPOPT also
+    knows a few it does not document, such as ``sb``.)"""
+    error, text = _made_with({"print_options_documentation": "yes",
+                              "print_advanced_options": "yes", "print_level": 5})
+    names = tuple(dict.fromkeys(re.findall(r"^([a-z][a-z0-9_]*)[ (]", text, re.M)))
+    if error or not names:
+        raise RuntimeError("IPOPT printed no option documentation through CasADi, so its "
+                           f"option names cannot be listed here ({error or 'no text'})")
+    return names
+
+
+_TYPES = {"is_int()": "a whole number", "is_double()": "a number",
+          "is_string()": "a string"}
+
+
+def check_options(options: dict) -> list[str]:
+    """IPOPT's own verdict on ``options``, asked one option at a time before the search:
+    returns the names IPOPT does not know; a value of the wrong type, or one IPOPT does not
+    allow, raises ValueError naming the option, with IPOPT's explanation."""
+    unknown = []
+    for key, value in options.items():
+        error, printed = _made_with({"print_level": 0, key: value})
+        if error is None:
+            continue
+        if "No such IPOPT option" in error:
+            unknown.append(key)
+            continue
+        kind = next((t for a, t in _TYPES.items() if a in error), None)
+        if kind:
+            raise ValueError(f"IPOPT option {key!r} must be {kind}, got {value!r}")
+        said = printed.strip() or error.strip().splitlines()[-1]
+        raise ValueError(f"IPOPT refuses option {key!r} = {value!r}:\n{said}")
+    return unknown
 
 
 class _Objective(ca.Callback):

@@ -3,16 +3,34 @@ limited-memory quasi-Newton step, and one restart from the best point when a lin
 fails after progress.
 
 ``options`` go to ``minimize``'s L-BFGS-B options over this module's defaults
-(``maxfun = 10 * maxiter``, ``ftol = tol``, ``gtol = 1e-10``, ``maxcor = 20``).
+(``maxfun = 10 * maxiter``, ``ftol = tol``, ``gtol = 1e-10``, ``maxcor = 20``); their names
+are read from scipy's own documentation of the method (:func:`option_names`).
 """
 from __future__ import annotations
 
+import functools
+import re
 import time
 
 import numpy as np
-from scipy.optimize import minimize
+from scipy.optimize import minimize, show_options
 
 from .outcome import CONVERGED, FAILED, LIMIT, lbfgsb_outcome
+
+
+@functools.cache
+def option_names() -> tuple[str, ...]:
+    """The options scipy's L-BFGS-B takes, from its documentation
+    (``scipy.optimize.show_options("minimize", "L-BFGS-B")``), in its order."""
+    text = show_options("minimize", "L-BFGS-B", disp=False)
+    _, found, section = text.partition("Options\n-------\n")
+    section = re.split(r"\n(?:Notes|References|Examples)\n-+\n", section)[0]
+    names = tuple(re.findall(r"^(\w+) :", section, re.M))
+    if not (found and names):  # a scipy whose documentation reads otherwise: do not guess
+        raise RuntimeError("could not read L-BFGS-B's option names from scipy's "
+                           "show_options('minimize', 'L-BFGS-B'); please report the scipy "
+                           "version")
+    return names
 
 
 class _TimeUp(Exception):

@@ -1,16 +1,17 @@
-"""One optimisation of a problem's controls: :func:`solve`, with L-BFGS-B (:mod:`.lbfgsb`)
-or IPOPT (:mod:`.ipopt`) fed by an :class:`~.evaluator.Evaluator`.
+"""One optimisation of a problem's controls: :func:`solve`.
 
-Both return a :class:`~.result.Result` in scipy's vocabulary (``status`` included, see
-:mod:`.outcome`) plus the trajectory, a per-iteration history and timings.  Ctrl-C (or any
-:class:`~casadi_keyframe.interrupts.Interrupted`) stops the solve and returns the best controls seen so
-far with status 3; ``time_limit=`` stops it with status 1; with ``checkpoint=`` the best is
-also on disk after every iteration, written atomically.  ``continuation=`` solves at coarse
-time steps first, ``resolutions=`` on coarser meshes, then refines (see :func:`solve`; the
-stages themselves: :mod:`.stages`).
+It checks what it is asked before any simulation, goes through the stages
+(:mod:`.stages`) coarse to fine, runs the method of :data:`~.methods.METHODS` on each
+through an :class:`~.evaluator.Evaluator`, and returns a :class:`~.result.Result` in scipy's
+vocabulary (``status`` included, see :mod:`.outcome`).  Ctrl-C (or any
+:class:`~casadi_keyframe.interrupts.Interrupted`) stops the solve and returns the best
+controls seen so far with status 3; ``time_limit=`` stops it with status 1; with
+``checkpoint=`` the best is also on disk after every iteration, written atomically.
 """
 from __future__ import annotations
 
+import math
+import numbers
 import signal
 import time
 
@@ -20,13 +21,12 @@ from ..adjoints import get_gradient
 from ..interrupts import NAMES, handled
 from ..io import as_checkpoint
 from ..state import SimulationError
-from . import ipopt, lbfgsb
 from .evaluator import Evaluator, MetricView, evaluate_final
+from .methods import check_options, get_method
 from .outcome import CONVERGED, INTERRUPTED, LIMIT
 from .result import Result
 from .stages import carry, stage_name, stage_problems
 
-METHODS = ("lbfgsb", "ipopt")
 
 
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
@@ -35,12 +35,15 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
           time_limit: float | None = None) -> Result:
     """Optimise the problem's controls.
 
-    ``method`` is "lbfgsb" or "ipopt"; ``gradient`` a route name or strategy; ``u0`` the
-    starting controls at ``problem.dt`` (default: the problem's guess, else passive);
-    ``checkpoint`` a ``.npz`` path (or :class:`~.io.Checkpoint`) that always holds the best
-    controls so far (at ``problem.dt``, also during a coarse stage); ``options`` go to the
-    underlying solver; ``time_limit`` (seconds, wall clock, over all stages) stops the
-    search at the first iteration past it (IPOPT: its ``max_wall_time``) with status 1.
+    ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
+    ``gradient`` a route name or strategy; ``maxiter`` (a whole number >= 1) and ``tol``
+    (> 0) the search's limits; ``u0`` the starting controls at ``problem.dt`` (default: the
+    problem's guess, else passive); ``checkpoint`` a ``.npz`` path (or
+    :class:`~casadi_keyframe.io.Checkpoint`) that always holds the best controls so far (at
+    ``problem.dt``, also during a coarse stage); ``options`` go to the method's library
+    (an unknown name is refused before the search, with the valid ones); ``time_limit``
+    (seconds, wall clock, over all stages) stops the search at the first iteration past it
+    (IPOPT: its ``max_wall_time``) with status 1.
 
     ``continuation`` (the paper's section 6: optimise at a large time step, then refine) is a
     list of time steps from coarse to fine, e.g. ``[4 * prob.dt, 2 * prob.dt]``; the
@@ -68,15 +71,10 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     A simulation that fails at the starting controls raises :class:`SimulationError`;
     during the search a failing point counts as a failed evaluation.
     """
-    if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; choose one of {METHODS}")
-    if maxiter < 1:
-        raise ValueError("maxiter must be at least 1")
-    if time_limit is not None and not time_limit > 0:
-        raise ValueError(f"time_limit must be a positive number of seconds, got {time_limit}")
+    options = check_settings(method, maxiter, tol, time_limit, options)
     problems = stage_problems(problem, continuation, resolutions)
     strategy = get_gradient(gradient)
-    search = _Search(method, maxiter, tol, options or {}, quiet, as_checkpoint(checkpoint),
+    search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
                      time_limit)
     u = None if u0 is None else carry(problem, problem.controls.check(u0), problems[0])
     stages = []
@@ -89,6 +87,27 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
             break
         u = carry(p, ev.best_u, problems[k + 1])
     return _result(problem, p, ev, strategy, search, stages, len(problems))
+
+
+def check_settings(method, maxiter, tol, time_limit, options) -> dict:
+    """Refuse a setting of :func:`solve` before any simulation runs (ValueError naming it
+    and what it takes); return the method's options, checked, as a new dict."""
+    get_method(method)
+    if isinstance(maxiter, bool) or not isinstance(maxiter, numbers.Integral) or maxiter < 1:
+        raise ValueError(f"maxiter must be a whole number >= 1 (iterations per stage), got "
+                         f"{maxiter!r}")
+    if not _positive(tol):
+        raise ValueError(f"tol must be a finite number > 0 (the method's convergence "
+                         f"tolerance), got {tol!r}")
+    if time_limit is not None and not _positive(time_limit):
+        raise ValueError(f"time_limit must be a finite positive number of seconds (None for "
+                         f"no limit), got {time_limit!r}")
+    return check_options(method, options)
+
+
+def _positive(value) -> bool:
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0)
 
 
 def _result(problem, p, ev, strategy, search, stages, count) -> Result:
@@ -119,7 +138,7 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
 
 
 class _Search:
-    """What the stages of one :func:`solve` share: the optimizer and its settings, the
+    """What the stages of one :func:`solve` share: the method and its settings, the
     history, the checkpoint and the clock."""
 
     def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
@@ -160,7 +179,7 @@ class _Search:
                                      "continuation at a finer dt or mesh"), 0)
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
-        run = lbfgsb.run if self.method == "lbfgsb" else ipopt.run
+        run = get_method(self.method).run
         metric = problem.controls.metric(problem.model, problem.dt)
         searched, start = (ev, u0) if metric is None else (MetricView(ev, metric),
                                                           metric.unsmooth(u0))

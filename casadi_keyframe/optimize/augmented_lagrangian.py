@@ -19,19 +19,19 @@ import numpy as np
 
 from ..adjoints import get_gradient
 from ..objectives import Objective, StateKeyframe
-from .outcome import CONVERGED, INTERRUPTED, LIMIT
 from .evaluator import evaluate_final
-from .result import Result
+from .outcome import INTERRUPTED, LIMIT
+from .result import Result, assemble
 from .search import solve
 
 
 def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
                     multipliers: bool = True, u0=None, time_limit: float | None = None,
                     **options) -> Result:
-    """Solve ``problem`` in ``rounds`` rounds of :func:`solve` (``options`` go to each: method,
-    gradient, maxiter per round, checkpoint, quiet, ...), each from the last round's controls,
-    with the keyframes' aim moved by the multipliers and their weights times
-    ``weight_growth ** round``.
+    """Solve ``problem`` in ``rounds`` rounds of :func:`~.search.solve` (``options`` go to
+    each: method, gradient, maxiter per round, checkpoint, quiet, ...), each from the last
+    round's controls, with the keyframes' aim moved by the multipliers and their weights
+    times ``weight_growth ** round``.
 
     The result is ``problem``'s (objective, breakdown and trajectory with the true targets
     and weights) at the last round's controls; ``stages`` has one entry per round with its
@@ -53,21 +53,13 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     history, stages, start = [], [], time.perf_counter()
     for k in range(rounds):
         scale = float(weight_growth) ** k
-        p = _with_keyframes(problem, shifts, scale)
         left = None if time_limit is None else max(time_limit - (time.perf_counter() - start),
                                                    1e-3)
-        res = solve(p, u0=u, time_limit=left, **options)
-        u = res.x
+        res = solve(_with_keyframes(problem, shifts, scale), u0=u, time_limit=left, **options)
+        u, traj = res.x, res.trajectory  # the dynamics do not depend on the keyframes' aim
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
-        traj = res.trajectory  # the dynamics do not depend on the keyframes' aim
-        breakdown = problem.breakdown(u, traj)
-        stages.append({"stage": k, "weight_scale": scale, "nit": res.nit, "nfev": res.nfev,
-                       "seconds": res.timings["wall_seconds"], "fun": breakdown["objective"],
-                       "control_cost": breakdown["control_cost"],
-                       "misses": breakdown["misses"], "status": res.status,
-                       "message": res.message, **{f"start_{k}": v for k, v in
-                                                  res.start.items()}})
+        stages.append(_round(problem, k, scale, res))
         if res.status == INTERRUPTED or _time_up(time_limit, start):
             break
         if multipliers:
@@ -81,13 +73,24 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     if len(stages) < rounds and status != INTERRUPTED:
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
                                   f"{len(stages) - 1} of 0..{rounds - 1}; last: {res.message}")
-    return Result(x=u, fun=float(f), jac=g, nit=sum(s["nit"] for s in stages),
-                  nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
-                  status=status, message=message,
-                  method=res.method, gradient=res.gradient, trajectory=traj, history=history,
-                  timings={"wall_seconds": time.perf_counter() - start,
-                           "stage_seconds": [s["seconds"] for s in stages]},
-                  breakdown=problem.breakdown(u, traj), stages=stages)
+    return assemble(problem, u, fun=f, jac=g, status=status, message=message,
+                    method=res.method, gradient=res.gradient, stages=stages, history=history,
+                    started=start, trajectory=traj)
+
+
+def _round(problem, k, scale, res) -> dict:
+    """Round ``k``'s :class:`~.result.Stage`: its solve's totals and how it ended, with the
+    true problem's objective, control cost and misses at its controls."""
+    breakdown = problem.breakdown(res.x, res.trajectory)
+    return {"stage": k, "dt": problem.dt, "steps": problem.steps,
+            "particles": problem.model.n, "weight_scale": scale, "nit": res.nit,
+            "nfev": res.nfev, "njev": res.njev, "seconds": res.timings["wall_seconds"],
+            "evaluation_seconds": res.timings["evaluation_seconds"],
+            "failed_simulations": res.timings["failed_simulations"],
+            "fun": breakdown["objective"], "control_cost": breakdown["control_cost"],
+            "misses": breakdown["misses"], "success": res.success, "status": res.status,
+            "message": res.message, "start_objective": res.start["objective"],
+            "start_keyframe_error": res.start["keyframe_error"]}
 
 
 def _time_up(time_limit, start) -> bool:

@@ -11,6 +11,7 @@ import numpy as np
 from ..adjoints import get_gradient
 from ..interrupts import check
 from ..state import SimulationError
+from .result import history_record
 
 
 class Evaluator:
@@ -33,6 +34,11 @@ class Evaluator:
         self.seconds = 0.0
         self.interrupted = None
         self.start = None  # (objective, keyframe error) at the starting controls
+
+    @property
+    def njev(self) -> int:
+        """Gradients computed: the evaluations that did not fail."""
+        return self.nfev - self.failures
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
@@ -66,12 +72,10 @@ class Evaluator:
         ``stage_dt``."""
         u, (f, _) = self.last_u, self.last
         control = self.problem.control_cost(u)[0]
-        history.append({"iteration": len(history) + 1, "stage": self.stage,
-                        "dt": self.problem.dt, "particles": self.problem.model.n,
-                        "objective": float(f),
-                        "keyframe_error": float(f - control),
-                        "control_norm": float(np.linalg.norm(u)),
-                        "seconds": time.perf_counter() - start, "nfev": self.nfev})
+        history.append(history_record(
+            self.problem, u, objective=f, keyframe_error=f - control,
+            iteration=len(history) + 1, stage=self.stage,
+            seconds=time.perf_counter() - start, nfev=self.nfev))
         if self.checkpoint is not None and self.best_u is not None:
             self.checkpoint.write(self.export(self.best_u), fun=float(self.best_f),
                                   nit=len(history), stage=self.stage,

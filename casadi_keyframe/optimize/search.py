@@ -24,7 +24,7 @@ from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
 from .methods import check_options, get_method
 from .outcome import CONVERGED, INTERRUPTED, LIMIT
-from .result import Result
+from .result import Result, assemble
 from .stages import carry, stage_name, stage_problems
 
 
@@ -124,17 +124,10 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
         message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} "
                    f"({stage_name(p)}): its best controls, carried to the problem "
                    f"({stage_name(problem)}), kept")
-    traj = problem.simulate(u)
-    return Result(x=u, fun=fun, jac=jac, nit=sum(s["nit"] for s in stages),
-                  nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
-                  status=status, message=message, method=search.method,
-                  gradient=getattr(strategy, "name", type(strategy).__name__),
-                  trajectory=traj, history=search.history,
-                  timings={"wall_seconds": time.perf_counter() - search.start,
-                           "evaluation_seconds": sum(s["evaluation_seconds"] for s in stages),
-                           "failed_simulations": sum(s["failed_simulations"] for s in stages),
-                           "stage_seconds": [s["seconds"] for s in stages]},
-                  breakdown=problem.breakdown(u, traj), stages=stages)
+    return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
+                    method=search.method,
+                    gradient=getattr(strategy, "name", type(strategy).__name__),
+                    stages=stages, history=search.history, started=search.start)
 
 
 class _Search:
@@ -151,15 +144,15 @@ class _Search:
         return self.deadline is not None and time.perf_counter() >= self.deadline
 
     def run(self, problem, ev, u0, stage) -> dict:
-        """One optimizer run from ``u0``: the stage's record (``nit``, ``status``,
-        ``message``, ...)."""
+        """One method run from ``u0``: the stage's :class:`~.result.Stage`."""
         t, first = time.perf_counter(), len(self.history)
         status, message = self._search(problem, ev, u0, stage)
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
                 "particles": problem.model.n,
-                "nit": len(self.history) - first, "nfev": ev.nfev, "fun": float(ev.best_f),
+                "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
+                "fun": float(ev.best_f),
                 "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
                 "success": status == CONVERGED, "status": status, "message": message,
                 "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,

@@ -44,11 +44,14 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         raise ValueError(f"rounds must be a whole number >= 1, got {rounds!r}")
     if not (np.isfinite(weight_growth) and weight_growth >= 1):
         raise ValueError(f"weight_growth must be >= 1 (1: multipliers alone), got {weight_growth}")
-    keyframes = [t for t in problem.objective_terms.terms if isinstance(t, StateKeyframe)]
+    terms = problem.objective_terms.terms
+    keyframes = [i for i, t in enumerate(terms) if isinstance(t, StateKeyframe)]
     if not keyframes:
         raise ValueError(f"{problem.name}: no StateKeyframe term to hold hard; an augmented "
                          "Lagrangian needs a state target (positions and/or velocities)")
-    shifts = {id(t): (0.0, 0.0) for t in keyframes}  # lambda / w, positions and velocities
+    # lambda / w per keyframe, positions and velocities, keyed by the term's place in the
+    # objective: each round's problem holds moved copies of the terms, in the same places
+    shifts = {i: (0.0, 0.0) for i in keyframes}
     u = problem.initial_controls() if u0 is None else problem.controls.check(u0)
     history, stages, start = [], [], time.perf_counter()
     for k in range(rounds):
@@ -63,11 +66,10 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         if res.status == INTERRUPTED or _time_up(time_limit, start):
             break
         if multipliers:
-            for t in keyframes:
-                sx, sv = shifts[id(t)]
+            for i in keyframes:
                 # lambda += w_k c  =>  lambda / w_{k+1} = (shift + c) / growth
-                shifts[id(t)] = tuple((s + c) / weight_growth for s, c in zip(
-                    (sx, sv), _residual(t, traj)))
+                shifts[i] = tuple((s + c) / weight_growth for s, c in zip(
+                    shifts[i], _residual(terms[i], traj)))
     f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
     if len(stages) < rounds and status != INTERRUPTED:
@@ -98,12 +100,13 @@ def _time_up(time_limit, start) -> bool:
 
 
 def _with_keyframes(problem, shifts, scale):
-    """``problem`` with each StateKeyframe aiming at ``target - shift`` with weights times
-    ``scale`` (the problem itself in round 0 of a plain start)."""
+    """``problem`` with each StateKeyframe (its index among the objective's terms a key of
+    ``shifts``) aiming at ``target - shift`` with weights times ``scale`` (the problem
+    itself in round 0 of a plain start)."""
     if scale == 1.0 and all(np.all(np.equal(s, 0.0)) for pair in shifts.values() for s in pair):
         return problem
-    terms = [t.moved(-shifts[id(t)][0], -shifts[id(t)][1], scale) if id(t) in shifts else t
-             for t in problem.objective_terms.terms]
+    terms = [t.moved(-shifts[i][0], -shifts[i][1], scale) if i in shifts else t
+             for i, t in enumerate(problem.objective_terms.terms)]
     return problem.with_objective(Objective(terms))
 
 

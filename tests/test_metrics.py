@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import InitialVelocity, StepForces, load_problem, solve
-from casadi_keyframe.optimize.metrics import mesh_laplacian
+from casadi_keyframe.optimize.metrics import mesh_laplacian, search_metric
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.optimize.evaluator import MetricView
 
@@ -27,7 +27,7 @@ def shapes(**controls):
     (shapes, {"time_smoothing": 0.05})])
 def test_the_metric_is_symmetric_keeps_constants_and_inverts(build, options):
     prob = build(**options)
-    metric = prob.controls.metric(prob.model, prob.dt)
+    metric = search_metric(prob)
     rng = np.random.default_rng(0)
     z, y = rng.standard_normal((2, prob.size))
     assert np.dot(metric.smooth(z), y) == pytest.approx(np.dot(z, metric.smooth(y)), rel=1e-12)
@@ -40,7 +40,7 @@ def test_the_metric_is_symmetric_keeps_constants_and_inverts(build, options):
 
 def test_the_search_in_z_sees_the_same_objective_and_the_smoothed_gradient():
     prob = shapes(smoothing=0.3, time_smoothing=0.05)
-    metric = prob.controls.metric(prob.model, prob.dt)
+    metric = search_metric(prob)
 
     def ev(u):
         return prob.objective_and_gradient(u)
@@ -82,4 +82,4 @@ def test_refusals():
     flock = load_problem("flock_path", agents=5, steps=20)
     flock = flock._rebuilt(controls=StepForces(smoothing=0.5))
     with pytest.raises(ValueError, match="needs a mesh"):
-        flock.controls.metric(flock.model, flock.dt)
+        search_metric(flock)

@@ -23,6 +23,25 @@ import scipy.sparse.linalg as spla
 from ..models.cloth import mesh_edges
 
 
+def search_metric(problem):
+    """The :class:`SmoothingMetric` a search of ``problem`` runs in, from its controls'
+    ``smoothing`` (metres, over the mesh) and ``time_smoothing`` (seconds, over the steps);
+    None without either.  Space smoothing needs a mesh (``model.faces``)."""
+    controls, model = problem.controls, problem.model
+    space = time = None
+    if controls.smoothing:
+        if getattr(model, "faces", None) is None:
+            raise ValueError("smoothing over space needs a mesh (a cloth); for a flock use "
+                             "time_smoothing")
+        laplacian = mesh_laplacian(model.faces, model.rest_positions, controls.idx)
+        space = controls.smoothing ** 2 * laplacian
+    if controls.time_smoothing and len(controls.block_shape) == 3:
+        time = controls.time_smoothing ** 2 * path_laplacian(controls.steps, problem.dt)
+    if space is None and time is None:
+        return None
+    return SmoothingMetric(controls.block_shape, space, time)
+
+
 def mesh_laplacian(faces, positions, idx) -> sp.csc_matrix:
     """The graph Laplacian of the mesh edges between the particles ``idx`` (their order),
     weights ``1 / |edge|^2`` at ``positions``."""

@@ -23,6 +23,7 @@ from ..io import as_checkpoint
 from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
 from .methods import check_options, get_method
+from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT
 from .result import Result, assemble
 from .stages import carry, stage_name, stage_problems
@@ -173,7 +174,7 @@ class _Search:
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
         run = get_method(self.method).run
-        metric = problem.controls.metric(problem.model, problem.dt)
+        metric = search_metric(problem)
         searched, start = (ev, u0) if metric is None else (MetricView(ev, metric),
                                                           metric.unsmooth(u0))
         try:

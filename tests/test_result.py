@@ -76,11 +76,13 @@ def test_a_result_missing_a_key_is_refused_by_name(results):
     bare = {k: v for k, v in r.history[0].items() if k != "objective"}
     with pytest.raises(ValueError, match="history record 0 lacks objective"):
         Result(**{**fields, "history": [bare]})
-    with pytest.raises(ValueError, match="timings 0 lacks evaluation_seconds"):
+    with pytest.raises(ValueError, match="timings lacks evaluation_seconds"):
         Result(**{**fields, "timings": {"wall_seconds": 1.0, "failed_simulations": 0,
                                         "stage_seconds": [1.0]}})
     with pytest.raises(ValueError, match="stage 0 lacks njev"):
         Result(**{**fields, "stages": [{k: v for k, v in r.stages[0].items() if k != "njev"}]})
+    with pytest.raises(ValueError, match="success status == 0"):
+        Result(**{**fields, "status": 2, "success": True})
     with pytest.raises(ValueError, match="has undeclared colour"):
         history_record(prob, r.x, objective=1.0, keyframe_error=0.5, iteration=1, stage=0,
                        seconds=0.0, nfev=1, colour="red")

@@ -175,12 +175,15 @@ class Result:
     stages: list[Stage]
 
     def __post_init__(self):
-        if self.status not in STATUS:
-            raise ValueError(f"Result status must be one of {sorted(STATUS)}, got "
-                             f"{self.status!r}")
-        _check_keys("timings", [self.timings], Timings)
-        _check_keys("history record", self.history, HistoryRecord)
-        _check_keys("stage", self.stages, Stage)
+        if self.status not in STATUS or self.success != (self.status == CONVERGED):
+            raise ValueError(f"Result status must be one of {sorted(STATUS)} and success "
+                             f"status == {CONVERGED}, got status {self.status!r}, success "
+                             f"{self.success!r}")
+        _check_keys("timings", self.timings, Timings)
+        for i, record in enumerate(self.history):
+            _check_keys(f"history record {i}", record, HistoryRecord)
+        for i, stage in enumerate(self.stages):
+            _check_keys(f"stage {i}", stage, Stage)
 
     @property
     def start(self) -> dict:
@@ -200,17 +203,16 @@ class Result:
                 "gradient_norm": float(np.linalg.norm(self.jac))}
 
 
-def _check_keys(what: str, records, kind) -> None:
-    """Refuse records of ``kind`` (a TypedDict) that lack a required key or carry a key it
-    does not declare."""
-    for i, record in enumerate(records):
-        missing = sorted(kind.__required_keys__ - set(record))
-        extra = sorted(set(record) - kind.__required_keys__ - kind.__optional_keys__)
-        problems = ([f"lacks {', '.join(missing)}"] if missing else []) + (
-            [f"has undeclared {', '.join(extra)}"] if extra else [])
-        if problems:
-            raise ValueError(f"Result {what} {i} {' and '.join(problems)}: {kind.__name__} "
-                             f"lists the keys; make records with the helpers of {__name__}")
+def _check_keys(what: str, record, kind) -> None:
+    """Refuse a ``record`` of ``kind`` (a TypedDict) that lacks a required key or carries a
+    key it does not declare; ``what`` names it in the message."""
+    missing = sorted(kind.__required_keys__ - set(record))
+    extra = sorted(set(record) - kind.__required_keys__ - kind.__optional_keys__)
+    problems = ([f"lacks {', '.join(missing)}"] if missing else []) + (
+        [f"has undeclared {', '.join(extra)}"] if extra else [])
+    if problems:
+        raise ValueError(f"Result {what} {' and '.join(problems)}: {kind.__name__} lists "
+                         f"the keys; make records with the helpers of {__name__}")
 
 
 def history_record(problem, u, *, objective: float, keyframe_error: float, iteration: int,
@@ -223,7 +225,7 @@ def history_record(problem, u, *, objective: float, keyframe_error: float, itera
               "keyframe_error": float(keyframe_error),
               "control_norm": float(np.linalg.norm(u)), "seconds": seconds, "nfev": nfev,
               **extra}
-    _check_keys("history record", [record], HistoryRecord)
+    _check_keys("history record", record, HistoryRecord)
     return record
 
 

@@ -23,7 +23,7 @@ Strategies:
 * ``coarse+ipopt``: the passive start with IPOPT on a cape of half the rows and columns
   first (``solve(..., resolutions=...)``), its forces carried to the full mesh;
 * ``tracking+lower_effort``: the tracking guess, then
-  :func:`~casadi_keyframe.constrained.lower_effort` (the landing held within 1 mm and 5 cm/s
+  :func:`~casadi_keyframe.optimize.constrained.lower_effort` (the landing held within 1 mm and 5 cm/s
   rms as a constraint while the control cost falls; ``--effort-steps`` kept steps at most,
   on the last ``--effort-window`` steps).
 
@@ -42,8 +42,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from casadi_keyframe import load_problem, solve  # noqa: E402
-from casadi_keyframe.augmented_lagrangian import solve_augmented  # noqa: E402
-from casadi_keyframe.constrained import lower_effort  # noqa: E402
+from casadi_keyframe.optimize import lower_effort, solve_augmented  # noqa: E402
 from casadi_keyframe.scenes.capes import clip_report  # noqa: E402
 
 WIDTH = 0.6  # m, the cape's width (cape_model's default)

@@ -19,6 +19,7 @@ from .adjoints import ROUTES as GRADIENT_ROUTES
 from .export import FORMATS as EXPORT_FORMATS
 from .loading import (OverrideError, check_overrides, list_problems, load_module,
                       load_problem, overrides_of, solve_defaults)
+from .optimize import METHODS
 from .run import EXIT_CODES, run_export, run_render, run_solve, solve_run
 from .sweep.plan import SWEEP_EXIT_CODES
 from .state import SimulationError
@@ -340,7 +341,7 @@ def _add_sweep_parser(sub) -> None:
                    help="seed of the perturbed starts")
     w.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a build() argument at every point")
-    w.add_argument("--method", choices=("lbfgsb", "ipopt"))
+    w.add_argument("--method", choices=list(METHODS))
     w.add_argument("--gradient", choices=GRADIENT_ROUTES)
     w.add_argument("--maxiter", type=positive_int, help="iteration limit of each point")
     w.add_argument("--continuation", metavar="DT,DT,...", help="as for solve")
@@ -392,7 +393,7 @@ def _solve_parser(sub) -> None:
                        epilog=EXIT_CODES, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
-    s.add_argument("--method", choices=("lbfgsb", "ipopt"))
+    s.add_argument("--method", choices=list(METHODS))
     s.add_argument("--gradient", choices=GRADIENT_ROUTES,
                    help="gradient route (default: the problem's SOLVE, else 'adjoint'): "
                         "'adjoint' the exact hand adjoint, 'swapped' the paper's approximate "

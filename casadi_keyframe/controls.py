@@ -13,7 +13,6 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .models.base import Surface
 
 
 def resample_steps(values, steps: int) -> np.ndarray:
@@ -49,7 +48,8 @@ class Controls:
 
     ``smoothing`` (metres, per-particle controls of a mesh) and ``time_smoothing``
     (seconds, step forces) change only the geometry the optimizer searches in, not the
-    objective: see :mod:`.metrics` and :meth:`metric`.  They exclude bounds."""
+    objective: the optimizer builds its metric from them
+    (:func:`casadi_keyframe.optimize.metrics.search_metric`).  They exclude bounds."""
 
     def __init__(self, agents=None, *, lower=None, upper=None, smoothing: float | None = None,
                  time_smoothing: float | None = None):
@@ -62,24 +62,6 @@ class Controls:
             raise ValueError("smoothing changes the search's variables, so it cannot keep "
                              "bounds on u: give either bounds or smoothing")
         self.smoothing, self.time_smoothing = smoothing, time_smoothing
-
-    def metric(self, model, dt: float):
-        """The :class:`~.metrics.SmoothingMetric` the optimizer searches in (None without
-        smoothing).  Space smoothing needs a mesh (a model with a surface)."""
-        from .metrics import SmoothingMetric, mesh_laplacian, path_laplacian
-
-        space = time = None
-        if self.smoothing:
-            if not isinstance(model, Surface):
-                raise ValueError("smoothing over space needs a mesh (a cloth); for a flock use "
-                                 "time_smoothing")
-            laplacian = mesh_laplacian(model.faces, model.rest_positions, self.idx)
-            space = self.smoothing ** 2 * laplacian
-        if self.time_smoothing and len(self.block_shape) == 3:
-            time = self.time_smoothing ** 2 * path_laplacian(self.steps, dt)
-        if space is None and time is None:
-            return None
-        return SmoothingMetric(self.block_shape, space, time)
 
     def bind(self, n: int, dim: int, steps: int) -> None:
         if self.agents is None:

@@ -17,7 +17,7 @@ from types import SimpleNamespace
 
 from .interrupts import NAMES, catching, check
 from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
-from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
+from .optimize.outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
 from .report import format_misses, format_physical, format_stage
 from .state import SimulationError
 
@@ -198,7 +198,7 @@ def _search(spec: SolveRun, u0, checkpoint, resumed: bool = False):
                    quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
                    time_limit=spec.time_limit, u0=u0)
     if spec.rounds:
-        from .augmented_lagrangian import solve_augmented
+        from .optimize.augmented_lagrangian import solve_augmented
         return solve_augmented(spec.problem, **spec.rounds, **options)
     resolutions = None if resumed or not spec.resolutions else spec.resolutions
     return solve(spec.problem, resolutions=resolutions, **options)

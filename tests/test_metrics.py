@@ -5,9 +5,9 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import InitialVelocity, StepForces, load_problem, solve
-from casadi_keyframe.metrics import mesh_laplacian
+from casadi_keyframe.optimize.metrics import mesh_laplacian, search_metric
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.optimize import _InMetric
+from casadi_keyframe.optimize.evaluator import MetricView
 
 
 def toss(**controls):
@@ -27,7 +27,7 @@ def shapes(**controls):
     (shapes, {"time_smoothing": 0.05})])
 def test_the_metric_is_symmetric_keeps_constants_and_inverts(build, options):
     prob = build(**options)
-    metric = prob.controls.metric(prob.model, prob.dt)
+    metric = search_metric(prob)
     rng = np.random.default_rng(0)
     z, y = rng.standard_normal((2, prob.size))
     assert np.dot(metric.smooth(z), y) == pytest.approx(np.dot(z, metric.smooth(y)), rel=1e-12)
@@ -40,13 +40,13 @@ def test_the_metric_is_symmetric_keeps_constants_and_inverts(build, options):
 
 def test_the_search_in_z_sees_the_same_objective_and_the_smoothed_gradient():
     prob = shapes(smoothing=0.3, time_smoothing=0.05)
-    metric = prob.controls.metric(prob.model, prob.dt)
+    metric = search_metric(prob)
 
     def ev(u):
         return prob.objective_and_gradient(u)
 
     ev.interrupted, ev.best_u = None, None
-    seen = _InMetric(ev, metric)
+    seen = MetricView(ev, metric)
     z = 0.01 * np.random.default_rng(1).standard_normal(prob.size)
     f, g = seen(z)
     assert f == pytest.approx(prob.objective(metric.smooth(z)), rel=1e-12)
@@ -82,4 +82,4 @@ def test_refusals():
     flock = load_problem("flock_path", agents=5, steps=20)
     flock = flock.with_controls(StepForces(smoothing=0.5))
     with pytest.raises(ValueError, match="needs a mesh"):
-        flock.controls.metric(flock.model, flock.dt)
+        search_metric(flock)

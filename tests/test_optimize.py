@@ -70,9 +70,94 @@ def test_failed_simulations_during_the_search_are_counted_not_returned(race):
     assert r.nit > 10 and r.fun < 0.2 * race.objective(race.initial_controls())
 
 
-def test_unknown_method_is_refused(race):
-    with pytest.raises(ValueError, match="unknown method"):
-        solve(race, "newton")
+class Counting(Adjoint):
+    calls = 0
+
+    def __call__(self, problem, u):
+        Counting.calls += 1
+        return super().__call__(problem, u)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"method": "newton"}, "unknown method 'newton'; choose one of lbfgsb, ipopt"),
+    ({"maxiter": 2.5}, "maxiter must be a whole number >= 1"),
+    ({"maxiter": 0}, "maxiter must be a whole number >= 1"),
+    ({"maxiter": True}, "maxiter must be a whole number >= 1"),
+    ({"tol": 0.0}, "tol must be a finite number > 0"),
+    ({"tol": float("nan")}, "tol must be a finite number > 0"),
+    ({"tol": float("inf")}, "tol must be a finite number > 0"),
+    ({"time_limit": 0}, "time_limit must be a finite positive number of seconds"),
+    ({"time_limit": float("inf")}, "time_limit must be a finite positive number of seconds"),
+    ({"time_limit": "60"}, "time_limit must be a finite positive number of seconds"),
+    ({"options": {"maxcorr": 5}}, r"options for method 'lbfgsb': unknown option 'maxcorr' "
+                                  r"\(did you mean 'maxcor'\?\); scipy's L-BFGS-B takes .*maxls"),
+    ({"method": "ipopt", "options": {"max_itr": 5}},
+     r"unknown option 'max_itr' \(did you mean 'max_iter'.*listed by "
+     r"casadi_keyframe.optimize.ipopt.option_names\(\)"),
+    ({"method": "ipopt", "options": {"hessian_approximation": "exakt"}},
+     r"(?s)IPOPT refuses option 'hessian_approximation' = 'exakt'.*limited-memory"),
+    ({"method": "ipopt", "options": {"max_iter": "ten"}},
+     "IPOPT option 'max_iter' must be a whole number"),
+])
+def test_bad_settings_are_refused_before_any_simulation(race, kwargs, message):
+    Counting.calls = 0
+    with pytest.raises(ValueError, match=message):
+        solve(race, gradient=Counting(), quiet=True, **kwargs)
+    assert Counting.calls == 0
+
+
+@pytest.mark.parametrize("method, options", [
+    ("lbfgsb", {"maxls": 30, "maxcor": 5}),
+    ("ipopt", {"limited_memory_max_history": 5, "sb": "yes"}),  # sb: known, undocumented
+])
+def test_valid_options_reach_the_method(race, method, options):
+    r = solve(race, method, maxiter=3, quiet=True, options=options)
+    assert r.nit == 3 and r.status == LIMIT
+
+
+def test_option_names_are_read_from_the_libraries():
+    from casadi_keyframe.optimize import ipopt, lbfgsb
+
+    assert {"maxcor", "ftol", "gtol", "maxfun", "maxiter", "maxls"} <= set(lbfgsb.option_names())
+    assert {"tol", "max_iter", "hessian_approximation", "limited_memory_max_history",
+            "max_wall_time"} <= set(ipopt.option_names())
+    assert "sb" not in ipopt.option_names()  # undocumented: IPOPT itself is asked (above)
+
+
+def test_solve_dispatches_through_the_method_table(race, monkeypatch):
+    """A new method is one entry of METHODS: solve runs it with the evaluator, its
+    iterations land in the history, and its options are checked against its names."""
+    from casadi_keyframe.optimize import METHODS, Method
+
+    def descend(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+        u = u0
+        for _ in range(maxiter):
+            f, g = ev(u)
+            u = u - options.get("step", 1e-3) * g
+            ev(u)
+            on_iteration()
+        return LIMIT, f"{maxiter} steps taken"
+
+    names = lambda: ("step",)  # noqa: E731
+    monkeypatch.setitem(METHODS, "descent", Method(
+        "descent", descend, names, lambda o: [k for k in o if k not in names()]))
+    r = solve(race, "descent", maxiter=4, quiet=True, options={"step": 1e-4})
+    assert r.method == "descent" and r.nit == 4 and r.status == LIMIT
+    assert r.fun < race.objective(race.initial_controls())
+    with pytest.raises(ValueError, match="did you mean 'step'"):
+        solve(race, "descent", quiet=True, options={"stepp": 1e-4})
+
+
+def test_the_command_line_offers_the_method_table():
+    from casadi_keyframe.cli import build_parser
+    from casadi_keyframe.optimize import METHODS
+
+    parser = build_parser()
+    for command in (["solve", "flock_race"], ["sweep", "flock_race", "--grid", "agents=4"]):
+        for name in METHODS:
+            assert parser.parse_args(command + ["--method", name]).method == name
+        with pytest.raises(SystemExit):
+            parser.parse_args(command + ["--method", "newton"])
 
 
 class WrongSign(Adjoint):
@@ -153,7 +238,7 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
     """After progress, L-BFGS-B restarts once from its best point with no curvature memory:
     if not even that steepest-descent step lowers phi, the search has converged (to a kink
     or the round-off floor); a failure at the very first step stays a failure."""
-    import casadi_keyframe.optimize as optimize
+    import casadi_keyframe.optimize.lbfgsb as lbfgsb
     from scipy.optimize import OptimizeResult
 
     prob = load_problem("flock_path", agents=6, steps=20)
@@ -168,11 +253,11 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
             return OptimizeResult(message="ABNORMAL: ", nit=nits[len(starts) - 1], nfev=3)
         return minimize
 
-    monkeypatch.setattr(optimize, "minimize", scripted([3, 0]))
+    monkeypatch.setattr(lbfgsb, "minimize", scripted([3, 0]))
     r = solve(prob, maxiter=50, quiet=True)
     assert len(starts) == 2 and np.array_equal(starts[1], r.x)  # restarted at the best
     assert r.status == CONVERGED and "no step along the steepest descent" in r.message
     starts.clear()
-    monkeypatch.setattr(optimize, "minimize", scripted([0, 0]))
+    monkeypatch.setattr(lbfgsb, "minimize", scripted([0, 0]))
     r = solve(prob, maxiter=50, quiet=True)
     assert len(starts) == 1 and r.status == FAILED

@@ -9,7 +9,7 @@ from scipy.spatial import Delaunay
 
 from casadi_keyframe import load_problem, solve
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.transfer import _closest_on_triangles, carry_to_mesh, mesh_interpolation
+from casadi_keyframe.optimize.transfer import _closest_on_triangles, carry_to_mesh, mesh_interpolation
 
 from helpers import InterruptAfter
 

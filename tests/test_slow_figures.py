@@ -99,7 +99,7 @@ def test_cape_blend_lands_on_the_walk_clip_and_stays_physical():
 
 
 def test_cape_blend_keeps_its_landing_for_less_effort():
-    from casadi_keyframe.constrained import lower_effort
+    from casadi_keyframe.optimize import lower_effort
 
     prob = build_problem(load_module("cape_blend"))
     guess = prob.initial_controls()

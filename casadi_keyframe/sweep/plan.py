@@ -19,7 +19,7 @@ from pathlib import Path
 
 from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
-from ..outcome import INTERRUPTED
+from ..optimize.outcome import INTERRUPTED
 from ..run import exit_code
 from .grid import points
 from .progress import Progress, format_seconds

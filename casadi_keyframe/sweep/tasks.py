@@ -26,7 +26,7 @@ import traceback
 from pathlib import Path
 
 from ..io import SUMMARY, write_json
-from ..outcome import FAILED, STATUS
+from ..optimize.outcome import FAILED, STATUS
 
 ROW, LOG = "row.json", "log.txt"
 ERROR = "error"  # the status of a point that ended without a result

@@ -1,4 +1,4 @@
-"""Hard keyframes by an augmented Lagrangian around :func:`~casadi_keyframe.optimize.solve`.
+"""Hard keyframes by an augmented Lagrangian around :func:`~.search.solve`.
 
 A keyframe weight w turns ``q_N = q*`` into a penalty, and the optimum of ``control cost +
 0.5 w |q_N - q*|^2`` misses by about (control cost's pull) / w.  Raising w shrinks the miss
@@ -17,18 +17,21 @@ import time
 
 import numpy as np
 
-from .adjoints import get_gradient
-from .objectives import Objective, StateKeyframe
-from .optimize import CONVERGED, INTERRUPTED, LIMIT, Result, evaluate_final, solve
+from ..adjoints import get_gradient
+from ..objectives import Objective, StateKeyframe
+from .evaluator import evaluate_final
+from .outcome import INTERRUPTED, LIMIT
+from .result import Result, assemble
+from .search import solve
 
 
 def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
                     multipliers: bool = True, u0=None, time_limit: float | None = None,
                     **options) -> Result:
-    """Solve ``problem`` in ``rounds`` rounds of :func:`solve` (``options`` go to each: method,
-    gradient, maxiter per round, checkpoint, quiet, ...), each from the last round's controls,
-    with the keyframes' aim moved by the multipliers and their weights times
-    ``weight_growth ** round``.
+    """Solve ``problem`` in ``rounds`` rounds of :func:`~.search.solve` (``options`` go to
+    each: method, gradient, maxiter per round, checkpoint, quiet, ...), each from the last
+    round's controls, with the keyframes' aim moved by the multipliers and their weights
+    times ``weight_growth ** round``.
 
     The result is ``problem``'s (objective, breakdown and trajectory with the true targets
     and weights) at the last round's controls; ``stages`` has one entry per round with its
@@ -41,50 +44,55 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         raise ValueError(f"rounds must be a whole number >= 1, got {rounds!r}")
     if not (np.isfinite(weight_growth) and weight_growth >= 1):
         raise ValueError(f"weight_growth must be >= 1 (1: multipliers alone), got {weight_growth}")
-    keyframes = [t for t in problem.objective_terms.terms if isinstance(t, StateKeyframe)]
+    terms = problem.objective_terms.terms
+    keyframes = [i for i, t in enumerate(terms) if isinstance(t, StateKeyframe)]
     if not keyframes:
         raise ValueError(f"{problem.name}: no StateKeyframe term to hold hard; an augmented "
                          "Lagrangian needs a state target (positions and/or velocities)")
-    shifts = {id(t): (0.0, 0.0) for t in keyframes}  # lambda / w, positions and velocities
+    # lambda / w per keyframe, positions and velocities, keyed by the term's place in the
+    # objective: each round's problem holds moved copies of the terms, in the same places
+    shifts = {i: (0.0, 0.0) for i in keyframes}
     u = problem.initial_controls() if u0 is None else problem.controls.check(u0)
     history, stages, start = [], [], time.perf_counter()
     for k in range(rounds):
         scale = float(weight_growth) ** k
-        p = _with_keyframes(problem, shifts, scale)
         left = None if time_limit is None else max(time_limit - (time.perf_counter() - start),
                                                    1e-3)
-        res = solve(p, u0=u, time_limit=left, **options)
-        u = res.x
+        res = solve(_with_keyframes(problem, shifts, scale), u0=u, time_limit=left, **options)
+        u, traj = res.x, res.trajectory  # the dynamics do not depend on the keyframes' aim
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
-        traj = res.trajectory  # the dynamics do not depend on the keyframes' aim
-        breakdown = problem.breakdown(u, traj)
-        stages.append({"stage": k, "weight_scale": scale, "nit": res.nit, "nfev": res.nfev,
-                       "seconds": res.timings["wall_seconds"], "fun": breakdown["objective"],
-                       "control_cost": breakdown["control_cost"],
-                       "misses": breakdown["misses"], "status": res.status,
-                       "message": res.message, **{f"start_{k}": v for k, v in
-                                                  res.start.items()}})
+        stages.append(_round(problem, k, scale, res))
         if res.status == INTERRUPTED or _time_up(time_limit, start):
             break
         if multipliers:
-            for t in keyframes:
-                sx, sv = shifts[id(t)]
+            for i in keyframes:
                 # lambda += w_k c  =>  lambda / w_{k+1} = (shift + c) / growth
-                shifts[id(t)] = tuple((s + c) / weight_growth for s, c in zip(
-                    (sx, sv), _residual(t, traj)))
+                shifts[i] = tuple((s + c) / weight_growth for s, c in zip(
+                    shifts[i], _residual(terms[i], traj)))
     f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
     if len(stages) < rounds and status != INTERRUPTED:
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
                                   f"{len(stages) - 1} of 0..{rounds - 1}; last: {res.message}")
-    return Result(x=u, fun=float(f), jac=g, nit=sum(s["nit"] for s in stages),
-                  nfev=sum(s["nfev"] for s in stages), success=status == CONVERGED,
-                  status=status, message=message,
-                  method=res.method, gradient=res.gradient, trajectory=traj, history=history,
-                  timings={"wall_seconds": time.perf_counter() - start,
-                           "stage_seconds": [s["seconds"] for s in stages]},
-                  breakdown=problem.breakdown(u, traj), stages=stages)
+    return assemble(problem, u, fun=f, jac=g, status=status, message=message,
+                    method=res.method, gradient=res.gradient, stages=stages, history=history,
+                    started=start, trajectory=traj)
+
+
+def _round(problem, k, scale, res) -> dict:
+    """Round ``k``'s :class:`~.result.Stage`: its solve's totals and how it ended, with the
+    true problem's objective, control cost and misses at its controls."""
+    breakdown = problem.breakdown(res.x, res.trajectory)
+    return {"stage": k, "dt": problem.dt, "steps": problem.steps,
+            "particles": problem.model.n, "weight_scale": scale, "nit": res.nit,
+            "nfev": res.nfev, "njev": res.njev, "seconds": res.timings["wall_seconds"],
+            "evaluation_seconds": res.timings["evaluation_seconds"],
+            "failed_simulations": res.timings["failed_simulations"],
+            "fun": breakdown["objective"], "control_cost": breakdown["control_cost"],
+            "misses": breakdown["misses"], "success": res.success, "status": res.status,
+            "message": res.message, "start_objective": res.start["objective"],
+            "start_keyframe_error": res.start["keyframe_error"]}
 
 
 def _time_up(time_limit, start) -> bool:
@@ -92,12 +100,13 @@ def _time_up(time_limit, start) -> bool:
 
 
 def _with_keyframes(problem, shifts, scale):
-    """``problem`` with each StateKeyframe aiming at ``target - shift`` with weights times
-    ``scale`` (the problem itself in round 0 of a plain start)."""
+    """``problem`` with each StateKeyframe (its index among the objective's terms a key of
+    ``shifts``) aiming at ``target - shift`` with weights times ``scale`` (the problem
+    itself in round 0 of a plain start)."""
     if scale == 1.0 and all(np.all(np.equal(s, 0.0)) for pair in shifts.values() for s in pair):
         return problem
-    terms = [t.moved(-shifts[id(t)][0], -shifts[id(t)][1], scale) if id(t) in shifts else t
-             for t in problem.objective_terms.terms]
+    terms = [t.moved(-shifts[i][0], -shifts[i][1], scale) if i in shifts else t
+             for i, t in enumerate(problem.objective_terms.terms)]
     return problem.with_objective(Objective(terms))
 
 

@@ -14,7 +14,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
-from .controls import InitialVelocity, StepForces
+from ..controls import InitialVelocity, StepForces
+from ..models.base import Surface
 
 def mesh_interpolation(vertices, faces, points) -> sp.csr_matrix:
     """``(len(points), len(vertices))`` barycentric weights of each point's closest point on
@@ -84,8 +85,8 @@ def carry_to_mesh(source, u, target) -> np.ndarray:
             f"of the same kind on both meshes; got {type(source.controls).__name__} to "
             f"{type(target.controls).__name__}")
     for which, p in (("source", source), ("target", target)):
-        if getattr(p.model, "faces", None) is None:
-            raise ValueError(f"the {which} problem {p.name!r} has no mesh (model.faces): "
+        if not isinstance(p.model, Surface):
+            raise ValueError(f"the {which} problem {p.name!r} has no mesh (a surface): "
                              "only a cloth's controls carry between meshes")
     u = source.controls.check(u)
     if kind is StepForces:

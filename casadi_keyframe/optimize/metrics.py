@@ -20,7 +20,27 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from .models.topology import mesh_edges
+from ..models.base import Surface
+from ..models.topology import mesh_edges
+
+
+def search_metric(problem):
+    """The :class:`SmoothingMetric` a search of ``problem`` runs in, from its controls'
+    ``smoothing`` (metres, over the mesh) and ``time_smoothing`` (seconds, over the steps);
+    None without either.  Space smoothing needs a mesh (a model with a surface)."""
+    controls, model = problem.controls, problem.model
+    space = time = None
+    if controls.smoothing:
+        if not isinstance(model, Surface):
+            raise ValueError("smoothing over space needs a mesh (a cloth); for a flock use "
+                             "time_smoothing")
+        laplacian = mesh_laplacian(model.faces, model.rest_positions, controls.idx)
+        space = controls.smoothing ** 2 * laplacian
+    if controls.time_smoothing and len(controls.block_shape) == 3:
+        time = controls.time_smoothing ** 2 * path_laplacian(controls.steps, problem.dt)
+    if space is None and time is None:
+        return None
+    return SmoothingMetric(controls.block_shape, space, time)
 
 
 def mesh_laplacian(faces, positions, idx) -> sp.csc_matrix:

@@ -1,0 +1,117 @@
+"""The objective as every search method sees it: :class:`Evaluator` (memoised, keeping the
+best point, counting failed simulations, writing the history and the checkpoint) and
+:class:`MetricView`, the same evaluator in a smooth metric's variables."""
+from __future__ import annotations
+
+import signal
+import time
+
+import numpy as np
+
+from ..adjoints import get_gradient
+from ..interrupts import check
+from ..state import SimulationError
+from .result import history_record
+
+
+class Evaluator:
+    """Memoised objective and gradient that tracks the best point and failed simulations.
+
+    Search methods ask for f and its gradient at the same point in separate calls (IPOPT)
+    or together (L-BFGS-B): the last point's pair is kept, so each point is simulated once.
+    ``stage`` is the stage it serves; ``export`` maps its controls to the final problem's
+    grid for the checkpoint (an :class:`~casadi_keyframe.io.Checkpoint` or None)."""
+
+    def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None):
+        self.problem, self.gradient = problem, get_gradient(gradient)
+        self.checkpoint, self.stage = checkpoint, stage
+        self.export = export or (lambda u: u)
+        self.nfev = 0
+        self.failures = 0
+        self.last_failure = ""
+        self.last_u = None
+        self.best_u, self.best_f, self.best_g = None, np.inf, None
+        self.seconds = 0.0
+        self.interrupted = None
+        self.start = None  # (objective, keyframe error) at the starting controls
+
+    @property
+    def njev(self) -> int:
+        """Gradients computed: the evaluations that did not fail."""
+        return self.nfev - self.failures
+
+    def __call__(self, u):
+        u = np.array(u, dtype=float).ravel()
+        if self.last_u is not None and np.array_equal(u, self.last_u):
+            return self.last
+        t = time.perf_counter()
+        try:
+            check()  # a signal caught by interrupts.catching stops the search here
+            f, g = self.gradient(self.problem, u)
+        except SimulationError as err:
+            # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
+            # up: measured, one iteration and "RELATIVE REDUCTION OF F"); IPOPT rejects it too
+            self.failures += 1
+            self.last_failure = str(err)
+            best = self.best_f if np.isfinite(self.best_f) else 0.0
+            f, g = best + 10.0 * (abs(best) + 1.0), np.zeros_like(u)
+        except KeyboardInterrupt as err:  # IPOPT would swallow it: remember, then re-raise
+            self.interrupted = getattr(err, "signum", signal.SIGINT)
+            raise
+        self.seconds += time.perf_counter() - t
+        self.nfev += 1
+        self.last_u, self.last = u, (f, g)
+        if f < self.best_f:
+            self.best_u, self.best_f, self.best_g = u, f, g
+        return f, g
+
+    def record(self, history, start, bar):
+        """Append one iteration (at the last evaluated point) to ``history``; the checkpoint
+        gets the best controls on the final grid (``u``), their objective at this stage's
+        time step (``fun``), the iterations so far (``nit``), the ``stage`` and its
+        ``stage_dt``."""
+        u, (f, _) = self.last_u, self.last
+        control = self.problem.control_cost(u)[0]
+        history.append(history_record(
+            self.problem, u, objective=f, keyframe_error=f - control,
+            iteration=len(history) + 1, stage=self.stage,
+            seconds=time.perf_counter() - start, nfev=self.nfev))
+        if self.checkpoint is not None and self.best_u is not None:
+            self.checkpoint.write(self.export(self.best_u), fun=float(self.best_f),
+                                  nit=len(history), stage=self.stage,
+                                  stage_dt=float(self.problem.dt))
+        bar.update(1)
+        bar.set_postfix(f=f"{f:.4g}")
+        check()
+
+
+class MetricView:
+    """The evaluator as the optimizer sees it in a smooth metric: a function of z with
+    ``u = S z`` (:mod:`.metrics`), its gradient ``S^T g = S g``; ``best_u`` is the z of the
+    best controls.  The evaluator itself keeps working in u (history, checkpoint, best)."""
+
+    def __init__(self, ev, metric):
+        self.ev, self.metric = ev, metric
+
+    def __call__(self, z):
+        f, g = self.ev(self.metric.smooth(z))
+        return f, self.metric.smooth(g)
+
+    @property
+    def best_u(self):
+        return self.metric.unsmooth(self.ev.best_u)
+
+    @property
+    def interrupted(self):
+        return self.ev.interrupted
+
+
+def evaluate_final(problem, strategy, u):
+    """Objective and gradient of ``problem`` at the controls ``u`` a search ends on (after a
+    continuation stage stopped early, or the last augmented-Lagrangian round); if that is
+    interrupted too, the objective alone (gradient NaN)."""
+    try:
+        f, g = strategy(problem, u)
+        return float(f), g
+    except KeyboardInterrupt:
+        return float(problem.objective(u)), np.full(u.size, np.nan)

@@ -1,0 +1,82 @@
+"""L-BFGS-B (scipy's ``minimize``) as a search method: bounds on the controls, a
+limited-memory quasi-Newton step, and one restart from the best point when a line search
+fails after progress.
+
+``options`` go to ``minimize``'s L-BFGS-B options over this module's defaults
+(``maxfun = 10 * maxiter``, ``ftol = tol``, ``gtol = 1e-10``, ``maxcor = 20``); their names
+are read from scipy's own documentation of the method (:func:`option_names`).
+"""
+from __future__ import annotations
+
+import functools
+import re
+import time
+
+import numpy as np
+from scipy.optimize import minimize, show_options
+
+from .outcome import CONVERGED, FAILED, LIMIT, lbfgsb_outcome
+
+
+@functools.cache
+def option_names() -> tuple[str, ...]:
+    """The options scipy's L-BFGS-B takes, from its documentation
+    (``scipy.optimize.show_options("minimize", "L-BFGS-B")``), in its order."""
+    text = show_options("minimize", "L-BFGS-B", disp=False)
+    _, found, section = text.partition("Options\n-------\n")
+    section = re.split(r"\n(?:Notes|References|Examples)\n-+\n", section)[0]
+    names = tuple(re.findall(r"^(\w+) :", section, re.M))
+    if not (found and names):  # a scipy whose documentation reads otherwise: do not guess
+        raise RuntimeError("could not read L-BFGS-B's option names from scipy's "
+                           "show_options('minimize', 'L-BFGS-B'); please report the scipy "
+                           "version")
+    return names
+
+
+class _TimeUp(Exception):
+    """Raised from L-BFGS-B's callback past the deadline (scipy lets it through)."""
+
+
+def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+    """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), calling
+    ``on_iteration()`` after each iteration; stop at ``deadline`` (``time.perf_counter()``,
+    or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
+    opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": tol, "gtol": 1e-10,
+            "maxcor": 20}
+    opts.update(options)
+    lb, ub = problem.bounds()
+    bounds = list(zip(lb, ub)) if np.isfinite(lb).any() or np.isfinite(ub).any() else None
+
+    def callback(intermediate_result):
+        on_iteration()
+        if deadline is not None and time.perf_counter() >= deadline:
+            raise _TimeUp
+
+    try:
+        res = minimize(ev, u0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts,
+                       callback=callback)
+        status, message = lbfgsb_outcome(res.message, maxiter=opts["maxiter"],
+                                         maxfun=opts["maxfun"])
+        # a line search that fails after progress restarts from the best point with no
+        # curvature memory: its first step is along the steepest descent, so a second
+        # failure there means no step lowers phi (a kink, such as the cloth law's at rest
+        # length, or round-off); one that fails at the first step leaves the gradient suspect
+        if not (status == FAILED and _line_search_failed(res)
+                and 0 < res.nit < opts["maxiter"] and res.nfev < opts["maxfun"]):
+            return status, message
+        opts["maxiter"] -= res.nit
+        opts["maxfun"] -= res.nfev
+        again = minimize(ev, ev.best_u, jac=True, method="L-BFGS-B", bounds=bounds,
+                         options=opts, callback=callback)
+    except _TimeUp:
+        return LIMIT, "time limit reached before converging"
+    if _line_search_failed(again) and again.nit == 0:
+        return CONVERGED, ("converged: no step along the steepest descent lowers the "
+                           "objective (the line search failed, and again from the best point "
+                           "with fresh curvature memory): a kink of the objective or its "
+                           f"round-off floor [L-BFGS-B: {again.message}]")
+    return lbfgsb_outcome(again.message, maxiter=maxiter, maxfun=opts["maxfun"])
+
+
+def _line_search_failed(res) -> bool:
+    return str(res.message).upper().startswith("ABNORMAL")

@@ -1,0 +1,190 @@
+"""One optimisation of a problem's controls: :func:`solve`.
+
+It checks what it is asked before any simulation, goes through the stages
+(:mod:`.stages`) coarse to fine, runs the method of :data:`~.methods.METHODS` on each
+through an :class:`~.evaluator.Evaluator`, and returns a :class:`~.result.Result` in scipy's
+vocabulary (``status`` included, see :mod:`.outcome`).  Ctrl-C (or any
+:class:`~casadi_keyframe.interrupts.Interrupted`) stops the solve and returns the best
+controls seen so far with status 3; ``time_limit=`` stops it with status 1; with
+``checkpoint=`` the best is also on disk after every iteration, written atomically.
+"""
+from __future__ import annotations
+
+import math
+import numbers
+import signal
+import time
+
+from tqdm.auto import tqdm
+
+from ..adjoints import get_gradient
+from ..interrupts import NAMES, handled
+from ..io import as_checkpoint
+from ..state import SimulationError
+from .evaluator import Evaluator, MetricView, evaluate_final
+from .methods import check_options, get_method
+from .metrics import search_metric
+from .outcome import CONVERGED, INTERRUPTED, LIMIT
+from .result import Result, assemble
+from .stages import carry, stage_name, stage_problems
+
+
+
+def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
+          tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
+          options: dict | None = None, continuation=None, resolutions=None,
+          time_limit: float | None = None) -> Result:
+    """Optimise the problem's controls.
+
+    ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
+    ``gradient`` a route name or strategy; ``maxiter`` (a whole number >= 1) and ``tol``
+    (> 0) the search's limits; ``u0`` the starting controls at ``problem.dt`` (default: the
+    problem's guess, else passive); ``checkpoint`` a ``.npz`` path (or
+    :class:`~casadi_keyframe.io.Checkpoint`) that always holds the best controls so far (at
+    ``problem.dt``, also during a coarse stage); ``options`` go to the method's library
+    (an unknown name is refused before the search, with the valid ones); ``time_limit``
+    (seconds, wall clock, over all stages) stops the search at the first iteration past it
+    (IPOPT: its ``max_wall_time``) with status 1.
+
+    ``continuation`` (the paper's section 6: optimise at a large time step, then refine) is a
+    list of time steps from coarse to fine, e.g. ``[4 * prob.dt, 2 * prob.dt]``; the
+    problem's own dt is appended if the list does not end with it.  ``u0``, if given, is
+    carried to the first stage's grid.  Each stage solves
+    ``problem.resampled(dt)`` from the previous stage's best controls carried to its grid
+    (``controls.resample``: the force in newtons stays the same function of time).
+    ``maxiter`` applies to each stage.  The result is the last stage's, at ``problem.dt``;
+    ``nit``, ``nfev`` and ``timings`` are totals over the stages, every ``history`` record
+    names its ``stage`` and ``dt``, and ``stages`` lists per stage its dt, iterations,
+    evaluations, best objective (at that dt), status, message and seconds.  An interrupt or
+    the time limit during an earlier stage ends the continuation there: the result is that
+    stage's best controls resampled to ``problem.dt`` and evaluated there, and its message
+    names the stage.
+
+    ``resolutions`` (coarse to fine in space, e.g. a cloth solved on a 12 x 12 mesh, then
+    25 x 25, then its own) lists coarser versions of the problem: problems, or dicts of
+    build overrides such as ``{"rows": 12, "cols": 12}`` for a problem built from a problem
+    file (:meth:`~.problem.ControlProblem.at_resolution`).  Each mesh, coarse to fine, is
+    solved in turn (with the ``continuation``'s time steps, if given) from the previous
+    mesh's best controls carried to it (:func:`~.transfer.carry_to_mesh`: interpolated on
+    the rest mesh, momentum and impulse kept); stages and history records name the mesh's
+    ``particles``, and the checkpoint always holds controls of ``problem`` itself.
+
+    A simulation that fails at the starting controls raises :class:`SimulationError`;
+    during the search a failing point counts as a failed evaluation.
+    """
+    options = check_settings(method, maxiter, tol, time_limit, options)
+    problems = stage_problems(problem, continuation, resolutions)
+    strategy = get_gradient(gradient)
+    search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
+                     time_limit)
+    u = None if u0 is None else carry(problem, problem.controls.check(u0), problems[0])
+    stages = []
+    for k, p in enumerate(problems):
+        ev = Evaluator(p, strategy, search.checkpoint, stage=k,
+                        export=lambda v, p=p: carry(p, v, problem))
+        stages.append(search.run(p, ev, p.initial_controls() if u is None else u,
+                                 (k, len(problems))))
+        if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
+            break
+        u = carry(p, ev.best_u, problems[k + 1])
+    return _result(problem, p, ev, strategy, search, stages, len(problems))
+
+
+def check_settings(method, maxiter, tol, time_limit, options) -> dict:
+    """Refuse a setting of :func:`solve` before any simulation runs (ValueError naming it
+    and what it takes); return the method's options, checked, as a new dict."""
+    get_method(method)
+    if isinstance(maxiter, bool) or not isinstance(maxiter, numbers.Integral) or maxiter < 1:
+        raise ValueError(f"maxiter must be a whole number >= 1 (iterations per stage), got "
+                         f"{maxiter!r}")
+    if not _positive(tol):
+        raise ValueError(f"tol must be a finite number > 0 (the method's convergence "
+                         f"tolerance), got {tol!r}")
+    if time_limit is not None and not _positive(time_limit):
+        raise ValueError(f"time_limit must be a finite positive number of seconds (None for "
+                         f"no limit), got {time_limit!r}")
+    return check_options(method, options)
+
+
+def _positive(value) -> bool:
+    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0)
+
+
+def _result(problem, p, ev, strategy, search, stages, count) -> Result:
+    """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``)."""
+    status, message = stages[-1]["status"], stages[-1]["message"]
+    if p is problem:
+        u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
+    else:
+        u = carry(p, ev.best_u, problem)
+        fun, jac = evaluate_final(problem, strategy, u)
+        if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
+            status = LIMIT
+            message = f"time limit reached ({search.time_limit:g} s) before converging"
+        message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} "
+                   f"({stage_name(p)}): its best controls, carried to the problem "
+                   f"({stage_name(problem)}), kept")
+    return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
+                    method=search.method,
+                    gradient=getattr(strategy, "name", type(strategy).__name__),
+                    stages=stages, history=search.history, started=search.start)
+
+
+class _Search:
+    """What the stages of one :func:`solve` share: the method and its settings, the
+    history, the checkpoint and the clock."""
+
+    def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
+        self.method, self.maxiter, self.tol, self.options = method, maxiter, tol, options
+        self.quiet, self.checkpoint, self.time_limit = quiet, checkpoint, time_limit
+        self.history, self.start = [], time.perf_counter()
+        self.deadline = None if time_limit is None else self.start + time_limit
+
+    def time_up(self) -> bool:
+        return self.deadline is not None and time.perf_counter() >= self.deadline
+
+    def run(self, problem, ev, u0, stage) -> dict:
+        """One method run from ``u0``: the stage's :class:`~.result.Stage`."""
+        t, first = time.perf_counter(), len(self.history)
+        status, message = self._search(problem, ev, u0, stage)
+        if status == LIMIT and self.time_up():
+            message = f"time limit reached ({self.time_limit:g} s) before converging"
+        return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
+                "particles": problem.model.n,
+                "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
+                "fun": float(ev.best_f),
+                "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
+                "success": status == CONVERGED, "status": status, "message": message,
+                "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
+                "failed_simulations": ev.failures}
+
+    def _search(self, problem, ev, u0, stage):
+        k, count = stage
+        where = "" if count == 1 else f" of stage {k} ({stage_name(problem)})"
+        f0, _ = ev(u0)
+        ev.start = (float(f0), float(f0 - problem.control_cost(u0)[0]))
+        if ev.failures:
+            raise SimulationError(f"the simulation fails at the starting controls{where} "
+                                  f"({ev.last_failure})"
+                                  + ("" if not where else "; start the continuation at a "
+                                     "finer dt or mesh" if k == 0 else "; the controls "
+                                     "carried from the previous stage fail here: start the "
+                                     "continuation at a finer dt or mesh"), 0)
+        desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
+        bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
+        run = get_method(self.method).run
+        metric = search_metric(problem)
+        searched, start = (ev, u0) if metric is None else (MetricView(ev, metric),
+                                                          metric.unsmooth(u0))
+        try:
+            return run(problem, searched, start, self.maxiter, self.tol, self.options,
+                       lambda: ev.record(self.history, self.start, bar), self.deadline)
+        except KeyboardInterrupt as err:
+            handled()
+            signum = getattr(err, "signum", signal.SIGINT)
+            who = ("by user (SIGINT)" if signum == signal.SIGINT
+                   else f"by {NAMES.get(signum, signum)}")
+            return INTERRUPTED, f"interrupted {who}; best result kept"
+        finally:
+            bar.close()

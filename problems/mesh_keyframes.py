@@ -1,20 +1,28 @@
 """Meshes in: a cloth read from a mesh file hits target meshes at keyframes (OBJ, PLY or USD).
 
-The cloth is ``cloth`` (its vertices are the particles, in the file's order; quads are split
-into triangles with a note), hanging from the vertices ``pins`` names (indices), those of
-the file's vertex set ``pin_group`` (PLY vertex property, USD point subset or primvar) and
-those inside ``pin_box`` (x0,y0,z0,x1,y1,z1).  ``keyframes`` gives FRAME:FILE pairs: at each
-frame every particle should be on its vertex of the file, which must be the cloth's mesh in
-another shape (same vertices in the same order, same faces); ``align=True`` compares shapes
-after the best rigid motion.  Metres, z up, gravity along -z.  The cloth starts at rest
-``wrinkle`` metres (2 mm) out of the file's shape along its normals: an exactly flat sheet
-hanging in its plane is a buckling saddle, whose exact gradient grows by orders of magnitude
-per second on fine meshes (``scenes.mesh_cloths.wrinkled``).  Per-step forces on the free
-particles (``control=velocity``: initial velocities only; ``smoothing`` metres searches in
-a metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
-``Smoothness(alpha)`` and ``StrainLimit(strain_limit, strain_weight)``.  ``mass`` is the
-cloth's total in kg, ``ground`` (a height) and ``spheres`` (x,y,z,radius, ...) add
-colliders, ``dt`` is the frame time and ``steps`` defaults to the last keyframe's frame.
+``cloth`` is the mesh file (its vertices are the particles, in the file's order; quads are
+split into triangles with a note).  It hangs from the vertices ``pins`` names (indices, e.g.
+``pins=0,29``; one index as ``pins=5,``), those of the file's vertex set ``pin_group`` (a
+PLY vertex property, a USD point subset or primvar) and those inside ``pin_box``
+(x0,y0,z0,x1,y1,z1).  ``keyframes`` gives FRAME:FILE pairs: at each frame every particle
+should be on its vertex of the file, which must be the cloth's mesh in another shape (same
+vertices in the same order, same faces); ``align`` compares shapes after the best rigid
+motion.  Metres, z up, gravity along -z; ``mass`` is the cloth's total in kg, ``ground`` (a
+height) and ``spheres`` (x,y,z,radius, ...) add colliders, ``dt`` is the frame time and
+``steps`` defaults to the last keyframe's frame.
+
+The cloth starts at rest ``wrinkle`` metres (2 mm) out of the file's shape along its
+normals: an exactly flat sheet hanging in its plane is a buckling saddle, whose exact
+gradient grows by orders of magnitude per second on fine meshes
+(``scenes.mesh_cloths.wrinkled``).  The controls are per-step forces on the free particles
+(``control``: ``velocity`` for initial velocities only; ``smoothing`` metres searches in a
+metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
+``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
+``strain_weight``).  With ``guess`` (per-step forces) the search starts from a PD controller
+that pulls the cloth from target to target and lands on each at rest by two inverse steps
+(``scenes.mesh_cloths.tracking_guess``): from zero forces L-BFGS-B stalls on a fine sheet,
+and from the guess it starts on its keyframes, where its line search often finds no lower
+control cost (the run then ends with exit code 1, its result on the keyframes written).
 
     casadi-keyframe solve mesh_keyframes --set cloth=sheet.obj \\
         --set keyframes=40:wave.obj,80:fold.obj --set pins=0,29 --out results/mine
@@ -31,7 +39,7 @@ from casadi_keyframe.scenes.mesh_cloths import (colliders_of, mesh_keyframe_prob
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
 
 SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
-RANGES = {"steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
+RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
           "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
           "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "control": ("forces", "velocity")}
 
@@ -43,7 +51,7 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           ground: float | None = None, spheres: tuple[float, ...] | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
-          smoothing: float | None = None, wrinkle: float = 0.002):
+          smoothing: float | None = None, wrinkle: float = 0.002, guess: bool = True):
     if cloth is None:
         if keyframes is not None:
             raise refuse("keyframes", "targets need the cloth they shape: give cloth=FILE too")
@@ -65,4 +73,4 @@ def build(cloth: str | None = None, keyframes: str | None = None,
                                  colliders=colliders_of(ground, spheres), weight=weight,
                                  alpha=alpha, align=align, strain_limit=strain_limit,
                                  strain_weight=strain_weight, smoothing=smoothing,
-                                 wrinkle=wrinkle)
+                                 wrinkle=wrinkle, guess=guess)

@@ -19,7 +19,9 @@ from ..models import ClothModel
 from ..models.colliders import Plane, Sphere
 from ..objectives import Smoothness, StrainLimit
 from ..views import ClothView
+from .cape_tracking import tracking_forces
 from .cloths import cloth_problem
+from .maths import smoothstep
 
 PROBLEM = "mesh_keyframes"
 EXAMPLE = "40:wave.obj,80:fold.obj"
@@ -139,13 +141,38 @@ def wrinkled(model, depth: float) -> np.ndarray:
     return x + bump[:, None] * at_vertex
 
 
+def keyframe_path(x0, terms, steps: int) -> np.ndarray:
+    """``(steps + 1, n, 3)`` positions from ``x0`` through each keyframe's target at its
+    frame (smoothstep between them, so the path rests at each), held after the last."""
+    stops = [(0, x0)] + [(t.frame, t.position_target) for t in terms]
+    path = np.empty((steps + 1,) + x0.shape)
+    for (f0, a), (f1, b) in zip(stops, stops[1:]):
+        s = smoothstep((np.arange(f0, f1 + 1) - f0) / max(f1 - f0, 1))
+        path[f0:f1 + 1] = a + s[:, None, None] * (b - a)
+    path[stops[-1][0]:] = stops[-1][1]
+    return path
+
+
+def tracking_guess(prob) -> np.ndarray:
+    """Start controls of ``prob`` (per-step forces): a PD controller pulling every particle
+    along :func:`keyframe_path` that lands on each target at rest by two inverse steps
+    (``cape_tracking.tracking_forces``), so the search starts on its keyframes; from zero
+    forces it meets the flat sheet's rough objective first and stalls."""
+    terms = sorted(prob.objective_terms.state_terms, key=lambda t: t.frame)
+    stops = {t.frame: (t.position_target, np.zeros_like(prob.x0)) for t in terms
+             if not getattr(t, "align", False)}
+    forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps), stops=stops)
+    return forces[:, prob.controls.idx].ravel()
+
+
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
-                          smoothing=None, wrinkle=0.0):
+                          smoothing=None, wrinkle=0.0, guess=True):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
-    strain limit and a small control cost."""
+    strain limit and a small control cost; with ``guess`` (per-step forces) the search
+    starts from :func:`tracking_guess`."""
     model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders)
     steps = max(f for f, _ in keyframes) if steps is None else steps
     terms = targets_of(model, keyframes, steps, weight=weight, align=align)
@@ -155,5 +182,7 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     controls = (StepForces(agents=free, smoothing=smoothing) if control == "forces"
                 else InitialVelocity(agents=free, smoothing=smoothing))
     objective = sum(terms, Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
-    return cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
-                         x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls, view=ClothView(camera=(15, -30)))
+    prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
+                         x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls,
+                         view=ClothView(camera=(15, -30)))
+    return prob.with_guess(tracking_guess(prob)) if guess and control == "forces" else prob

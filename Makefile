@@ -42,7 +42,7 @@ test-blender: $(STAMP) $(BLENDER_STAMP)
 # the add-on as Blender installs it (Edit > Preferences > Add-ons > Install from Disk)
 blender-addon:
 	mkdir -p dist
-	cd blender && $(PYTHON) -m zipfile -c ../dist/casadi_keyframe_blender.zip casadi_keyframe_blender/__init__.py casadi_keyframe_blender/bridge.py casadi_keyframe_blender/blender_manifest.toml
+	cd blender && $(PYTHON) -c "import pathlib, zipfile; z = zipfile.ZipFile('../dist/casadi_keyframe_blender.zip', 'w'); [z.write(p) for p in sorted(pathlib.Path('casadi_keyframe_blender').glob('*')) if p.suffix in ('.py', '.toml')]; z.close()"
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/flock_gradient.py

@@ -76,3 +76,26 @@ def test_a_small_sheet_from_obj_files_reaches_its_wave_and_fold(files, tmp_path,
     assert breakdown["physical"]["max_stretch"] <= 1.3
     x = np.load(out / "result.npz")["x"]
     assert x.shape == (31, 36, 3)
+
+
+def test_colliders_control_kind_and_pin_box_overrides(files):
+    from casadi_keyframe.controls import InitialVelocity
+    from casadi_keyframe.loading import load_problem
+    from casadi_keyframe.models.colliders import Plane, Sphere
+
+    prob = load_problem("mesh_keyframes", cloth=files["sheet"], keyframes=f"10:{files['wave']}",
+                        pin_box=(-1, -1, -0.01, 2, 1, 1), ground=-1.5,
+                        spheres=(0.5, 0.3, -0.5, 0.1, 0.2, 0.3, -0.8, 0.05),
+                        control="velocity", steps=12, dt=1 / 30)
+    assert [type(b) for b in prob.model.colliders] == [Plane, Sphere, Sphere]
+    np.testing.assert_array_equal(prob.model.pinned, np.arange(6))  # the top row
+    assert isinstance(prob.controls, InitialVelocity) and not prob.has_guess
+    assert (prob.steps, prob.dt) == (12, 1 / 30)
+
+
+def test_bad_spheres_and_box_are_refused_by_name(files, capsys):
+    cloth, wave = f"cloth={files['sheet']}", f"keyframes=10:{files['wave']}"
+    assert main(bad(files, cloth, wave, "spheres=0,0,0")) == 2
+    assert "mesh_keyframes: spheres: give x,y,z,radius for each sphere" in capsys.readouterr().err
+    assert main(bad(files, cloth, wave, "pin_box=5,5,5,6,6,6")) == 2
+    assert "mesh_keyframes: pin_box: " in capsys.readouterr().err

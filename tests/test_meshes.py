@@ -86,6 +86,10 @@ def test_unreadable_and_missing_files(tmp_path):
         read_mesh(write(tmp_path, "a.stl", "solid"))
     with pytest.raises(MeshError, match="junk.obj"):
         read_mesh(write(tmp_path, "junk.obj", "this is not\x00 a mesh\n"))
+    binary = tmp_path / "binary.obj"
+    binary.write_bytes(bytes(range(256)) * 8)
+    with pytest.raises(MeshError, match="binary.obj: cannot be read as OBJ: it is not a text"):
+        read_mesh(binary)
     with pytest.raises(MeshError, match="junk.ply"):
         read_mesh(write(tmp_path, "junk.ply", "ply\nformat nonsense\n"))
     with pytest.raises(MeshError, match="junk.usda: cannot be read as USD"):

@@ -66,6 +66,14 @@ def _trimesh(path: Path, kind: str):
 
 
 def _read_obj(path: Path):
+    head = path.read_bytes()[:1 << 16]
+    try:
+        if b"\0" in head:
+            raise UnicodeDecodeError("utf-8", head, 0, 1, "NUL byte")
+        head.decode("utf-8", errors="strict" if len(head) < 1 << 16 else "ignore")
+    except UnicodeDecodeError:
+        raise MeshError(f"{path}: cannot be read as OBJ: it is not a text file (an OBJ is "
+                        f"text: export it again as Wavefront OBJ)") from None
     loaded = _trimesh(path, "OBJ")
     sizes, count = [], 0
     with open(path, errors="replace") as f:  # polygon sizes and vertex count, for the checks

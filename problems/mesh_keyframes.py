@@ -18,11 +18,13 @@ gradient grows by orders of magnitude per second on fine meshes
 (``control``: ``velocity`` for initial velocities only; ``smoothing`` metres searches in a
 metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
 ``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
-``strain_weight``).  With ``guess`` (per-step forces) the search starts from a PD controller
-that pulls the cloth from target to target and lands on each at rest by two inverse steps
-(``scenes.mesh_cloths.tracking_guess``): from zero forces L-BFGS-B stalls on a fine sheet,
-and from the guess it starts on its keyframes, where its line search often finds no lower
-control cost (the run then ends with exit code 1, its result on the keyframes written).
+``strain_weight``).  With per-step forces the search starts from ``guess``: "land" (the
+default), a PD controller that pulls the cloth from target to target and lands on each at
+rest by two inverse steps, whatever force holding a target's shape takes; "track", the PD
+controller alone, gentle but lagging; "none", zero forces
+(``scenes.mesh_cloths.tracking_guess``).  On a fine flat sheet the objective is rough at
+the scale of a line search's steps, and L-BFGS-B often finds no better point than its start
+(a run that ends so exits with code 1, its result written).
 
     casadi-keyframe solve mesh_keyframes --set cloth=sheet.obj \\
         --set keyframes=40:wave.obj,80:fold.obj --set pins=0,29 --out results/mine
@@ -41,7 +43,8 @@ from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
 SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
 RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
           "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
-          "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "control": ("forces", "velocity")}
+          "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "control": ("forces", "velocity"),
+          "guess": ("land", "track", "none")}
 
 
 def build(cloth: str | None = None, keyframes: str | None = None,
@@ -51,7 +54,7 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           ground: float | None = None, spheres: tuple[float, ...] | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
-          smoothing: float | None = None, wrinkle: float = 0.002, guess: bool = True):
+          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land"):
     if cloth is None:
         if keyframes is not None:
             raise refuse("keyframes", "targets need the cloth they shape: give cloth=FILE too")

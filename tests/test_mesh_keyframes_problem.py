@@ -99,3 +99,23 @@ def test_bad_spheres_and_box_are_refused_by_name(files, capsys):
     assert "mesh_keyframes: spheres: give x,y,z,radius for each sphere" in capsys.readouterr().err
     assert main(bad(files, cloth, wave, "pin_box=5,5,5,6,6,6")) == 2
     assert "mesh_keyframes: pin_box: " in capsys.readouterr().err
+
+
+def test_guesses_land_track_or_start_from_zero(files):
+    """"land" starts on both keyframes (inverse steps at each, not only the last), "track"
+    near them with far gentler forces, "none" from zero forces."""
+    from casadi_keyframe.loading import load_problem
+
+    def start(guess):
+        prob = load_problem("mesh_keyframes", cloth=files["sheet"], guess=guess, pins=(0, 5),
+                            keyframes=f"15:{files['wave']},30:{files['fold']}")
+        u = prob.initial_controls()
+        misses = [m["rms_position_error"] for m in prob.breakdown(u)["misses"]]
+        return prob, u, misses
+
+    landed, u_land, on = start("land")
+    tracked, u_track, near = start("track")
+    passive, u_zero, off = start("none")
+    assert max(on) < 1e-9 and not np.any(u_zero)
+    assert max(near) < 0.5 * min(off) and min(near) > 1e-6
+    assert tracked.control_cost(u_track)[0] < 0.1 * landed.control_cost(u_land)[0]

@@ -153,26 +153,28 @@ def keyframe_path(x0, terms, steps: int) -> np.ndarray:
     return path
 
 
-def tracking_guess(prob) -> np.ndarray:
+def tracking_guess(prob, land: bool = True) -> np.ndarray:
     """Start controls of ``prob`` (per-step forces): a PD controller pulling every particle
-    along :func:`keyframe_path` that lands on each target at rest by two inverse steps
-    (``cape_tracking.tracking_forces``), so the search starts on its keyframes; from zero
-    forces it meets the flat sheet's rough objective first and stalls."""
+    along :func:`keyframe_path` (``cape_tracking.tracking_forces``) and, with ``land``,
+    landing on each target at rest by two inverse steps, so the search starts on its
+    keyframes.  The landings hold each target's shape whatever it costs: strong forces where
+    a target stretches the cloth; the PD controller alone is gentle but lags."""
     terms = sorted(prob.objective_terms.state_terms, key=lambda t: t.frame)
     stops = {t.frame: (t.position_target, np.zeros_like(prob.x0)) for t in terms
-             if not getattr(t, "align", False)}
+             if land and not getattr(t, "align", False)}
     forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps), stops=stops)
     return forces[:, prob.controls.idx].ravel()
 
 
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
-                          smoothing=None, wrinkle=0.0, guess=True):
+                          smoothing=None, wrinkle=0.0, guess="land"):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
-    strain limit and a small control cost; with ``guess`` (per-step forces) the search
-    starts from :func:`tracking_guess`."""
+    strain limit and a small control cost; with ``guess`` "land" or "track" (per-step
+    forces) the search starts from :func:`tracking_guess` with or without its landings,
+    with "none" from zero forces."""
     model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders)
     steps = max(f for f, _ in keyframes) if steps is None else steps
     terms = targets_of(model, keyframes, steps, weight=weight, align=align)
@@ -185,4 +187,6 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
                          x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls,
                          view=ClothView(camera=(15, -30)))
-    return prob.with_guess(tracking_guess(prob)) if guess and control == "forces" else prob
+    if guess == "none" or control != "forces":
+        return prob
+    return prob.with_guess(tracking_guess(prob, land=guess == "land"))

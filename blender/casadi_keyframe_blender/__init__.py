@@ -173,7 +173,7 @@ def prepare(context):
 def finish(context, obj, out: Path, code: int) -> list[str]:
     """Read the misses, put the cache on ``obj`` and return the lines to show."""
     scene, settings = context.scene, context.scene.casadi_keyframe
-    if code not in (0, 1, 3) or not (out / "summary.json").is_file():
+    if code not in (0, 1, 3, 130, 143) or not (out / "summary.json").is_file():  # see solve --help
         raise RuntimeError(f"casadi-keyframe failed (exit code {code}): see the console")
     lines = bridge.describe_misses(bridge.read_misses(out), settings.tolerance,
                                    scene.frame_start)

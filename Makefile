@@ -4,7 +4,12 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow bench clean
+# make test-blender: Blender 5.0.1 as the bpy module (Python 3.11, about 820 MB) in its own venv
+PYTHON311 ?= python3.11
+BLENDER_VENV := .venv-blender
+BLENDER_STAMP := $(BLENDER_VENV)/.installed
+
+.PHONY: demo test test-slow test-blender blender-addon bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -23,9 +28,25 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
 
+$(BLENDER_STAMP):
+	$(PYTHON311) -m venv $(BLENDER_VENV)
+	$(BLENDER_VENV)/bin/python -m pip install --quiet --upgrade pip
+	$(BLENDER_VENV)/bin/python -m pip install --quiet bpy==5.0.1
+	touch $(BLENDER_STAMP)
+
+# round trips through a real Blender and the add-on run headless; not part of 'make test'
+test-blender: $(STAMP) $(BLENDER_STAMP)
+	BLENDER_PYTHON=$(CURDIR)/$(BLENDER_VENV)/bin/python $(BIN)/python -m pytest -q \
+	    -p no:cacheprovider blender/tests
+
+# the add-on as Blender installs it (Edit > Preferences > Add-ons > Install from Disk)
+blender-addon:
+	mkdir -p dist
+	cd blender && $(PYTHON) -c "import pathlib, zipfile; z = zipfile.ZipFile('../dist/casadi_keyframe_blender.zip', 'w'); [z.write(p) for p in sorted(pathlib.Path('casadi_keyframe_blender').glob('*')) if p.suffix in ('.py', '.toml')]; z.close()"
+
 bench: $(STAMP)
 	$(BIN)/python benchmarks/flock_gradient.py
 	$(BIN)/python benchmarks/cloth_gradient.py
 
 clean:
-	rm -rf $(VENV) results .pytest_cache
+	rm -rf $(VENV) $(BLENDER_VENV) results dist .pytest_cache

@@ -17,6 +17,7 @@ import numpy as np
 
 from .adjoints import ROUTES as GRADIENT_ROUTES
 from .export import FORMATS as EXPORT_FORMATS
+from .export.alembic import BlenderError
 from .loading import (OverrideError, check_overrides, list_problems, load_module,
                       load_problem, overrides_of, solve_defaults)
 from .optimize import METHODS
@@ -369,7 +370,7 @@ def _output_options(s) -> None:
     s.add_argument("--no-viewer", action="store_true",
                    help="skip viewer.html, the interactive viewer (needs plotly)")
     s.add_argument("--export", action="append", metavar="FORMAT", choices=EXPORT_FORMATS,
-                   help="also export the result: usd, pc2, obj or html (repeatable; see "
+                   help="also export the result: usd, pc2, obj, html or abc (repeatable; see "
                         "'casadi-keyframe export')")
 
 
@@ -382,7 +383,8 @@ def _export_parser(sub) -> None:
                    help="usd: NAME.usd, one stage (needs casadi_keyframe[usd]); pc2: NAME.pc2 "
                         "and its rest mesh NAME_rest.obj (Blender's Mesh Cache modifier); "
                         "obj: obj/NAME_0000.obj ... one per frame; html: viewer.html (needs "
-                        "casadi_keyframe[viewer]); repeatable")
+                        "casadi_keyframe[viewer]); abc: NAME.abc, Alembic of a cloth (needs "
+                        "Blender: the bpy module or a blender binary); repeatable")
     e.add_argument("--out", help="output folder (default: the results folder)")
     e.set_defaults(func=cmd_export)
 
@@ -502,6 +504,9 @@ def main(argv=None) -> int:
     except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
         print(f"error: {err}", file=sys.stderr)
         return 2
+    except BlenderError as err:  # an export through Blender that Blender did not finish
+        print(f"error: {err}", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ class Override:
 
     @property
     def type_name(self) -> str:
-        base = f"{self.length} floats" if self.kind == "floats" else self.kind
+        base = (f"{self.length or 'some'} floats" if self.kind == "floats" else self.kind)
         return base + (" | None" if self.optional else "")
 
     def describe(self) -> str:

@@ -94,20 +94,43 @@ def test_usd_cloth_round_trip_and_compliance(cloth):
     assert validate(path) == []
 
 
-def test_usd_flock_points_ids_and_highlight(flock, tmp_path):
+def test_usd_flock_point_instancer(flock, tmp_path):
     pytest.importorskip("pxr", reason="usd-core is not installed: pip install casadi_keyframe[usd]")
-    from pxr import UsdGeom
+    from pxr import Gf, UsdGeom
 
     out, result = flock
     stage = _stage(export(out, "usd", out=tmp_path)[0])
-    pts = UsdGeom.Points(stage.GetPrimAtPath("/Result/Flock"))
-    assert list(pts.GetIdsAttr().Get()) == list(range(8))
-    flag = UsdGeom.PrimvarsAPI(pts).GetPrimvar("highlighted").Get()
+    inst = UsdGeom.PointInstancer(stage.GetPrimAtPath("/Result/Flock"))
+    assert list(inst.GetIdsAttr().Get()) == list(range(8))
+    protos = [str(p) for p in inst.GetPrototypesRel().GetTargets()]
+    assert protos == ["/Result/Flock/Prototypes/Agent", "/Result/Flock/Prototypes/Highlighted"]
+    assert UsdGeom.Cone(stage.GetPrimAtPath(protos[0])).GetAxisAttr().Get() == "X"
     highlight = load_problem("flock_race", agents=8, steps=12).view.highlight
-    assert [i for i, f in enumerate(flag) if f] == list(highlight)
+    index = list(inst.GetProtoIndicesAttr().Get())
+    assert [i for i, k in enumerate(index) if k == 1] == list(highlight) and set(index) == {0, 1}
     for n in (0, 5, result["x"].shape[0] - 1):
-        np.testing.assert_array_equal(np.array(pts.GetPointsAttr().Get(n))[:, :2],
+        np.testing.assert_array_equal(np.array(inst.GetPositionsAttr().Get(n))[:, :2],
                                       result["x"][n].astype(np.float32))
+        np.testing.assert_array_equal(np.array(inst.GetVelocitiesAttr().Get(n))[:, :2],
+                                      result["v"][n].astype(np.float32))
+        # a reader's instance transforms: each cone's +x along its agent's velocity
+        for m, v in zip(inst.ComputeInstanceTransformsAtTime(n, n), result["v"][n]):
+            heading = Gf.Matrix4d(m).TransformDir(Gf.Vec3d(1, 0, 0))
+            np.testing.assert_allclose(heading, np.r_[v, 0] / np.linalg.norm(v), atol=2e-3)
+    assert len(inst.ComputeInstanceTransformsAtTime(5, 5)) == 8
+
+
+def test_heading_quaternions_turn_x_onto_the_velocity():
+    from scipy.spatial.transform import Rotation
+
+    from casadi_keyframe.export.usd import heading_quaternions
+    v = np.array([[1.0, 0, 0], [0, 2, 0], [0, 0, -3], [-1, 0, 0], [0, 0, 0], [1, -2, 0.5]])
+    q = heading_quaternions(v)
+    turned = Rotation.from_quat(q[:, [1, 2, 3, 0]]).apply([1.0, 0, 0])  # scipy: real last
+    np.testing.assert_allclose(turned[[0, 1, 2, 3, 5]],
+                               v[[0, 1, 2, 3, 5]] / np.linalg.norm(v[[0, 1, 2, 3, 5]], axis=1,
+                                                                   keepdims=True), atol=1e-12)
+    np.testing.assert_allclose(q[4], [1, 0, 0, 0])
 
 
 def test_usd_blend_has_its_clips_and_moving_capsules(tmp_path):

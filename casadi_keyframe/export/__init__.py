@@ -11,6 +11,7 @@ format    files (in the results folder, or ``out``)           needs
 ``pc2``   ``NAME.pc2`` + ``NAME_rest.obj`` (:mod:`.pc2`)       nothing
 ``obj``   ``obj/NAME_0000.obj`` ... one per frame (:mod:`.obj`) nothing
 ``html``  ``viewer.html``: the interactive viewer (:mod:`.viewer`)  ``casadi_keyframe[viewer]``
+``abc``   ``NAME.abc``: Alembic, cloth only (:mod:`.alembic`)  Blender (``bpy`` or a binary)
 ========  =================================================  ===========================
 """
 from __future__ import annotations
@@ -19,7 +20,7 @@ from pathlib import Path
 
 from .scene import Scene, scene_of
 
-FORMATS = ("usd", "pc2", "obj", "html")
+FORMATS = ("usd", "pc2", "obj", "html", "abc")
 VIEWER = "viewer.html"
 
 __all__ = ["FORMATS", "Scene", "check_library", "export", "export_scene", "scene_of",
@@ -46,6 +47,9 @@ def export_scene(scene: Scene, fmt: str, out) -> list[Path]:
     if fmt == "obj":
         from .obj import write_sequence
         return write_sequence(scene, out / "obj")
+    if fmt == "abc":
+        from .alembic import write_alembic
+        return [write_alembic(scene, out / f"{scene.name}.abc")]
     from .viewer import write_viewer
     return [write_viewer(scene, out / VIEWER)]
 
@@ -73,6 +77,9 @@ def check_library(fmt: str) -> None:
     elif fmt == "html":
         from .viewer import plotly_module
         plotly_module()
+    elif fmt == "abc":
+        from .alembic import find_blender
+        find_blender()
 
 
 def write_outputs(problem, trajectory, out, formats=(), *, viewer: bool = True) -> list[Path]:

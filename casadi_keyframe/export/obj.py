@@ -17,13 +17,14 @@ from ..io import atomic_path
 
 
 def obj_text(vertices, faces=None, *, comment: str = "") -> str:
-    """The OBJ text of ``vertices`` ``(n, 3)`` and triangles ``faces`` ``(m, 3)`` (0-based)."""
+    """The OBJ text of ``vertices`` ``(n, 3)`` and ``faces`` ``(m, k)`` (0-based; triangles,
+    or quads for a mesh a DCC will meet as quads)."""
     v = np.asarray(vertices, dtype=np.float32)
     lines = [f"# {line}" for line in comment.splitlines()]
     lines.append("\n".join(f"v {a:.9g} {b:.9g} {c:.9g}" for a, b, c in v.tolist()))
     if faces is not None and len(faces):
         f = np.asarray(faces, dtype=int) + 1
-        lines.append("\n".join(f"f {a} {b} {c}" for a, b, c in f.tolist()))
+        lines.append("\n".join("f " + " ".join(map(str, face)) for face in f.tolist()))
     return "\n".join(lines) + "\n"
 
 

@@ -106,6 +106,7 @@ class Scene:
     clips: list = field(default_factory=list)
     misses: dict = field(default_factory=dict)  # frame -> one line of keyframe misses
     stretch: np.ndarray | None = None  # (frames,) a cloth's largest spring stretch per frame
+    velocities: np.ndarray | None = None  # (frames, n, 3) the particles' velocities
 
     @property
     def frames(self) -> int:
@@ -123,7 +124,7 @@ def scene_of(problem, trajectory) -> Scene:
     scene = Scene(problem.name, float(trajectory.dt), points3(trajectory.x),
                   np.asarray(model.faces, int) if isinstance(model, Surface) else None,
                   bodies(model, times), targets(problem), dim=model.dim,
-                  misses=misses(problem, trajectory))
+                  misses=misses(problem, trajectory), velocities=points3(trajectory.v))
     if isinstance(model, PhysicalReport):
         scene.stretch = np.array([model.max_stretch(x) for x in trajectory.x])
     if isinstance(view, FlockView):

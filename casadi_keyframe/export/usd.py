@@ -1,9 +1,10 @@
 """One USD stage per result (needs ``usd-core``: ``pip install casadi_keyframe[usd]``).
 
 ``/Result`` (the default prim) holds the particles, a cloth as a time-sampled
-``UsdGeom.Mesh`` (faces once, points per frame) or a flock as time-sampled ``UsdGeom.Points``
-(``ids`` per agent, the view's highlighted agents marked by the ``primvars:highlighted`` flag
-and coloured orange); ``Colliders`` (``Sphere``, ``Capsule``, planes as a quad ``Mesh``;
+``UsdGeom.Mesh`` (faces once, points per frame) or a flock as a time-sampled ``UsdGeom.PointInstancer``
+(positions, orientations along the velocity, velocities and ``ids`` per agent; two cone
+prototypes pointing along +x, ``Agent`` and, for the view's highlighted agents, a larger
+orange ``Highlighted``); ``Colliders`` (``Sphere``, ``Capsule``, planes as a quad ``Mesh``;
 moving ones with a time-sampled transform); ``Targets``, one prim per keyframe target (a
 whole-cloth shape as a mesh, particle and centre-of-mass targets as points, a region's outline
 as a closed curve), and the view's ``Ring``, so that each can be hidden on its own; and for
@@ -137,21 +138,48 @@ class _Writer:
         return pts
 
     def particles(self, path):
-        """The cloth's mesh, or the flock's points with ids and the highlight flag."""
-        scene = self.scene
-        if scene.faces is not None:
-            self.mesh(path, scene.positions, CLOTH)
-            return
+        """The cloth's mesh, or the flock's point instancer."""
+        if self.scene.faces is not None:
+            self.mesh(path, self.scene.positions, CLOTH)
+        else:
+            self.instancer(path)
+
+    def instancer(self, path, length: float = 0.4):
+        """The flock as a ``PointInstancer``: per frame the agents' positions, orientations
+        (the cone's +x turned onto the velocity) and velocities; ``ids`` and prototype
+        indices (1 for a highlighted agent) once."""
+        scene, UsdGeom, Vt = self.scene, self.UsdGeom, self.Vt
         n = scene.positions.shape[1]
-        pts = self.points(path, scene.positions, AGENT, width=0.3)
-        pts.CreateIdsAttr(self.Vt.Int64Array(list(range(n))))
-        flag = np.zeros(n, dtype=np.int32)
-        flag[list(scene.highlight)] = 1
-        api = self.UsdGeom.PrimvarsAPI(pts)
-        api.CreatePrimvar("highlighted", self.Sdf.ValueTypeNames.IntArray,
-                          self.UsdGeom.Tokens.vertex).Set(self.Vt.IntArray(flag.tolist()))
-        colors = np.where(flag[:, None] == 1, HIGHLIGHT, AGENT)
-        pts.CreateDisplayColorPrimvar(self.UsdGeom.Tokens.vertex).Set(self._vec3(colors))
+        inst = UsdGeom.PointInstancer.Define(self.stage, path)
+        protos = [self.cone(f"{path}/Prototypes/Agent", length, AGENT),
+                  self.cone(f"{path}/Prototypes/Highlighted", 1.5 * length, HIGHLIGHT)]
+        inst.CreatePrototypesRel().SetTargets([p.GetPath() for p in protos])
+        index = np.zeros(n, dtype=np.int32)
+        index[list(scene.highlight)] = 1
+        inst.CreateProtoIndicesAttr(Vt.IntArray(index.tolist()))
+        inst.CreateIdsAttr(Vt.Int64Array(list(range(n))))
+        positions, orientations = inst.CreatePositionsAttr(), inst.CreateOrientationsAttr()
+        velocities, extent = inst.CreateVelocitiesAttr(), inst.CreateExtentAttr()
+        v = np.zeros_like(scene.positions) if scene.velocities is None else scene.velocities
+        for k, (x, vk) in enumerate(zip(scene.positions, v)):
+            check()
+            positions.Set(self._vec3(x), float(k))
+            velocities.Set(self._vec3(vk), float(k))
+            q = heading_quaternions(vk)[:, [1, 2, 3, 0]]  # GfQuath's memory: i, j, k, real
+            orientations.Set(Vt.QuathArray.FromNumpy(q.astype(np.float16)), float(k))
+            extent.Set(self._extent(x, 0.75 * length), float(k))
+        return inst
+
+    def cone(self, path, length: float, rgb):
+        """A cone along +x, ``length`` long, its apex forward (an agent's shape)."""
+        cone = self.UsdGeom.Cone.Define(self.stage, path)
+        cone.CreateAxisAttr(self.UsdGeom.Tokens.x)
+        cone.CreateHeightAttr(length)
+        cone.CreateRadiusAttr(length / 3)
+        half = np.array([length / 2, length / 3, length / 3])
+        cone.CreateExtentAttr(self._vec3(np.array([-half, half])))
+        self._color(cone, rgb)
+        return cone
 
     def colliders(self, path, bodies):
         """One prim per collider under ``path``."""
@@ -231,6 +259,19 @@ class _Writer:
         self._points_over_time(curve, points[None], pad=width / 2)
         self._color(curve, rgb)
         return curve
+
+
+def heading_quaternions(velocities) -> np.ndarray:
+    """``(n, 4)`` unit quaternions (real part first, USD's ``quath`` order) that turn +x onto
+    each velocity's direction by the shortest arc; no turn where the velocity is 0, half a
+    turn about z where it points along -x."""
+    v = np.asarray(velocities, float)
+    speed = np.linalg.norm(v, axis=1, keepdims=True)
+    u = np.divide(v, speed, out=np.tile([1.0, 0.0, 0.0], (len(v), 1)), where=speed > 1e-12)
+    q = np.c_[1.0 + u[:, 0], np.zeros(len(u)), -u[:, 2], u[:, 1]]  # (1 + x.u, x cross u)
+    back = q[:, 0] < 1e-9
+    q[back] = [0.0, 0.0, 0.0, 1.0]
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
 
 
 def validate(path) -> list[str]:

@@ -193,6 +193,19 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         return cls._build(v, f, mesh_topology(f), masses, params, pinned, jit, scene)
 
     @classmethod
+    def from_file(cls, path, *, pinned=(), mass: float = 1.0, params: ClothParams | None = None,
+                  jit: bool | None = None, **scene):
+        """A cloth from a mesh file (OBJ, PLY or USD, or a :class:`~..meshes.Mesh` already
+        read), its vertices the particles in the file's order (see :mod:`..meshes`, which
+        reads and checks it); ``pinned``: vertex indices, the name of one of the file's
+        vertex sets, or a :class:`~..meshes.PinBox`; the rest as :meth:`from_mesh`."""
+        from ..meshes import Mesh, pin_indices, read_mesh
+
+        mesh = path if isinstance(path, Mesh) else read_mesh(path)
+        return cls.from_mesh(mesh.vertices, mesh.faces, mass=mass, params=params,
+                             pinned=pin_indices(mesh, pinned), jit=jit, **scene)
+
+    @classmethod
     def _build(cls, vertices, faces, pairs, masses, params, pinned, jit, scene):
         params = ClothParams() if params is None else params
         kinds = sorted(pairs)

@@ -71,7 +71,7 @@ def reference_path(character, motion, x0, walk_clip, steps: int, dt: float) -> n
 
 def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
                     start_frequency: float | None = None, damping: float = 0.7,
-                    landing_steps: int = 2) -> np.ndarray:
+                    landing_steps: int = 2, stops=None) -> np.ndarray:
     """Per-step forces ``(steps, n, 3)`` of a PD controller that pulls every particle of
     ``prob``'s cape along ``path`` (``(steps + 1, n, 3)``) from its start: ``m (a* + kp (x* -
     x) + kd (v* - v) - g) + drag m v*`` with ``kp = (2 pi f)^2``, ``kd = 2 damping sqrt(kp)``,
@@ -83,7 +83,8 @@ def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
     that state (:func:`landing_path`), by inverse steps (the integrator's ``force_for``).
     Two steps is the least that sets positions and velocities, and the best: an inverse step
     also cancels the contact forces along the cubic, so a longer landing costs more, not
-    less.  Run closed-loop through the problem's integrator; replayed open-loop, the forces
+    less.  ``stops = {frame: (x, v)}`` lands on more states the same way, each at its frame
+    (``end`` is the stop at the last frame).  Run closed-loop through the problem's integrator; replayed open-loop, the forces
     give the same motion.  (Exact inverse dynamics along the whole path does not yield: it cancels the
     contacts and the stretch the path asks for with forces of thousands of g.)"""
     model, integrator, dt, steps = prob.model, prob.integrator, prob.dt, prob.steps
@@ -95,13 +96,19 @@ def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
     a_ref = np.gradient(v_ref, dt, axis=0)
     m = model.masses[:, None]
     g = np.asarray(model.params.gravity)
-    land_from = steps if end is None else steps - min(max(landing_steps, 2), steps)
+    stops = {**(stops or {}), **({steps: end} if end is not None else {})}
+    starts, prev = {}, 0
+    for frame in sorted(stops):  # each landing starts after the one before has ended
+        starts[max(frame - max(landing_steps, 2), prev)] = frame
+        prev = frame
     x, v, work = prob.x0, prob.v0, integrator.init(model)
     forces = np.zeros((steps,) + x.shape)
+    land_from, land_to = -1, -1
     for n in range(steps):
-        if n == land_from:
-            land = landing_path(x, v, *end, steps - n, dt)
-        if n >= land_from:
+        if n in starts:
+            land_from, land_to = n, starts[n]
+            land = landing_path(x, v, *stops[land_to], land_to - n, dt)
+        if land_from <= n < land_to:
             forces[n] = integrator.force_for(model, x, v, (land[n - land_from + 1] - x) / dt,
                                              n, dt)
         else:

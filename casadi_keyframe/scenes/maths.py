@@ -53,12 +53,21 @@ def soft_max(a: float, b: float, softness: float) -> float:
     return max(a, b) + softness * np.log1p(np.exp(-abs(a - b) / softness))
 
 
+def best_rigid_motion(source, dest, weights=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)``, the rotation and translation that carry the points ``source`` closest to
+    ``dest`` (both ``(n, 3)``): they minimise ``sum_i w_i |dest_i - (R source_i + t)|^2``
+    (Kabsch, weighted, centroids removed; a proper rotation, no reflection)."""
+    w = np.ones(len(source)) if weights is None else np.asarray(weights, float)
+    ca, cb = (np.average(np.asarray(p, float), axis=0, weights=w) for p in (source, dest))
+    turn, _ = Rotation.align_vectors(np.asarray(dest, float) - cb,
+                                     np.asarray(source, float) - ca, weights=w)
+    R = turn.as_matrix()
+    return R, cb - R @ ca
+
+
 def turn_angle(rest, moved, weights=None) -> float:
     """The angle in degrees of the rotation that best carries the points ``rest`` onto
     ``moved`` (both ``(n, 3)``, weighted, centroids removed: Kabsch), e.g. how far a tossed
     sheet has turned over, 180 for upside down."""
-    w = np.ones(len(rest)) if weights is None else np.asarray(weights, float)
-    a = np.asarray(rest, float) - np.average(rest, axis=0, weights=w)
-    b = np.asarray(moved, float) - np.average(moved, axis=0, weights=w)
-    turn, _ = Rotation.align_vectors(b, a, weights=w)
-    return float(np.degrees(turn.magnitude()))
+    R, _ = best_rigid_motion(rest, moved, weights)
+    return float(np.degrees(Rotation.from_matrix(R).magnitude()))

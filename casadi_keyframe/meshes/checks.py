@@ -1,0 +1,96 @@
+"""Checks a cloth mesh must pass before it becomes springs: triangles only (larger polygons
+fanned, with a notice), every face of positive area, every vertex used, every edge shared by
+at most two faces.  A failure is a :class:`MeshError` that names the file, what is wrong and
+where, and what to do about it."""
+from __future__ import annotations
+
+import numpy as np
+
+from .mesh import Mesh
+
+# a face whose area is below this fraction of the mean face area counts as degenerate
+DEGENERATE_AREA = 1e-10
+
+
+class MeshError(ValueError):
+    """A mesh that cannot be read or cannot be a cloth; the message says why and how to fix it."""
+
+
+def triangulate(polygons) -> tuple[np.ndarray, int]:
+    """``(triangles (m, 3), polygons split)``: each polygon (a list of vertex indices, 3 or
+    more) fanned from its first corner, ``(a, b, c, d) -> (a, b, c), (a, c, d)``.  The split
+    depends on the indices only, so the same polygons give the same triangles in every file
+    (what a target mesh's topology check needs); it suits planar convex polygons."""
+    triangles, split = [], 0
+    for poly in polygons:
+        poly = [int(i) for i in poly]
+        if len(poly) < 3:
+            raise MeshError(f"a face has {len(poly)} corners; every face needs at least 3")
+        split += len(poly) > 3
+        triangles.extend((poly[0], poly[k], poly[k + 1]) for k in range(1, len(poly) - 1))
+    return np.array(triangles, dtype=np.intp).reshape(-1, 3), split
+
+
+def check_mesh(vertices, polygons, *, source=None, groups=None) -> Mesh:
+    """The :class:`Mesh` of ``vertices`` ``(n, 3)`` and ``polygons`` (triangles or larger),
+    checked as the module docstring says; ``source`` names the file in messages."""
+    where = str(source) if source is not None else "mesh"
+    v = np.asarray(vertices, dtype=float)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
+        raise MeshError(f"{where}: needs at least 3 vertices with x, y, z; got an array of "
+                        f"shape {v.shape}")
+    if not np.all(np.isfinite(v)):
+        raise MeshError(f"{where}: a vertex has a NaN or infinite coordinate "
+                        f"(vertex {int(np.flatnonzero(~np.isfinite(v).all(1))[0])})")
+    polygons = list(polygons)
+    if not polygons:
+        raise MeshError(f"{where}: has no faces; a cloth needs a surface (export the faces, "
+                        f"not only the points)")
+    faces, split = triangulate(polygons)
+    if faces.min() < 0 or faces.max() >= len(v):
+        raise MeshError(f"{where}: a face refers to vertex {int(faces.max())}, but the mesh "
+                        f"has {len(v)} vertices (0..{len(v) - 1})")
+    _check_degenerate(v, faces, where)
+    _check_used(v, faces, where)
+    _check_manifold(faces, where)
+    notices = ((f"{where}: {split} of {len(polygons)} faces had more than 3 corners and were "
+                f"split into triangles from their first corner",) if split else ())
+    return Mesh(v, faces, dict(groups or {}), source, notices)
+
+
+def _check_degenerate(v, faces, where):
+    repeated = np.flatnonzero((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
+                              | (faces[:, 0] == faces[:, 2]))
+    if repeated.size:
+        raise MeshError(f"{where}: {repeated.size} face(s) repeat a vertex (first: triangle "
+                        f"{faces[repeated[0]].tolist()}); merge or remove them (Blender: "
+                        f"Mesh > Clean Up > Degenerate Dissolve)")
+    area = 0.5 * np.linalg.norm(np.cross(v[faces[:, 1]] - v[faces[:, 0]],
+                                         v[faces[:, 2]] - v[faces[:, 0]]), axis=1)
+    flat = np.flatnonzero(area <= DEGENERATE_AREA * max(area.mean(), 1e-300))
+    if flat.size:
+        raise MeshError(f"{where}: {flat.size} face(s) have no area (first: triangle "
+                        f"{faces[flat[0]].tolist()}, corners on one line); remove them "
+                        f"(Blender: Mesh > Clean Up > Degenerate Dissolve)")
+
+
+def _check_used(v, faces, where):
+    unused = np.setdiff1d(np.arange(len(v)), faces.ravel())
+    if unused.size:
+        raise MeshError(f"{where}: {unused.size} vertex/vertices belong to no face (first: "
+                        f"vertex {int(unused[0])}); a cloth particle needs a face to get a "
+                        f"mass: delete loose vertices (Blender: Mesh > Clean Up > Delete "
+                        f"Loose)")
+
+
+def _check_manifold(faces, where):
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
+    unique, counts = np.unique(edges, axis=0, return_counts=True)
+    crowded = np.flatnonzero(counts > 2)
+    if crowded.size:
+        a, b = unique[crowded[0]].tolist()
+        raise MeshError(f"{where}: non-manifold: {crowded.size} edge(s) are shared by more "
+                        f"than two faces (first: the edge between vertices {a} and {b}, in "
+                        f"{int(counts[crowded[0]])} faces); a cloth is a surface whose edges "
+                        f"join at most two faces: split or delete the extra faces (Blender: "
+                        f"Select > Select All by Trait > Non Manifold)")

@@ -1,0 +1,176 @@
+"""Mesh files in: OBJ and PLY through trimesh, USD through usd-core.
+
+Each reader returns the file's vertices in the file's order (the order a point cache for the
+mesh must keep), its polygons before triangulation and its named vertex sets, and
+:func:`.checks.check_mesh` makes them a checked :class:`~.mesh.Mesh`.  Named vertex sets come
+from PLY vertex properties (a ``pins`` column, say: the vertices where it is non-zero) and
+from USD ``GeomSubset`` s of points and scalar vertex primvars; OBJ has none (its groups are
+groups of faces).
+"""
+from __future__ import annotations
+
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from .checks import MeshError, check_mesh
+from .mesh import Mesh
+
+FORMATS = {".obj": "OBJ", ".ply": "PLY", ".usd": "USD", ".usda": "USD", ".usdc": "USD",
+           ".usdz": "USD"}
+# PLY vertex properties that are geometry or appearance, not a named vertex set
+_PLY_STANDARD = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha", "s", "t",
+                 "u", "v", "texture_u", "texture_v", "quality", "intensity"}
+
+
+def read_mesh(path) -> Mesh:
+    """The checked triangle mesh in the file ``path`` (``.obj``, ``.ply``, ``.usd``,
+    ``.usda``, ``.usdc``, ``.usdz``); a :class:`MeshError` (a ValueError) naming the file
+    when it is missing, unreadable or not a usable cloth mesh."""
+    path = Path(path)
+    kind = FORMATS.get(path.suffix.lower())
+    if kind is None:
+        raise MeshError(f"{path}: unknown mesh format {path.suffix or '(no suffix)'!r}; give "
+                        f"an OBJ, PLY or USD file ({', '.join(FORMATS)})")
+    if not path.is_file():
+        raise MeshError(f"{path}: no such file" if not path.exists()
+                        else f"{path}: is a folder, not a mesh file")
+    reader = {"OBJ": _read_obj, "PLY": _read_ply, "USD": _read_usd}[kind]
+    vertices, polygons, groups, notices = reader(path)
+    mesh = check_mesh(vertices, polygons, source=path, groups=groups)
+    if notices:
+        mesh = Mesh(mesh.vertices, mesh.faces, mesh.groups, mesh.source,
+                    tuple(notices) + mesh.notices)
+    return mesh
+
+
+def _trimesh(path: Path, kind: str):
+    """trimesh's reading of ``path`` with the file's vertex order kept (no merging)."""
+    try:
+        import trimesh
+    except ImportError:
+        raise ImportError("reading OBJ and PLY meshes needs trimesh: pip install "
+                          "casadi_keyframe[meshes] (or pip install trimesh)") from None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            loaded = trimesh.load(str(path), file_type=kind.lower(), process=False,
+                                  maintain_order=True, force="mesh")
+    except Exception as err:  # trimesh raises many kinds for a broken file
+        raise MeshError(f"{path}: cannot be read as {kind}: {err}") from None
+    if not hasattr(loaded, "vertices") or len(loaded.vertices) == 0:
+        raise MeshError(f"{path}: holds no mesh vertices readable as {kind}; export the "
+                        f"cloth as a mesh with its faces")
+    return loaded
+
+
+def _read_obj(path: Path):
+    head = path.read_bytes()[:1 << 16]
+    try:
+        if b"\0" in head:
+            raise UnicodeDecodeError("utf-8", head, 0, 1, "NUL byte")
+        head.decode("utf-8", errors="strict" if len(head) < 1 << 16 else "ignore")
+    except UnicodeDecodeError:
+        raise MeshError(f"{path}: cannot be read as OBJ: it is not a text file (an OBJ is "
+                        f"text: export it again as Wavefront OBJ)") from None
+    loaded = _trimesh(path, "OBJ")
+    sizes, count = [], 0
+    with open(path, errors="replace") as f:  # polygon sizes and vertex count, for the checks
+        for line in f:
+            if line.startswith("v "):
+                count += 1
+            elif line.startswith("f "):
+                sizes.append(len(line.split()) - 1)
+    if len(loaded.vertices) != count:
+        raise MeshError(f"{path}: {count} 'v' lines but {len(loaded.vertices)} vertices read; "
+                        f"the vertex order could not be kept (one object per file, please)")
+    return np.asarray(loaded.vertices, float), np.asarray(loaded.faces), {}, _quads(path, sizes)
+
+
+def _quads(path, sizes) -> list[str]:
+    big = sum(s > 3 for s in sizes)
+    return ([f"{path}: {big} of {len(sizes)} faces had more than 3 corners and were split "
+             f"into triangles from their first corner"] if big else [])
+
+
+def _read_ply(path: Path):
+    loaded = _trimesh(path, "PLY")
+    raw = loaded.metadata.get("_ply_raw", {})
+    polygons = raw.get("face", {}).get("data", {}).get("vertex_indices")
+    notices = []
+    if polygons is not None:
+        polygons = [np.asarray(p).ravel() for p in polygons]
+        notices = _quads(path, [len(p) for p in polygons])
+    else:
+        polygons = np.asarray(loaded.faces)
+    columns = raw.get("vertex", {}).get("data", {})
+    n = len(loaded.vertices)
+    groups = {name: np.flatnonzero(np.asarray(values).ravel() != 0)
+              for name, values in columns.items()
+              if name not in _PLY_STANDARD and np.asarray(values).size == n}  # scalar columns
+    return np.asarray(loaded.vertices, float), polygons, groups, notices
+
+
+def _read_usd(path: Path):
+    try:
+        from pxr import Usd, UsdGeom
+    except ImportError:
+        raise ImportError("reading USD meshes needs usd-core: pip install "
+                          "casadi_keyframe[usd] (or pip install usd-core)") from None
+    stage = Usd.Stage.Open(str(path)) if _opens(path) else None
+    if stage is None:
+        raise MeshError(f"{path}: cannot be read as USD")
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if len(meshes) != 1:
+        raise MeshError(f"{path}: holds {len(meshes)} meshes; give a file with exactly one "
+                        f"(the cloth, or one target shape)" + (
+                            f": {', '.join(str(p.GetPath()) for p in meshes[:4])}"
+                            if meshes else ""))
+    prim, time = meshes[0], Usd.TimeCode.EarliestTime()
+    mesh = UsdGeom.Mesh(prim)
+    points = np.asarray(mesh.GetPointsAttr().Get(time), float).reshape(-1, 3)
+    world = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
+    points = points @ world[:3, :3] + world[3, :3]  # USD matrices act on row vectors
+    notices = []
+    if UsdGeom.StageHasAuthoredMetersPerUnit(stage):  # unauthored, USD says cm: trust metres
+        points *= UsdGeom.GetStageMetersPerUnit(stage)
+    if (stage.HasAuthoredMetadata("upAxis")
+            and UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y):
+        points = np.c_[points[:, 0], -points[:, 2], points[:, 1]]
+        notices.append(f"{path}: the stage is y up; turned to z up as the cloth is simulated")
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], int)
+    flat = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(time) or [], int)
+    if counts.sum() != flat.size:
+        raise MeshError(f"{path}: {prim.GetPath()}'s face counts add up to {counts.sum()}, "
+                        f"its face indices are {flat.size}")
+    polygons = np.split(flat, np.cumsum(counts)[:-1]) if counts.size else []
+    return points, polygons, _usd_groups(prim, len(points)), notices + _quads(path, counts)
+
+
+def _opens(path: Path) -> bool:
+    from pxr import Sdf
+    try:
+        return Sdf.Layer.FindOrOpen(str(path)) is not None
+    except Exception:  # pxr's Tf errors for a file that is not USD
+        return False
+
+
+def _usd_groups(prim, n: int) -> dict:
+    """Point subsets and scalar per-vertex primvars (non-zero values) of a mesh prim."""
+    from pxr import UsdGeom
+    groups = {}
+    for subset in UsdGeom.Subset.GetAllGeomSubsets(UsdGeom.Imageable(prim)):
+        if subset.GetElementTypeAttr().Get() == "point":
+            groups[subset.GetPrim().GetName()] = np.unique(np.asarray(
+                subset.GetIndicesAttr().Get() or [], int))
+    for primvar in UsdGeom.PrimvarsAPI(prim).GetPrimvars():
+        if primvar.GetInterpolation() not in (UsdGeom.Tokens.vertex, UsdGeom.Tokens.varying):
+            continue
+        values = primvar.Get()
+        if values is None:
+            continue
+        values = np.asarray(values)
+        if values.shape == (n,) and values.dtype.kind in "biuf":
+            groups.setdefault(primvar.GetPrimvarName(), np.flatnonzero(values != 0))
+    return groups

@@ -1,0 +1,192 @@
+"""A cloth keyframe problem from mesh files, with every bad input refused by the name of the
+option that gave it (what ``problems/mesh_keyframes.py`` builds from its overrides).
+
+The option names in messages are the problem file's: ``cloth``, ``keyframes``, ``pins``,
+``pin_group``, ``pin_box``, ``steps``, ``spheres``.
+"""
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..controls import InitialVelocity, StepForces
+from ..loading import OverrideError
+from ..mesh_keyframe import MeshKeyframe
+from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
+from ..models import ClothModel
+from ..models.colliders import Plane, Sphere
+from ..objectives import Smoothness, StrainLimit
+from ..views import ClothView
+from .cape_tracking import tracking_forces
+from .cloths import cloth_problem
+from .maths import smoothstep
+
+PROBLEM = "mesh_keyframes"
+EXAMPLE = "40:wave.obj,80:fold.obj"
+
+
+def refuse(option: str, message: str):
+    """An :class:`~..loading.OverrideError` naming ``option`` (the CLI exits 2 with it)."""
+    return OverrideError(f"{PROBLEM}: {option}: {message}", PROBLEM)
+
+
+def parse_keyframes(text: str) -> list[tuple[int, str]]:
+    """``"40:wave.obj,80:fold.obj"`` -> ``[(40, "wave.obj"), (80, "fold.obj")]``, frames
+    increasing, each at most once."""
+    out = []
+    for item in (p.strip() for p in str(text).split(",")):
+        frame, sep, path = item.partition(":")
+        if not sep or not path.strip() or not frame.strip().isdigit():
+            raise refuse("keyframes", f"expected FRAME:FILE pairs separated by commas, such as "
+                                      f"{EXAMPLE}; got {item!r}")
+        out.append((int(frame), path.strip()))
+    frames = [f for f, _ in out]
+    if min(frames) < 1 or len(set(frames)) != len(frames):
+        raise refuse("keyframes", f"frames must be 1 or more and each given once, got {frames}")
+    return sorted(out)
+
+
+def read_option(option: str, path) -> Mesh:
+    """The mesh file an option names, its reading errors refused by the option's name and
+    its notices (quads triangulated...) printed as notes."""
+    try:
+        mesh = read_mesh(Path(path).expanduser())
+    except MeshError as err:
+        raise refuse(option, str(err)) from None
+    for notice in mesh.notices:
+        print(f"note: {notice}", file=sys.stderr)
+    return mesh
+
+
+def pinned_of(mesh: Mesh, pins, pin_group, pin_box):
+    """The pinned vertices the three pin options name together (their union)."""
+    chosen = [np.zeros(0, np.intp)]
+    for option, value in (("pins", pins), ("pin_group", pin_group), ("pin_box", pin_box)):
+        if value is None or (option == "pins" and len(value) == 0):
+            continue
+        try:
+            if option == "pin_box":
+                if len(value) != 6:
+                    raise MeshError(f"give 6 numbers, the lower corner x,y,z then the upper "
+                                    f"x,y,z; got {len(value)}")
+                value = PinBox(value[:3], value[3:])
+            chosen.append(pin_indices(mesh, value))
+        except MeshError as err:
+            raise refuse(option, str(err)) from None
+    return np.unique(np.concatenate(chosen))
+
+
+def targets_of(model, keyframes, steps, *, weight, align) -> list[MeshKeyframe]:
+    """One :class:`MeshKeyframe` per ``(frame, file)``, each checked against the cloth's
+    vertices and faces and the horizon here, so the message names the option."""
+    terms = []
+    for frame, target in keyframes:
+        path = target.label() if isinstance(target, Mesh) else target
+        if frame > steps:
+            raise refuse("keyframes", f"frame {frame} ({path}) is beyond the horizon of "
+                                      f"steps={steps}; pick a frame in 1..{steps} or raise steps")
+        mesh = target if isinstance(target, Mesh) else read_option("keyframes", target)
+        if mesh.n != model.n:
+            raise refuse("keyframes", f"the target {path} (frame {frame}) has {mesh.n} "
+                                      f"vertices, the cloth {model.n}; a target must be the "
+                                      f"cloth's mesh in another shape")
+        if not mesh.same_topology(model.faces):
+            raise refuse("keyframes", f"the target {path} (frame {frame}) has the cloth's "
+                                      f"{model.n} vertices but other faces; export it from the "
+                                      f"cloth's own mesh")
+        terms.append(MeshKeyframe(frame, mesh, weight=weight / model.n, align=align))
+    return terms
+
+
+def colliders_of(ground, spheres) -> list:
+    """A ground plane at height ``ground`` (None: none) and spheres from a flat list of
+    ``x, y, z, radius`` numbers."""
+    bodies = [] if ground is None else [Plane((0.0, 0.0, ground))]
+    if spheres:
+        if len(spheres) % 4:
+            raise refuse("spheres", f"give x,y,z,radius for each sphere (a multiple of 4 "
+                                    f"numbers), got {len(spheres)} numbers")
+        for x, y, z, r in np.reshape(spheres, (-1, 4)):
+            if not r > 0:
+                raise refuse("spheres", f"a sphere's radius must be positive, got {r}")
+            bodies.append(Sphere((x, y, z), float(r)))
+    return bodies
+
+
+def wrinkled(model, depth: float) -> np.ndarray:
+    """The cloth's rest positions moved ``depth`` metres along each vertex's normal times
+    ``sin(pi a) sin(pi b)``, (a, b) the vertex's place in the mesh's two widest directions
+    scaled to [0, 1]; pinned vertices stay.  An exactly flat sheet that hangs in its plane
+    is compressed across its width as it sags, and a flat compressed mass-spring sheet is a
+    buckling saddle: the planar motion is exact but unstable, so the exact gradient along
+    it grows like e^(rate t), the rate rising as the mesh gets finer.  A start a hair out of
+    plane buckles as real cloth does and keeps the gradient meaningful."""
+    x = model.rest_positions
+    if depth == 0:
+        return x.copy()
+    faces = model.faces
+    normal = np.cross(x[faces[:, 1]] - x[faces[:, 0]], x[faces[:, 2]] - x[faces[:, 0]])
+    at_vertex = np.zeros_like(x)
+    for k in range(3):
+        np.add.at(at_vertex, faces[:, k], normal)
+    at_vertex /= np.maximum(np.linalg.norm(at_vertex, axis=1, keepdims=True), 1e-300)
+    centred = x - x.mean(0)
+    axes = np.linalg.svd(centred, full_matrices=False)[2][:2]
+    span = centred @ axes.T
+    ab = (span - span.min(0)) / np.maximum(np.ptp(span, axis=0), 1e-300)
+    bump = depth * np.sin(np.pi * ab[:, 0]) * np.sin(np.pi * ab[:, 1])
+    bump[model.pinned] = 0.0
+    return x + bump[:, None] * at_vertex
+
+
+def keyframe_path(x0, terms, steps: int) -> np.ndarray:
+    """``(steps + 1, n, 3)`` positions from ``x0`` through each keyframe's target at its
+    frame (smoothstep between them, so the path rests at each), held after the last."""
+    stops = [(0, x0)] + [(t.frame, t.position_target) for t in terms]
+    path = np.empty((steps + 1,) + x0.shape)
+    for (f0, a), (f1, b) in zip(stops, stops[1:]):
+        s = smoothstep((np.arange(f0, f1 + 1) - f0) / max(f1 - f0, 1))
+        path[f0:f1 + 1] = a + s[:, None, None] * (b - a)
+    path[stops[-1][0]:] = stops[-1][1]
+    return path
+
+
+def tracking_guess(prob, land: bool = True) -> np.ndarray:
+    """Start controls of ``prob`` (per-step forces): a PD controller pulling every particle
+    along :func:`keyframe_path` (``cape_tracking.tracking_forces``) and, with ``land``,
+    landing on each target at rest by two inverse steps, so the search starts on its
+    keyframes.  The landings hold each target's shape whatever it costs: strong forces where
+    a target stretches the cloth; the PD controller alone is gentle but lags."""
+    terms = sorted(prob.objective_terms.state_terms, key=lambda t: t.frame)
+    stops = {t.frame: (t.position_target, np.zeros_like(prob.x0)) for t in terms
+             if land and not getattr(t, "align", False)}
+    forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps), stops=stops)
+    return forces[:, prob.controls.idx].ravel()
+
+
+def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
+                          colliders, weight, alpha, align, strain_limit, strain_weight,
+                          smoothing=None, wrinkle=0.0, guess="land"):
+    """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
+    file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
+    initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
+    strain limit and a small control cost; with ``guess`` "land" or "track" (per-step
+    forces) the search starts from :func:`tracking_guess` with or without its landings,
+    with "none" from zero forces."""
+    model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders)
+    steps = max(f for f, _ in keyframes) if steps is None else steps
+    terms = targets_of(model, keyframes, steps, weight=weight, align=align)
+    free = np.flatnonzero(model.free_mask()[::3])
+    if free.size == 0:
+        raise refuse("pins", "every vertex is pinned: nothing can move")
+    controls = (StepForces(agents=free, smoothing=smoothing) if control == "forces"
+                else InitialVelocity(agents=free, smoothing=smoothing))
+    objective = sum(terms, Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
+    prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
+                         x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls,
+                         view=ClothView(camera=(15, -30)))
+    if guess == "none" or control != "forces":
+        return prob
+    return prob.with_guess(tracking_guess(prob, land=guess == "land"))

@@ -1,0 +1,79 @@
+"""Meshes in: a cloth read from a mesh file hits target meshes at keyframes (OBJ, PLY or USD).
+
+``cloth`` is the mesh file (its vertices are the particles, in the file's order; quads are
+split into triangles with a note).  It hangs from the vertices ``pins`` names (indices, e.g.
+``pins=0,29``; one index as ``pins=5,``), those of the file's vertex set ``pin_group`` (a
+PLY vertex property, a USD point subset or primvar) and those inside ``pin_box``
+(x0,y0,z0,x1,y1,z1).  ``keyframes`` gives FRAME:FILE pairs: at each frame every particle
+should be on its vertex of the file, which must be the cloth's mesh in another shape (same
+vertices in the same order, same faces); ``align`` compares shapes after the best rigid
+motion.  Metres, z up, gravity along -z; ``mass`` is the cloth's total in kg, ``ground`` (a
+height) and ``spheres`` (x,y,z,radius, ...) add colliders, ``dt`` is the frame time and
+``steps`` defaults to the last keyframe's frame.
+
+The cloth starts at rest ``wrinkle`` metres (2 mm) out of the file's shape along its
+normals: an exactly flat sheet hanging in its plane is a buckling saddle, whose exact
+gradient grows by orders of magnitude per second on fine meshes
+(``scenes.mesh_cloths.wrinkled``).  The controls are per-step forces on the free particles
+(``control``: ``velocity`` for initial velocities only; ``smoothing`` metres searches in a
+metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
+``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
+``strain_weight``).  With per-step forces the search starts from ``guess``: "land" (the
+default), a PD controller that pulls the cloth from target to target and lands on each at
+rest by two inverse steps, whatever force holding a target's shape takes; "track", the PD
+controller alone, gentle but lagging; "none", zero forces
+(``scenes.mesh_cloths.tracking_guess``).  On a fine flat sheet the objective is rough at
+the scale of a line search's steps, and L-BFGS-B often finds no better point than its start
+(a run that ends so exits with code 1, its result written).
+
+    casadi-keyframe solve mesh_keyframes --set cloth=sheet.obj \\
+        --set keyframes=40:wave.obj,80:fold.obj --set pins=0,29 --out results/mine
+
+With no ``cloth`` it solves its own 12 x 12 hanging sheet with a wave at frame 40 and a fold
+at frame 80 (``scenes.mesh_targets``).  A missing or unreadable file, a target of another
+vertex count or other faces, a pin out of range or a frame beyond ``steps`` is refused with
+the option's name (exit code 2).  The Blender add-on in ``blender/`` runs this problem.
+"""
+from casadi_keyframe.meshes import check_mesh
+from casadi_keyframe.scenes.mesh_cloths import (colliders_of, mesh_keyframe_problem,
+                                                 parse_keyframes, pinned_of, read_option,
+                                                 refuse)
+from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
+
+SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
+RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
+          "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
+          "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "control": ("forces", "velocity"),
+          "guess": ("land", "track", "none")}
+
+
+def build(cloth: str | None = None, keyframes: str | None = None,
+          pins: tuple[float, ...] | None = None, pin_group: str | None = None,
+          pin_box: tuple[float, ...] | None = None, steps: int | None = None,
+          dt: float = 1 / 60, mass: float = 0.3, control: str = "forces",
+          ground: float | None = None, spheres: tuple[float, ...] | None = None,
+          weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
+          strain_limit: float = 1.2, strain_weight: float = 1e3,
+          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land"):
+    if cloth is None:
+        if keyframes is not None:
+            raise refuse("keyframes", "targets need the cloth they shape: give cloth=FILE too")
+        vertices, quads = hanging_sheet(12, 12)
+        sheet = check_mesh(vertices, quads)
+        targets = [(40, check_mesh(wave(vertices), quads)), (80, check_mesh(fold(vertices), quads))]
+        pins = (0, 11) if pins is None and pin_group is None and pin_box is None else pins
+    else:
+        if keyframes is None:
+            raise refuse("keyframes", "give the targets as FRAME:FILE pairs, e.g. "
+                                      "keyframes=40:wave.obj,80:fold.obj")
+        sheet, targets = read_option("cloth", cloth), parse_keyframes(keyframes)
+    if pins is not None and any(p != int(p) for p in pins):
+        raise refuse("pins", f"give whole vertex indices, got {pins}")
+    pinned = pinned_of(sheet, None if pins is None else [int(p) for p in pins], pin_group,
+                       pin_box)
+    return mesh_keyframe_problem(cloth=sheet, keyframes=targets, steps=steps, dt=dt, mass=mass,
+                                 pinned=pinned, control=control,
+                                 colliders=colliders_of(ground, spheres), weight=weight,
+                                 alpha=alpha, align=align, strain_limit=strain_limit,
+                                 strain_weight=strain_weight, smoothing=smoothing,
+                                 wrinkle=wrinkle, guess=guess)

@@ -60,13 +60,15 @@ class Swapped(Adjoint):
         return step
 
 
-def unrolled_objective(problem, U):
+def unrolled_objective(problem, U, P):
     """The whole objective as an MX expression of the controls U, through the unrolled
-    symbolic simulation (the integrator's ``symbolic_step`` at every step)."""
+    symbolic simulation (the integrator's ``symbolic_step`` at every step); ``P`` holds every
+    step's parameters S, one after another (:func:`step_parameters`)."""
     forces, dv0 = problem.controls.symbolic(U)
     X = ca.DM(problem.x0.T)
     V = ca.DM(problem.v0.T) + (dv0 if dv0 is not None else 0)
     step = problem.integrator.symbolic_step(problem.model)
+    size = step.size1_in(4)
     by_frame: dict[int, list] = {}
     for t in problem.objective_terms.state_terms:
         by_frame.setdefault(t.frame, []).append(t)
@@ -81,13 +83,24 @@ def unrolled_objective(problem, U):
             E = ca.DM(problem.external[n].T)
             if forces is not None:
                 E = E + forces[n]
-            S = problem.integrator.step_parameters(problem.model, n * problem.dt, problem.dt)
-            X, V = step(X, V, E, problem.dt, S)
+            X, V = step(X, V, E, problem.dt, P[n * size:(n + 1) * size])
     return J + problem.control_expression(U)
 
 
+def step_parameters(problem, u) -> np.ndarray:
+    """Every step's symbolic parameters for controls u: what depends on time and, for a
+    scheme that decides something per step (the contacts a step holds), what the numeric
+    simulation decided, so the unrolled graph follows the path actually simulated."""
+    integrator, model, dt = problem.integrator, problem.model, problem.dt
+    records = problem.simulate(u).records if integrator.decides_per_step(model) else None
+    return np.concatenate([integrator.step_parameters(model, n * dt, dt,
+                                                      None if records is None else records[n])
+                           for n in range(problem.steps)] or [np.zeros(0)])
+
+
 class CasADiReverse:
-    """Exact, the reference: CasADi reverse mode through the unrolled simulation; its
+    """Exact, the reference: CasADi reverse mode through the unrolled simulation of the path
+    the numeric simulation takes (the contacts it holds, for a cloth that holds them); its
     Function is built once per problem and kept while the problem lives."""
 
     name = "casadi"
@@ -97,13 +110,15 @@ class CasADiReverse:
         fn = self._functions.get(problem)
         if fn is None:
             U = ca.MX.sym("U", problem.size)
-            J = unrolled_objective(problem, U)
-            fn = self._functions[problem] = ca.Function("casadi_gradient", [U],
+            step = problem.integrator.symbolic_step(problem.model)
+            P = ca.MX.sym("P", step.size1_in(4) * problem.steps)
+            J = unrolled_objective(problem, U, P)
+            fn = self._functions[problem] = ca.Function("casadi_gradient", [U, P],
                                                         [J, ca.gradient(J, U)])
         return fn
 
     def __call__(self, problem, u):
-        val, grad = self.function(problem)(u)
+        val, grad = self.function(problem)(u, step_parameters(problem, u))
         return float(val), np.asarray(grad).ravel()
 
 

@@ -270,8 +270,8 @@ class LinearizedBackwardEuler(Integrator):
     def _revised(self, model, found, held, x, v, t, dt, x1):
         """``(found, held)`` revised after a step that ended at x1 (springs it should have
         taken taut, particles it should have held), or None if the step stands."""
-        if not isinstance(model, ContactConstraints):
-            return None  # (springs are revised around contact only: see below)
+        if not (isinstance(model, ContactConstraints) and model.constraint_families):
+            return None  # the paper's penalty springs alone: its step, as it was
         more = model.revised_contacts(held, x, v, t, dt, x1)
         # springs only where the cloth touches a body, where a stop within a step stretches
         # them: taking springs taut elsewhere makes a keyframe objective rough for nothing

@@ -179,6 +179,11 @@ class ContactConstraints(abc.ABC):
     derivative contractions of the normals and targets for the exact adjoint and tangent,
     and the same in CasADi given which contacts are held."""
 
+    @property
+    @abc.abstractmethod
+    def constraint_families(self) -> tuple:
+        """The families whose contacts the step holds (none: the model holds no contact)."""
+
     @abc.abstractmethod
     def contacts(self, x, v, t: float, dt: float, previous=None):
         """The :class:`~.contact_constraint.Contacts` a step from (x, v) at t holds

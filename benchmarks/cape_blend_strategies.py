@@ -88,9 +88,7 @@ def run(name, build, maxiter, rounds=3, growth=10.0, effort=(5, 12), coarse=None
                               multipliers=name != "schedule", maxiter=per_round, quiet=True)
     seconds, cpu = time.perf_counter() - start, time.process_time() - cpu
     score = build(guess="passive") if name == "tracking+soft" else prob  # default weights
-    view = prob.view
-    report = clip_report(prob.model, res.trajectory, view.character,
-                         view.animation.shifted(-view.t_a))
+    report = clip_report(prob.model, res.trajectory)
     return {**report, "strategy": name, "nit": res.nit, "nfev": res.nfev, "seconds": seconds,
             "cpu": cpu, "start_control": prob.control_cost(prob.initial_controls())[0],
             "objective": score.objective(res.x), "control": res.breakdown["control_cost"],

@@ -22,7 +22,6 @@ import argparse  # noqa: E402
 import statistics  # noqa: E402
 import time  # noqa: E402
 
-import numpy as np  # noqa: E402
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402

@@ -62,7 +62,7 @@ def test_the_cape_stays_out_of_the_body_and_is_not_overstretched(clips, kind):
     assert deepest(traj, animation) < (TOLERANCE if kind == "walk" else LANDING_TOLERANCE)
     assert max(model.max_stretch(x) for x in traj.x) < 1.5
     assert traj.x[:, :, 2].min() > -0.02  # nor through the ground
-    report = clip_report(model, traj, CHARACTER, animation)
+    report = clip_report(model, traj)
     assert report["penetration"] == pytest.approx(max(deepest(traj, animation), 0), abs=1e-9)
 
 

@@ -22,7 +22,7 @@ from ..models import Attachment, ClothModel, ClothParams
 from ..models.colliders import Contact, Plane
 from ..simulate import simulate
 from .animations import Animation, Walk, fall, walk
-from .skeleton import Character, capsule_clearance
+from .skeleton import Character
 
 CAPE_PARAMS = ClothParams(stretch=500.0, shear=50.0, bend=2e-5, damping=0.5, air_drag=2.0)
 """Fabric at dt = 1/60: the default sheet's stiffnesses (about 1 % strain hanging) with
@@ -173,13 +173,11 @@ def cached_clip(kind: str, rows: int, cols: int, seconds: float, dt: float):
     return simulate_clip(kind, rows, cols, seconds=seconds, dt=dt)
 
 
-def clip_report(model: ClothModel, traj, character: Character, animation: Animation) -> dict:
-    """Figures of a clip: the largest spring stretch, the deepest penetration of a particle
-    into the body (m, measured against the true pose at each frame) and below the ground."""
-    depth = 0.0
-    for n, t in enumerate(traj.times):
-        pose = animation.pose(t)
-        gap = capsule_clearance(traj.x[n], character.segments(pose), character.radii)
-        depth = max(depth, -gap.min())
-    return {"max_stretch": max(model.max_stretch(x) for x in traj.x),
-            "penetration": depth, "below_ground": max(0.0, -traj.x[:, :, 2].min())}
+def clip_report(model: ClothModel, traj) -> dict:
+    """Figures of a clip: the largest spring stretch, the deepest particle inside the body
+    or the ground (m: the library's one measure, :meth:`ClothModel.physical_report`) and how
+    far a particle is below z = 0."""
+    physical = model.physical_report(traj.x, traj.dt)
+    return {"max_stretch": physical["max_stretch"],
+            "penetration": physical.get("max_penetration", 0.0),
+            "below_ground": max(0.0, -float(traj.x[:, :, 2].min()))}

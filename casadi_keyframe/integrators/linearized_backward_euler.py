@@ -272,11 +272,10 @@ class LinearizedBackwardEuler(Integrator):
         taken taut, particles it should have held), or None if the step stands."""
         if not (isinstance(model, ContactConstraints) and model.constraint_families):
             return None  # the paper's penalty springs alone: its step, as it was
-        more = model.revised_contacts(held, x, v, t, dt, x1)
+        more, touching = model.review_contacts(held, x, v, t, dt, x1)
         # springs only where the cloth touches a body, where a stop within a step stretches
         # them: taking springs taut elsewhere makes a keyframe objective rough for nothing
-        touching = (held is not None or more is not None or model.touches(x, t)
-                    or model.touches(x1, t + dt))
+        touching = touching or held is not None
         taut = model.revised_interactions(found, x, x1) if touching else None
         if taut is None and more is None:
             return None

@@ -198,13 +198,10 @@ class ContactConstraints(abc.ABC):
         """The derivative of ``-n_k (n_k . q_k) + nbar_k (nbar_k . z_k)`` along ``(dx, dv)``."""
 
     @abc.abstractmethod
-    def touches(self, x, t: float) -> bool:
-        """Whether a particle at positions x is in a body's contact layer at time t."""
-
-    @abc.abstractmethod
-    def revised_contacts(self, held, x, v, t: float, dt: float, x1):
-        """``held`` plus the particles a step ended inside a body without holding them; None
-        if there are none."""
+    def review_contacts(self, held, x, v, t: float, dt: float, x1):
+        """``(revised, touching)`` after a step that ended at x1: ``held`` plus the particles
+        it ended inside a body without holding them (None if there are none), and whether a
+        particle ended in a body's contact layer."""
 
     @abc.abstractmethod
     def contact_masks(self, contacts) -> np.ndarray:

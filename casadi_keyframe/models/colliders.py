@@ -177,8 +177,7 @@ def _distance_kernel(body_type: type) -> MappedKernel:
     x = ca.SX.sym("x", 3)
     geo = {key: ca.SX.sym(key, size) for key, size in body_type.GEOMETRY.items()}
     phi = body_type.surface(x, **geo)[0]
-    return MappedKernel(ca.Function(f"{body_type.kind}_distance", [x, *geo.values()], [phi]),
-                        jit=False)  # for reports: not worth compiling
+    return MappedKernel(ca.Function(f"{body_type.kind}_distance", [x, *geo.values()], [phi]))
 
 
 def signed_distances(body: Body, x: np.ndarray, t: float) -> np.ndarray:

@@ -240,24 +240,27 @@ def choose_contacts(families, x, v, t, dt, free_particles, previous: Contacts | 
     return Contacts(held, body[held], normals[held], targets[held], released=released)
 
 
-def revised_contacts(families, held: Contacts | None, x, v, t, dt, x1, free_particles):
-    """``held`` with the particles that ended the step inside a body's held layer (deeper
-    than its tolerance) though the step did not hold them, each with the contact of the body
-    it ended deepest in, as at the step's start; None if there are none (the step stands)."""
-    if not families:
-        return None
+def review_contacts(families, held: Contacts | None, x, v, t, dt, x1, free_particles):
+    """``(revised, touching)`` after a step from (x, v) at t that ended at x1: ``held`` with
+    the particles that ended inside a body's held layer (deeper than its tolerance) though
+    the step did not hold them, each with the contact of the body it ended deepest in, as
+    at the step's start (None if there are none: the step stands), and whether any particle
+    ended in a body's contact layer."""
     n = x.shape[0]
     held = NO_CONTACTS if held is None else held
     unheld = free_particles.copy()
     unheld[held.particles] = False
     worst, body = np.zeros(n), np.full(n, -1)
+    touching = False
     for b, family in enumerate(families):
-        depth = family.layer - family.tolerance - signed_distances(family.body, x1, t + dt)
+        phi = signed_distances(family.body, x1, t + dt)
+        touching = touching or bool(phi.min() < family.body.contact.thickness)
+        depth = family.layer - family.tolerance - phi
         deeper = unheld & (depth > worst)
         worst[deeper], body[deeper] = depth[deeper], b
     late = np.flatnonzero(body >= 0)
     if not late.size:
-        return None
+        return None, touching
     normals, targets = np.zeros((late.size, 3)), np.zeros(late.size)
     for b, family in enumerate(families):
         mine = body[late] == b
@@ -270,7 +273,8 @@ def revised_contacts(families, held: Contacts | None, x, v, t, dt, x1, free_part
     released[late] = False
     return Contacts(particles[order], np.concatenate([held.body, body[late]])[order],
                     np.concatenate([held.normals, normals])[order],
-                    np.concatenate([held.targets, targets])[order], released=released)
+                    np.concatenate([held.targets, targets])[order],
+                    released=released), True
 
 
 class HeldContacts(ContactConstraints):
@@ -289,15 +293,12 @@ class HeldContacts(ContactConstraints):
         whole = self.free_mask().reshape(self.n, 3).all(axis=1)
         return choose_contacts(self.constraint_families, x, v, t, dt, whole, previous)
 
-    def touches(self, x, t: float) -> bool:
-        return any(signed_distances(body, x, t).min() < body.contact.thickness
-                   for body in self.colliders)
-
-    def revised_contacts(self, held, x, v, t: float, dt: float, x1):
-        """``held`` with the particles a step from (x, v) ended inside a body's layer without
-        holding them; None if it held every one it had to."""
+    def review_contacts(self, held, x, v, t: float, dt: float, x1):
+        """``(revised, touching)``: ``held`` with the particles a step from (x, v) ended
+        inside a body's layer without holding them (None if it held every one it had to),
+        and whether the cloth ended in a body's contact layer."""
         whole = self.free_mask().reshape(self.n, 3).all(axis=1)
-        return revised_contacts(self.constraint_families, held, x, v, t, dt, x1, whole)
+        return review_contacts(self.constraint_families, held, x, v, t, dt, x1, whole)
 
     def _by_body(self, contacts):
         for b, family in enumerate(self.constraint_families):

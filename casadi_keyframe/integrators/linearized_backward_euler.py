@@ -424,6 +424,7 @@ class LinearizedBackwardEuler(Integrator):
             held = None if record is None else record.contacts
             parts.append(np.zeros(len(model.constraint_families) * model.n) if held is None
                          else model.contact_masks(held))
+            parts.append(model.contact_parameters(t, dt))
         parts.append(model.decision_parameters(None if record is None else record.interactions))
         return np.concatenate(parts)
 
@@ -454,17 +455,19 @@ class LinearizedBackwardEuler(Integrator):
         fi, ci = np.flatnonzero(free).tolist(), np.flatnonzero(~free).tolist()
         Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
         dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)
-        n_masks = n_s - n_scene - n_targets - n_decided
-        if not n_masks:  # no contacts held by the step
+        n_held = n_s - n_scene - n_targets - n_decided  # masks and the held bodies
+        if not n_held:  # no contacts held by the step
             system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, prescribed])
             Am, bm, dvm = system(Xm, Vm, Em, dtm, Sm)
             dv = dvm
             rhs = bm[fi] - (ca.mtimes(Am[fi, ci], dvm[ci]) if ci else 0)
             dv[fi] = ca.solve(Am[fi, fi], rhs, "ldl")
         else:
+            n_masks = len(model.constraint_families) * n
             masks = S[n_scene + n_targets:n_scene + n_targets + n_masks]
+            bodies = S[n_scene + n_targets + n_masks:n_scene + n_targets + n_held]
             system = ca.Function("lbe_system", [X, V, E, dt, S], _held_system(
-                model, X, V, scene, dt, masks, A, b, prescribed, mass, free))
+                model, X, V, bodies, dt, masks, A, b, prescribed, mass, free))
             Am, rhs, dvm = system(Xm, Vm, Em, dtm, Sm)
             dv = dvm
             dv[fi] = dvm[fi] + ca.solve(Am[fi, fi], rhs[fi], "ldl")
@@ -472,10 +475,11 @@ class LinearizedBackwardEuler(Integrator):
         return ca.Function("lbe_step", [Xm, Vm, Em, dtm, Sm], [Xm + dtm * v_next, v_next])
 
 
-def _held_system(model, X, V, scene, dt, masks, A, b, prescribed, mass, free):
-    """``(A_hat, S (b - A z), z)`` of the symbolic step with the contacts ``masks`` held
-    (see :mod:`.contact_filter`); z is the prescribed part of dv on every component."""
-    normals, targets = model.symbolic_contacts(X, V, scene, dt, masks)
+def _held_system(model, X, V, bodies, dt, masks, A, b, prescribed, mass, free):
+    """``(A_hat, S (b - A z), z)`` of the symbolic step with the contacts ``masks`` held on
+    the ``bodies`` (their geometry over the step, see :mod:`.contact_filter`); z is the
+    prescribed part of dv on every component."""
+    normals, targets = model.symbolic_contacts(X, V, bodies, dt, masks)
     P = ca.diagcat(*[ca.mtimes(normals[:, k], normals[:, k].T) for k in range(model.n)])
     keep = ca.SX.eye(3 * model.n) - P
     held = ca.vec(normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1))

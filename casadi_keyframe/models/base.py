@@ -208,8 +208,13 @@ class ContactConstraints(abc.ABC):
         """Which contacts are held, as the symbolic step's flat 0/1 parameters."""
 
     @abc.abstractmethod
-    def symbolic_contacts(self, X, V, S, dt, masks):
-        """``(normals 3 x n, targets 1 x n)`` of the held contacts (zero elsewhere)."""
+    def contact_parameters(self, t: float, dt: float) -> np.ndarray:
+        """The held bodies' geometry for the step from t (the symbolic step's input)."""
+
+    @abc.abstractmethod
+    def symbolic_contacts(self, X, V, G, dt, masks):
+        """``(normals 3 x n, targets 1 x n)`` of the held contacts (zero elsewhere), the
+        bodies' geometry G from :meth:`contact_parameters`."""
 
 
 class PhysicalReport(abc.ABC):

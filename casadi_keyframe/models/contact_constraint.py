@@ -2,16 +2,17 @@ r"""Contact that holds: a particle touching a body has its velocity along the bo
 prescribed inside the implicit step, as Baraff and Witkin treat contact (the filter of their
 modified CG), instead of a stiff spring that sees the body only once the particle is inside.
 
-A particle is in contact with a body at the start of a step from t when it is in the body's
-contact layer, or will reach it within the step at its present speed relative to the body:
+For the step from t, ``phi_0`` and ``phi_1`` are a particle's signed distances (negative
+inside) to the body's surface where the body is at t and at t + dt, ``n`` the outward unit
+normal of the latter at the particle: ``phi_0 - phi_1`` is how far the body comes towards
+the particle within the step.  In contact, the step ends with
 
-    phi(x) + dt n . (v - v_body) <= thickness + tolerance,
+    n . v+ = c = (phi_0 - phi_1) / dt + (thickness - phi_0) / dt          (phi_0 >= thickness)
+    n . v+ = c = (phi_0 - phi_1) / dt + beta (thickness - phi_0) / dt     (phi_0 < thickness)
 
-with ``phi`` the signed distance to the surface (negative inside), ``n`` the outward unit
-normal and ``v_body`` the surface's velocity there.  In contact, the step ends with
-
-    n . v+ = c = n . v_body + (thickness - phi(x)) / dt          (phi >= thickness)
-    n . v+ = c = n . v_body + beta (thickness - phi(x)) / dt   (phi < thickness)
+and a particle is in contact when it would end the step within the layer moving as it
+does, ``phi_1 + dt n . v <= thickness + tolerance`` (i.e. ``dt (n . v - c) <= tolerance``
+for an arriving particle).
 
 so an arriving particle ends the step on the layer's surface (exactly for a plane, outside
 it for a sphere or a capsule, whose distance is convex), and one found inside the layer is
@@ -43,20 +44,24 @@ from .base import ContactConstraints
 from .interaction import FamilyBlocks, Interaction
 
 TOLERANCE = 0.25  # of the thickness: a particle this close to the layer's surface touches it
+OVERSHOOT = 0.1  # of the thickness: a step that leaves a particle this far past it is redone
 CORRECTION = 0.5  # of a particle's depth in the layer undone per step (beta)
 
 
 @functools.lru_cache(maxsize=None)
 def constraint_kernels(body_type: type) -> dict[str, ca.Function]:
-    """Per particle ``(x, v, *geometry, h, dt)``: ``constraint -> (phi, n, c)``, ``vjp(..., lam,
-    q, nu) -> (gx, gv)`` and ``jvp(..., q, nbar, dx, dv) -> d`` (module docstring)."""
+    """Per particle ``(x, v, *geometry at t, *geometry at t + dt, h, dt)``:
+    ``constraint -> (phi_0, n, c)``, ``vjp(..., lam, q, nu) -> (gx, gv)`` and ``jvp(..., q,
+    nbar, dx, dv) -> d`` (module docstring)."""
     x, v = ca.SX.sym("x", 3), ca.SX.sym("v", 3)
-    geo = {key: ca.SX.sym(key, size) for key, size in body_type.GEOMETRY.items()}
+    start = {key: ca.SX.sym(f"{key}_0", size) for key, size in body_type.GEOMETRY.items()}
+    end = {key: ca.SX.sym(f"{key}_1", size) for key, size in body_type.GEOMETRY.items()}
     h, dt = ca.SX.sym("h"), ca.SX.sym("dt")
-    phi, n, v_body = body_type.surface(x, **geo)
-    c = ca.dot(n, v_body) + ca.if_else(phi >= h, 1.0, CORRECTION) * (h - phi) / dt
+    phi, _, _ = body_type.surface(x, **start)
+    phi_end, n, _ = body_type.surface(x, **end)
+    c = (phi - phi_end) / dt + ca.if_else(phi >= h, 1.0, CORRECTION) * (h - phi) / dt
     z = n * (c - ca.dot(n, v))
-    args = [x, v, *geo.values(), h, dt]
+    args = [x, v, *start.values(), *end.values(), h, dt]
     lam, q, nu, nbar = (ca.SX.sym(s, 3) for s in ("lam", "q", "nu", "nbar"))
     dx, dv = ca.SX.sym("dx", 3), ca.SX.sym("dv", 3)
     scalar = -ca.dot(lam, n) * ca.dot(n, q) + ca.dot(nu, z)
@@ -145,6 +150,7 @@ class BodyConstraint(Interaction):
         self.body, self.n = body, n
         self.layer = float(body.contact.thickness if layer is None else layer)
         self.tolerance = TOLERANCE * float(body.contact.thickness)
+        self.overshoot = OVERSHOOT * float(body.contact.thickness)
         self.kernels = constraint_kernels(type(body))
         self.mapped = {k: MappedKernel(f, jit=jit) for k, f in self.kernels.items()}
 
@@ -153,15 +159,19 @@ class BodyConstraint(Interaction):
         """The layer the contact holds (the kernels' ``h``)."""
         return self.layer
 
-    def parameters(self, t):
-        return self.body.parameters(t)
+    def contact_parameters(self, t: float, dt: float) -> np.ndarray:
+        """The body's geometry at t and at t + dt, as the symbolic step takes it."""
+        return np.concatenate([self.body.parameters(t), self.body.parameters(t + dt)])
 
     def _columns(self, t, dt, count):
-        geometry = [np.broadcast_to(g, (count, np.size(g))) for g in self.body.geometry(t)]
+        """The kernels' inputs after ``x, v``: the body at t and t + dt, the layer, dt."""
+        geometry = [np.broadcast_to(g, (count, np.size(g)))
+                    for g in (*self.body.geometry(t), *self.body.geometry(t + dt))]
         return geometry + [np.full((count, 1), self.thickness), np.full((count, 1), dt)]
 
     def candidates(self, x, v, t, dt):
-        """``(phi (n,), normals (n, 3), targets (n,))`` of every particle at time t."""
+        """``(phi_0 (n,), normals (n, 3), targets (n,))`` of every particle for the step
+        from t."""
         phi, normal, target = self.mapped["constraint"](x, v, *self._columns(t, dt, self.n))
         return phi.ravel(), normal, target.ravel()
 
@@ -180,11 +190,12 @@ class BodyConstraint(Interaction):
                                   nbar, dx[particles], dv[particles])[0]
 
     def symbolic_constraint(self, X, V, S, dt):
-        """``(phi, normals, targets)`` of every particle as CasADi expressions (``1 x n``,
-        ``3 x n``, ``1 x n``) from the ``3 x n`` X, V and this body's parameters S."""
+        """``(phi_0, normals, targets)`` of every particle as CasADi expressions (``1 x n``,
+        ``3 x n``, ``1 x n``) from the ``3 x n`` X, V and the body's parameters S
+        (:meth:`contact_parameters`)."""
         n = X.shape[1]
         parts, at = [], 0
-        for size in self.body.GEOMETRY.values():
+        for size in (*self.body.GEOMETRY.values(), *self.body.GEOMETRY.values()):
             parts.append(ca.repmat(S[at:at + size], 1, n))
             at += size
         phi, normal, target = self.kernels["constraint"].map(n)(
@@ -242,8 +253,8 @@ def choose_contacts(families, x, v, t, dt, free_particles, previous: Contacts | 
 
 def review_contacts(families, held: Contacts | None, x, v, t, dt, x1, free_particles):
     """``(revised, touching)`` after a step from (x, v) at t that ended at x1: ``held`` with
-    the particles that ended inside a body's held layer (deeper than its tolerance) though
-    the step did not hold them, each with the contact of the body it ended deepest in, as
+    the particles that ended inside a body's held layer (deeper than its overshoot,
+    :data:`OVERSHOOT`) though the step did not hold them, each with the contact of the body it ended deepest in, as
     at the step's start (None if there are none: the step stands), and whether any particle
     ended in a body's contact layer."""
     n = x.shape[0]
@@ -255,7 +266,7 @@ def review_contacts(families, held: Contacts | None, x, v, t, dt, x1, free_parti
     for b, family in enumerate(families):
         phi = signed_distances(family.body, x1, t + dt)
         touching = touching or bool(phi.min() < family.body.contact.thickness)
-        depth = family.layer - family.tolerance - phi
+        depth = family.layer - family.overshoot - phi
         deeper = unheld & (depth > worst)
         worst[deeper], body[deeper] = depth[deeper], b
     late = np.flatnonzero(body >= 0)
@@ -325,15 +336,19 @@ class HeldContacts(ContactConstraints):
         masks[contacts.body, contacts.particles] = 1.0
         return masks.ravel()
 
-    def symbolic_contacts(self, X, V, S, dt, masks):
+    def contact_parameters(self, t: float, dt: float) -> np.ndarray:
+        """The held bodies' geometry at t and t + dt, one body after another."""
+        return np.concatenate([f.contact_parameters(t, dt) for f in self.constraint_families]
+                              or [np.zeros(0)])
+
+    def symbolic_contacts(self, X, V, G, dt, masks):
         normals, targets = ca.SX.zeros(3, self.n), ca.SX.zeros(1, self.n)
-        b = 0
-        for family, part in self.scene_parts(S):
-            if not isinstance(family, BodyConstraint):
-                continue
-            _, normal, target = family.symbolic_constraint(X, V, part, dt)
+        at = 0
+        for b, family in enumerate(self.constraint_families):
+            size = family.contact_parameters(0.0, 1.0).size
+            _, normal, target = family.symbolic_constraint(X, V, G[at:at + size], dt)
+            at += size
             held = ca.reshape(masks[b * self.n:(b + 1) * self.n], 1, self.n)
             normals += ca.repmat(held, 3, 1) * normal
             targets += held * target
-            b += 1
         return normals, targets

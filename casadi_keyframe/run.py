@@ -304,9 +304,13 @@ def run_render(source, *, animation: bool = True) -> int:
 
 
 def _render(source, animation: bool) -> int:
-    from .saved import load_saved
+    from .files import writable_folder
+    from .saved import load_saved, saved_file
 
-    saved = load_saved(source)
+    path = saved_file(source)
+    writable_folder(path.parent, "the results folder", fix="render draws beside the run "
+                    "file: copy the folder somewhere you can write and render the copy")
+    saved = load_saved(path)
     prob, out = saved.problem, saved.path.parent
     draw(prob, saved.trajectory, _history(saved.meta, saved.arrays), out, animation=animation)
     print(f"{prob.name}: pictures drawn in {out}/ from {saved.path.name}")

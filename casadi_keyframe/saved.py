@@ -9,6 +9,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import NamedTuple
 
+import numpy as np
+
 from .io import RESULT, read_run, run_file
 from .state import Trajectory
 
@@ -24,13 +26,19 @@ class SavedRun(NamedTuple):
     path: Path
 
 
+def saved_file(source) -> Path:
+    """The file a saved run is read from: ``source`` if it is a file, else its folder's
+    ``result.npz``, or its ``checkpoint.npz`` alone (FileNotFoundError if neither)."""
+    source = Path(source)
+    return source / RESULT if (source / RESULT).is_file() else run_file(source)
+
+
 def load_saved(source, *, quiet: bool = False) -> SavedRun:
     """Read the run in ``source`` (a results folder, preferring its ``result.npz``, or a
     ``.npz`` file) and rebuild its problem; a ValueError if the controls do not fit it."""
     from .loading import load_problem
 
-    source = Path(source)
-    path = source / RESULT if (source / RESULT).is_file() else run_file(source)
+    path = saved_file(source)
     run = read_run(path)
     meta, arrays = run["meta"], run["arrays"]
     name = meta.get("problem_file")
@@ -40,6 +48,12 @@ def load_saved(source, *, quiet: bool = False) -> SavedRun:
         raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
                          f"{meta.get('overrides', {})} has {prob.size}")
     if "x" in arrays:
+        frames = (prob.steps + 1, prob.model.n, prob.model.dim)
+        if arrays["x"].shape != frames or not np.isclose(float(arrays["dt"]), prob.dt):
+            raise ValueError(f"{path} holds a trajectory of shape {arrays['x'].shape} at dt "
+                             f"{float(arrays['dt']):.6g} s, but {prob.name} built with "
+                             f"{meta.get('overrides', {})} has {frames} at dt {prob.dt:.6g} s: "
+                             "the file was altered, or the problem file changed since the run")
         traj = Trajectory(arrays["x"], arrays["v"], float(arrays["dt"]))
     else:
         if not quiet:

@@ -246,7 +246,9 @@ def test_a_failing_point_is_a_row_with_its_reason(tmp_path):
             "overrides": {"k": 3}, "options": {"maxiter": 2}, "values": {"k": 3},
             "name": "k=3", "label": "k=3", "folder": str(tmp_path / "k=3"), "id": "x"}
     row = run_task(spec)
-    assert row["status"] == "error" and row["reason"] == "ValueError: k = 3 is cursed"
+    assert row["status"] == "error" and row["reason"] == (
+        f"problem file {path} failed in build() at line 9 (raise ValueError(\"k = 3 is "
+        f"cursed\")): ValueError: k = 3 is cursed")
     assert read_row(tmp_path / "k=3") == row
 
     class KilledWorker(Exception):

@@ -17,6 +17,7 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..files import FileDamaged
 from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
 from ..optimize.outcome import INTERRUPTED
@@ -198,8 +199,14 @@ def spec_id(spec: dict) -> str:
 def _todo(specs, resume: bool):
     """The specs to run and how many finished points are re-run for other settings; without
     ``resume`` a folder that already holds points is refused."""
-    rows = [read_row(spec["folder"]) for spec in specs]
-    if not resume and any(rows):
+    rows, damaged = [], []
+    for spec in specs:
+        try:
+            rows.append(read_row(spec["folder"]))
+        except FileDamaged as err:  # a point cut short as its row was written elsewhere
+            rows.append(None)
+            damaged.append(err)
+    if not resume and (any(rows) or damaged):
         raise ValueError(f"{Path(specs[0]['folder']).parent.parent} already holds a sweep's "
                          "points: give --resume to continue it (finished points are skipped) "
                          "or choose another --out")
@@ -207,6 +214,8 @@ def _todo(specs, resume: bool):
                 for r, s in zip(rows, specs)]
     stale = sum(r is not None and r.get("status") != ERROR and r.get("spec_id") != s["id"]
                 for r, s in zip(rows, specs))
+    for err in damaged:
+        print(f"sweep: {err}")
     return [s for s, ok in zip(specs, complete) if not ok], stale
 
 
@@ -216,7 +225,7 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
 
     rows, missing = [], []
     for spec in plan.specs:
-        row = read_row(spec["folder"])
+        row = _row_or_none(spec["folder"])
         if row is None or row.get("spec_id") != spec["id"]:
             missing.append(spec["name"])
         else:
@@ -237,6 +246,14 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
     write_json(plan.out / SUMMARY, summary)
     return SweepResult(rows, best, files + [plan.out / SUMMARY], failed, missing, code,
                        summary)
+
+
+def _row_or_none(folder) -> dict | None:
+    """A point's row, or None when it has none or a damaged one (the point is missing)."""
+    try:
+        return read_row(folder)
+    except FileDamaged:
+        return None
 
 
 def report(result: SweepResult, out) -> None:

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from ..files import FileDamaged
+from ..interrupts import NAMES, catching, handled
 from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
 from ..optimize.outcome import INTERRUPTED
@@ -42,7 +43,8 @@ exit codes:
   1    at least one point failed (no result after --tries attempts, an error, or the
        search failed): the table's reason column says why; the other points are written
   2    bad input (problem, grid, overrides, options, scheduler address, --out)
-  130  interrupted by Ctrl-C: the finished points are on disk, continue with --resume
+  130  interrupted by Ctrl-C before every point finished: the finished points are on
+       disk, continue with --resume (a signal after every point finished changes nothing)
   143  stopped by SIGTERM; as 130"""
 
 
@@ -166,21 +168,36 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
         print(f"sweep: {stale} finished point(s) were solved with other settings: solving "
               "them again")
     if todo:
-        try:
-            with connect(workers=workers, scheduler=scheduler, tries=tries,
-                         timeout=timeout) as client:
-                check_workers(client, [folder.resolve(), *_files(todo)])
-                shown = Progress(len(todo), skipped=len(plan.specs) - len(todo),
-                                 enabled=progress)
-                _, signum = run_specs(client, todo, progress=shown)
-                shown.close()
-        except KeyboardInterrupt:  # Ctrl-C while the cluster starts or stops
-            signum = signal.SIGINT
+        signum = _solve_points(todo, folder, skipped=len(plan.specs) - len(todo),
+                               progress=progress, workers=workers, scheduler=scheduler,
+                               tries=tries, timeout=timeout)
     elif progress:
         print(f"sweep: all {len(plan.specs)} points are complete already")
     where = scheduler or ("local, one worker per core" if workers is None else
                           f"local, {workers} worker{'s' * (workers != 1)}")
     return _finish(plan, signum, time.monotonic() - started, where)
+
+
+def _solve_points(todo, folder, *, skipped, progress, workers, scheduler, tries, timeout):
+    """Solve the points ``todo`` on the cluster; the signal that stopped the sweep, or None.
+
+    SIGINT and SIGTERM are caught throughout (:func:`..interrupts.catching`): one while the
+    cluster starts, runs or closes stops the sweep, and the cluster is closed whole even
+    when a second one comes (it is raised after the close)."""
+    signum = None
+    with catching():
+        try:
+            with connect(workers=workers, scheduler=scheduler, tries=tries,
+                         timeout=timeout) as client:
+                check_workers(client, [folder.resolve(), *_files(todo)])
+                shown = Progress(len(todo), skipped=skipped, enabled=progress)
+                _, signum = run_specs(client, todo, progress=shown,
+                                      tries=None if scheduler else tries)
+                shown.close()
+        except KeyboardInterrupt as err:  # while the cluster starts or closes
+            signum = signum or getattr(err, "signum", signal.SIGINT)
+        handled()  # acted on: the table and the plot are still written
+    return signum
 
 
 def _files(specs) -> set:
@@ -238,11 +255,15 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
     files += [picture] if picture else []
     failed = [r["point"] for r in rows if is_failed(r)]
     best = best_per_group(rows, plan.figure, plan.group_by)
-    code = (exit_code(INTERRUPTED, signum) if signum else 1 if failed or missing else 0)
+    # a signal after every point finished loses nothing: the sweep is complete
+    code = (exit_code(INTERRUPTED, signum) if signum and missing
+            else 1 if failed or missing else 0)
     summary = {**plan.about, "figure": plan.figure, "group_by": plan.group_by,
                "points": len(plan.specs), "complete": len(rows) - len(failed),
                "failed": failed, "missing": missing, "best": best, "cluster": where,
-               "seconds": seconds, "exit_code": code, "files": [str(f) for f in files]}
+               "seconds": seconds, "exit_code": code, "files": [str(f) for f in files],
+               "signal_after_complete": NAMES.get(signum, signum) if signum and not missing
+               else None}
     write_json(plan.out / SUMMARY, summary)
     return SweepResult(rows, best, files + [plan.out / SUMMARY], failed, missing, code,
                        summary)
@@ -263,6 +284,9 @@ def report(result: SweepResult, out) -> None:
     print(f"sweep of {s.get('problem', s.get('study'))}: {s['complete']} of {s['points']} "
           f"points complete, {len(s['failed'])} failed, {len(s['missing'])} not run "
           f"({format_seconds(s['seconds'])}, {s['cluster']})")
+    if s.get("signal_after_complete"):
+        print(f"  {s['signal_after_complete']} came after every point had finished: the sweep "
+              "is complete")
     for path in result.files:
         print(f"  wrote {path}")
     for b in result.best[:20]:

@@ -100,6 +100,9 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
               history_keyframe_error=np.array([h["keyframe_error"] for h in hist]),
               history_seconds=np.array([h["seconds"] for h in hist]),
               history_stage=np.array([h.get("stage", 0) for h in hist], dtype=int),
+              history_dt=np.array([h.get("dt", np.nan) for h in hist], dtype=float),
+              history_particles=np.array([h.get("particles", 0) for h in hist], dtype=int),
+              history_round=np.array([h.get("round", -1) for h in hist], dtype=int),
               start_objective=np.array(_or_nan(result.start["objective"])),
               start_keyframe_error=np.array(_or_nan(result.start["keyframe_error"])))
     write_json(out / SUMMARY, summary)

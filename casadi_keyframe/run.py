@@ -322,8 +322,15 @@ def _history(meta, arrays) -> SimpleNamespace:
     objective = arrays.get("history_objective", ())
     history = [{"iteration": i + 1, "objective": float(f),
                 "keyframe_error": float(arrays["history_keyframe_error"][i]),
-                "seconds": float(arrays["history_seconds"][i])}
-               for i, f in enumerate(objective)]
+                "seconds": float(arrays["history_seconds"][i]),
+                **{key: cast(arrays[f"history_{key}"][i])
+                   for key, cast in (("stage", int), ("dt", float), ("particles", int),
+                                     ("round", int))
+                   if f"history_{key}" in arrays},  # older files lack some
+                } for i, f in enumerate(objective)]
+    for record in history:
+        if record.get("round", 0) < 0:  # written as -1: no rounds
+            del record["round"]
     start = {k: float(arrays[f"start_{k}"]) if f"start_{k}" in arrays else None
              for k in ("objective", "keyframe_error")}
     return SimpleNamespace(history=history, start=start, method=meta.get("method", "?"),

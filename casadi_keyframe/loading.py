@@ -316,8 +316,8 @@ def _module(path: Path):
     try:
         spec.loader.exec_module(module)
     except SyntaxError as err:
-        raise ValueError(f"problem file {path} is not valid Python: {err.msg} (line "
-                         f"{err.lineno})") from None
+        where = f" (line {err.lineno})" if err.lineno else ""
+        raise ValueError(f"problem file {path} is not valid Python: {err.msg}{where}") from None
     except Exception as err:  # noqa: BLE001 - the user's code: any error, reported by line
         raise ProblemFileError(path, "to import", err) from err
     return module

@@ -19,6 +19,7 @@ from .interrupts import NAMES, catching, check
 from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
 from .optimize.outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
 from .report import format_misses, format_physical, format_stage
+from .saved import check_trajectory
 from .state import SimulationError
 
 EXIT_CODES = """\
@@ -220,6 +221,7 @@ def resume_controls(spec: SolveRun):
     if run["u"].size != prob.size:
         raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
                          f"{prob.size}")
+    check_trajectory(run, prob)  # a stored trajectory that does not fit: an altered file
     return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun")}
 
 

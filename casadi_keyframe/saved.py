@@ -47,16 +47,26 @@ def load_saved(source, *, quiet: bool = False) -> SavedRun:
     if run["u"].size != prob.size:
         raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
                          f"{meta.get('overrides', {})} has {prob.size}")
+    check_trajectory(run, prob)
     if "x" in arrays:
-        frames = (prob.steps + 1, prob.model.n, prob.model.dim)
-        if arrays["x"].shape != frames or not np.isclose(float(arrays["dt"]), prob.dt):
-            raise ValueError(f"{path} holds a trajectory of shape {arrays['x'].shape} at dt "
-                             f"{float(arrays['dt']):.6g} s, but {prob.name} built with "
-                             f"{meta.get('overrides', {})} has {frames} at dt {prob.dt:.6g} s: "
-                             "the file was altered, or the problem file changed since the run")
         traj = Trajectory(arrays["x"], arrays["v"], float(arrays["dt"]))
     else:
         if not quiet:
             print(f"{prob.name}: {path.name} holds controls only: simulating them")
         traj = prob.simulate(run["u"])
     return SavedRun(prob, traj, meta, arrays, path)
+
+
+def check_trajectory(run: dict, prob) -> None:
+    """A ValueError if the trajectory a run file stores (:func:`.io.read_run`) is not one of
+    ``prob``: another number of frames, particles or dimensions, or another dt."""
+    arrays = run["arrays"]
+    if "x" not in arrays:
+        return
+    frames = (prob.steps + 1, prob.model.n, prob.model.dim)
+    if arrays["x"].shape != frames or not np.isclose(float(arrays["dt"]), prob.dt):
+        raise ValueError(f"{run['path']} holds a trajectory of shape {arrays['x'].shape} at dt "
+                         f"{float(arrays['dt']):.6g} s, but {prob.name} built with "
+                         f"{run['meta'].get('overrides', {})} has {frames} at dt "
+                         f"{prob.dt:.6g} s: the file was altered, or the problem file changed "
+                         "since the run")

@@ -102,6 +102,9 @@ def test_a_trajectory_that_does_not_fit_its_problem_is_refused(run, tmp_path, ca
     (tmp_path / "result.npz").write_bytes(_rewritten(data, x=data["x"][:-1], v=data["v"][:-1]))
     assert main(["export", str(tmp_path), "--format", "obj"]) == 2
     assert "holds a trajectory of shape (10, 4, 2)" in capsys.readouterr().err
+    assert main(["solve", *SMALL, "--out", str(tmp_path / "o"), "--quiet", "--resume",
+                 str(tmp_path / "result.npz")]) == 2
+    assert "holds a trajectory of shape (10, 4, 2)" in capsys.readouterr().err
     (tmp_path / "result.npz").write_bytes(_rewritten(data, v=data["v"][:, :2]))
     assert main(["render", str(tmp_path)]) == 2
     assert "trajectory that does not fit together" in capsys.readouterr().err

@@ -32,7 +32,8 @@ from casadi_keyframe.scenes.flocks import blob, flock_problem
 def build(agents: int = 4):
     x0 = blob(agents + 1, (0, 0), 1.0, 2, np.random.default_rng(0))
     return flock_problem(agents=agents, steps=10, dt=0.05, seed=0, dim=2, x0=x0,
-                         v0=np.zeros((agents, 2)), objective=CenterOfMassKeyframe(10, x=[1, 0]))
+                         v0=np.zeros((agents, 2)), objective=CenterOfMassKeyframe(10, x=[1, 0]),
+                         name="bad")
 '''
 CASES = {  # file text, the line reported, the exception
     "raises": (RAISES, "at line 5 (return 1 / k): ZeroDivisionError: division by zero"),
@@ -40,7 +41,9 @@ CASES = {  # file text, the line reported, the exception
                          "ModuleNotFoundError: No module named 'casadi_keyframe_no_such_module'"),
     "name": (NAME, "to import at line 2 (SIZE = undefined_name + 1): NameError: name "
                    "'undefined_name' is not defined"),
-    "shape": (BAD_SHAPE, "in build() at line 9 (return flock_problem("),
+    "shape": (BAD_SHAPE, "in build() at line 9 (return flock_problem(agents=agents, steps=10, "
+                         "dt=0.05, seed=0, dim=2, x0=x0,): ValueError: initial positions x0 "
+                         "must have shape (4, 2) (particles, dim), got (5, 2)"),
 }
 
 

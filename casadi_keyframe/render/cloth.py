@@ -26,8 +26,8 @@ from ..geometry import body_geometry, capsule_grid, circle, plane_patch
 from ..views import ClothView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
-from .targets import (camera_direction, colorbar, distance_colors, distance_norm, distances,
-                      miss_text, target_camera)
+from .targets import (camera_direction, center_distance, colorbar, distance_colors,
+                      distance_norm, distances, format_mm, miss_text, target_camera)
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
 BACK = "#c9b58f"  # the side of a cloth turned away from the camera (a cape's inside)
@@ -282,8 +282,12 @@ class TrajectoryPanel(ClothPanel):
         self.show_targets(n, ahead=ahead)
         title = frame_title(self.name, n, self.trajectory, full_title)
         missed = [1e3 * d for d in (distances(m, x) for m in here) if d is not None]
-        if missed:
-            title += f"\nkeyframe: {miss_text(np.concatenate(missed))} off"
+        centre = [m for m in here if m.kind == "center"]
+        said = ([f"{miss_text(np.concatenate(missed))} off"] if missed else []) + [
+            f"centre of mass {format_mm(1e3 * center_distance(m, x, self.model.masses))} off"
+            for m in centre]
+        if said:
+            title += "\nkeyframe: " + "; ".join(said)
         self.set_title(title, full_title)
 
 

@@ -76,6 +76,13 @@ def distances(marker, x) -> np.ndarray | None:
     return None
 
 
+def center_distance(marker, x, masses) -> float:
+    """The distance in metres of the centre of mass of positions ``x`` (weighted by
+    ``masses``) to a "center" marker's target."""
+    w = np.asarray(masses, float)
+    return float(np.linalg.norm(w @ np.asarray(x, float) / w.sum() - marker.points[0]))
+
+
 def distance_norm(millimetres) -> LogNorm:
     """A log colour scale in mm from 1 mm to the largest of ``millimetres`` rounded up to 1,
     2 or 5 times a power of ten (at least 10 mm): a hit within a millimetre and a miss of a
@@ -108,8 +115,11 @@ def colorbar(fig, norm: LogNorm, rect=(0.3, 0.035, 0.4, 0.018)):
 def miss_text(millimetres) -> str:
     """``"rms 2.2 mm, max 5.8 mm"`` of distances in mm."""
     d = np.asarray(millimetres, float)
-    return f"rms {_mm(np.sqrt(np.mean(d ** 2)))}, max {_mm(d.max())}"
+    return f"rms {format_mm(np.sqrt(np.mean(d ** 2)))}, max {format_mm(d.max())}"
 
 
-def _mm(value: float) -> str:
+def format_mm(value: float) -> str:
+    """A distance in mm to two significant figures (``"< 0.01 mm"`` below that)."""
+    if value < 0.01:
+        return "< 0.01 mm"
     return f"{value:.2g} mm" if value < 10 else f"{value:.0f} mm"

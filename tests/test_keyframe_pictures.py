@@ -77,6 +77,8 @@ def test_keyframe_panels_colour_the_distance_and_draw_targets_at_their_frame(she
     assert panels[1].azim != CAMERA[1] or panels[1].elev != CAMERA[0]
     bars = [ax for ax in fig.axes if "[mm]" in ax.get_xlabel()]
     assert len(bars) == 1
+    monkeypatch.undo()
+    matplotlib.pyplot.close(fig)
 
 
 def test_the_animation_labels_a_target_drawn_before_its_frame(sheet):
@@ -118,3 +120,5 @@ def test_convergence_labels_stages_and_keeps_wild_iterates_off_the_scale(tmp_pat
     assert "up to 6e+07" in notes and "stage begins" in notes
     widths = {line.get_label(): line.get_linewidth() for line in left.lines}
     assert widths["objective"] > widths["keyframe error"]  # the thin line drawn over it
+    monkeypatch.undo()
+    matplotlib.pyplot.close(fig)

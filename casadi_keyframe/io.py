@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .files import FileDamaged, read_json, read_npz, writable_file
+from .files import FileDamaged, read_json, read_npz, writable_file, writable_folder
 from .interrupts import deferred
 
 RESULT, SUMMARY, CHECKPOINT = "result.npz", "summary.json", "checkpoint.npz"
@@ -87,8 +87,7 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
 
     ``meta`` (e.g. ``problem_file``, ``resumed_from``) joins the summary and the npz's
     ``meta``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = writable_folder(out_dir, "out_dir")
     summary = {"problem": problem_name, "overrides": overrides or {}, **meta,
                **result.summary()}
     traj, hist = result.trajectory, result.history

@@ -98,3 +98,13 @@ def test_export_in_python_checks_its_out(run, tmp_path):
         export(run, "pc2", out=tmp_path / "f" / "x")
     assert export(run, "obj", out=tmp_path / "new")[0].is_file()
     np.testing.assert_equal(sorted(p.name for p in (tmp_path / "new").iterdir()), ["obj"])
+
+
+def test_a_sweep_in_python_checks_its_out_before_any_point(tmp_path):
+    pytest.importorskip("distributed")
+    from casadi_keyframe.sweep import sweep
+
+    (tmp_path / "f").write_text("")
+    with pytest.raises(ValueError, match=r"cannot write the output folder .*f/s \(out=\)"):
+        sweep("flock_path", {"weight": [1.0, 2.0]}, out=tmp_path / "f" / "s",
+              overrides={"agents": 3, "steps": 5}, progress=False)

@@ -17,7 +17,7 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..files import FileDamaged
+from ..files import FileDamaged, writable_folder
 from ..interrupts import NAMES, catching, handled
 from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
@@ -156,8 +156,9 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
              tries: int = 3, resume: bool = False, progress: bool = True,
              timeout: float = 10.0) -> SweepResult:
     """Run the plan's points not already complete, then write the table, the plot and
-    ``sweep.json``; the :class:`SweepResult`."""
-    folder = plan.out / POINTS
+    ``sweep.json``; the :class:`SweepResult`.  ``plan.out`` that cannot be written is
+    refused (ValueError naming ``out=``) before any point starts."""
+    folder = writable_folder(plan.out, "out=") / POINTS
     folder.mkdir(parents=True, exist_ok=True)
     for spec in plan.specs:
         spec["folder"] = str((folder / spec["name"]).resolve())

@@ -29,17 +29,20 @@ def extent_seen(points, camera) -> float:
     (a flat target seen edge-on, or a line end-on) to 1 (seen square-on): the area of the
     points' covariance ellipse projected onto the image plane over its largest projection
     (``e^T adj(C) e`` over the largest eigenvalue of ``adj(C)``)."""
+    return float(_seen(points, camera_direction(camera)[None])[0])
+
+
+def _seen(points, directions) -> np.ndarray:
+    """:func:`extent_seen` of ``points`` from each of the unit ``directions`` ``(m, 3)``."""
     p = np.asarray(points, float).reshape(-1, 3)
     if len(p) < 3:
-        return 1.0  # a point or two: any side shows them
-    w = np.linalg.eigvalsh(np.cov(p.T))[::-1].clip(min=0)
+        return np.ones(len(directions))  # a point or two: any side shows them
+    w, vectors = np.linalg.eigh(np.cov(p.T))
+    w, vectors = w[::-1].clip(min=0), vectors[:, ::-1]  # largest, middle, smallest spread
     if w[1] <= 1e-12 * max(w[0], 1e-300):
-        return 1.0  # (nearly) on a line: seen as a line from almost everywhere
-    _, vectors = np.linalg.eigh(np.cov(p.T))
-    vectors = vectors[:, ::-1]  # along the largest, middle, smallest spread
+        return np.ones(len(directions))  # (nearly) on a line: a line from almost everywhere
     adj = np.array([w[1] * w[2], w[0] * w[2], w[0] * w[1]])  # adj(C)'s eigenvalues
-    along = vectors.T @ camera_direction(camera)
-    return float(along ** 2 @ adj / adj.max())
+    return (directions @ vectors) ** 2 @ adj / adj.max()
 
 
 def target_camera(points_list, default) -> tuple[float, float]:
@@ -51,17 +54,14 @@ def target_camera(points_list, default) -> tuple[float, float]:
     if not targets:
         return tuple(default)
     cameras = [(el, az) for el in ELEVATIONS for az in AZIMUTHS]
-    seen = np.array([min(extent_seen(t, c) for t in targets) for c in cameras])
+    directions = np.array([camera_direction(c) for c in cameras])
+    seen = np.min([_seen(t, directions) for t in targets], axis=0)
     need = min(0.5, 0.9 * seen.max())
     if min(extent_seen(t, default) for t in targets) >= need:
         return tuple(default)
-    away = np.array([_angle(c, default) for c in cameras])
+    away = np.arccos(np.clip(directions @ camera_direction(default), -1.0, 1.0))
     best = np.flatnonzero(seen >= need)
     return cameras[best[np.argmin(away[best])]]
-
-
-def _angle(a, b) -> float:
-    return float(np.arccos(np.clip(camera_direction(a) @ camera_direction(b), -1.0, 1.0)))
 
 
 def distances(marker, x) -> np.ndarray | None:

@@ -7,9 +7,9 @@ import ast
 import inspect
 import shutil
 import sys
-import tempfile
 import textwrap
 import time
+import traceback
 from fractions import Fraction
 from pathlib import Path
 
@@ -18,8 +18,9 @@ import numpy as np
 from .adjoints import ROUTES as GRADIENT_ROUTES
 from .export import FORMATS as EXPORT_FORMATS
 from .export.alembic import BlenderError
-from .loading import (OverrideError, check_overrides, list_problems, load_module,
-                      load_problem, overrides_of, solve_defaults)
+from .files import writable_folder
+from .loading import (OverrideError, ProblemFileError, check_overrides, list_problems,
+                      load_module, load_problem, overrides_of, solve_defaults)
 from .optimize import METHODS
 from .run import EXIT_CODES, run_export, run_render, run_solve, solve_run
 from .sweep.plan import SWEEP_EXIT_CODES
@@ -110,23 +111,6 @@ def at_least(kind, low, *, strict: bool = False):
 positive_int = at_least(int, 1)
 
 
-def ensure_writable(folder) -> Path:
-    """Create ``folder`` (and its parents) and check a file can be written in it, so a bad
-    ``--out`` is refused before the build and the solve, not at the first checkpoint."""
-    out = Path(folder)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as err:
-        blocker = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
-        reason = (f"{blocker} is a file, not a folder" if blocker is not None
-                  else err.strerror or str(err))
-        raise ValueError(f"cannot write the output folder {out}: {reason}; choose another "
-                         f"--out") from None
-    return out
-
-
 def parse_time_steps(text: str | None) -> list[float] | None:
     """``"1/15,1/30,1/60"`` (fractions or decimals, seconds) -> ``[0.0667, 0.0333, 0.0167]``."""
     if not text:
@@ -212,7 +196,7 @@ def cmd_solve(args) -> int:
     module = load_module(args.problem)
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
-    out = ensure_writable(args.out) if args.out else None
+    out = writable_folder(args.out, "--out") if args.out is not None else None
     spec = solve_run(module, args.problem, overrides, out, method=args.method,
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,
@@ -220,7 +204,7 @@ def cmd_solve(args) -> int:
                      time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
                      animation=not args.no_animation, exports=tuple(args.export or ()),
                      viewer=not args.no_viewer)
-    ensure_writable(spec.out)
+    writable_folder(spec.out, "--out")
     return run_solve(spec)
 
 
@@ -272,13 +256,13 @@ def cmd_study(args) -> int:
     if args.grid:
         from .sweep import report, study_sweep
 
-        out = ensure_writable(args.out or Path("results") / f"study-{args.study}")
+        out = writable_folder(_out(args, f"study-{args.study}"), "--out")
         result = study_sweep(args.study, parse_grid(args.grid), out=out,
                              overrides=parse_overrides(args.set), figure=args.figure,
                              **_runner_options(args))
         report(result, out)
         return result.exit_code
-    if args.set or args.out:
+    if args.set or args.out is not None:
         raise ValueError("--set and --out go with --grid (a study grid run as a sweep)")
     if args.study == "gradient-accuracy":
         print(studies.format_gradient_accuracy(studies.gradient_accuracy(quick=args.quick)))
@@ -291,7 +275,7 @@ def cmd_sweep(args) -> int:
     from .sweep import report, sweep
 
     grid = parse_grid(args.grid)
-    out = ensure_writable(args.out or Path("results") / f"sweep-{Path(args.problem).stem}")
+    out = writable_folder(_out(args, f"sweep-{Path(args.problem).stem}"), "--out")
     result = sweep(args.problem, grid, out=out, starts=args.starts,
                    overrides=parse_overrides(args.set), seed=args.seed, perturb=args.perturb,
                    figure=args.figure, pictures=args.pictures,
@@ -302,6 +286,11 @@ def cmd_sweep(args) -> int:
                    **_runner_options(args))
     report(result, out)
     return result.exit_code
+
+
+def _out(args, default: str):
+    """``--out`` as given (an empty one is refused by the check), else ``results/DEFAULT``."""
+    return Path("results") / default if args.out is None else args.out
 
 
 def _runner_options(args) -> dict:
@@ -482,31 +471,47 @@ def build_parser() -> argparse.ArgumentParser:
     _gradcheck_parser(sub)
     _study_parser(sub)
     _add_sweep_parser(sub)
+    debug = "print the whole traceback with an error (the library's own lines included)"
+    p.add_argument("--debug", action="store_true", help=debug)
+    for command in sub.choices.values():  # also after the command, where users type it
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help=debug)
     return p
 
 
 def main(argv=None) -> int:
     """Run a command: 0 on success, 1 when the simulation fails, 2 on bad input (a message,
-    never a traceback)."""
+    never a traceback; ``--debug`` adds the traceback)."""
     args = build_parser().parse_args(argv)
+    debug = getattr(args, "debug", False)
     try:
         return args.func(args)
     except OverrideError as err:
-        print(f"error: {err}\n  'casadi-keyframe show {err.problem}' lists the overrides with "
-              f"their types, defaults and ranges", file=sys.stderr)
+        _error(err, debug, f"\n  'casadi-keyframe show {err.problem}' lists the overrides "
+                           "with their types, defaults and ranges")
         return 2
     except SimulationError as err:
         text = " ".join(str(err).split())
         text = text if "simulation" in text else f"the simulation failed: {text}"
         fix = "" if "reduce" in text else "; reduce dt (--set dt=...) or the forces"
-        print(f"error: {text}{fix}", file=sys.stderr)
+        _error(err, debug, text=text + fix)
         return 1
+    except ProblemFileError as err:
+        _error(err, debug, "" if debug else "\n  (--debug shows the whole traceback)")
+        return 2
     except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
-        print(f"error: {err}", file=sys.stderr)
+        _error(err, debug)
         return 2
     except BlenderError as err:  # an export through Blender that Blender did not finish
-        print(f"error: {err}", file=sys.stderr)
+        _error(err, debug)
         return 1
+
+
+def _error(err, debug: bool, more: str = "", *, text: str | None = None) -> None:
+    """``error: MESSAGE`` on stderr (with ``--debug``, the traceback first)."""
+    if debug:
+        traceback.print_exception(err)
+    print(f"error: {err if text is None else text}{more}", file=sys.stderr)
 
 
 if __name__ == "__main__":

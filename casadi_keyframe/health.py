@@ -116,13 +116,19 @@ class BackwardWatch:
                       int(self.fastest_step), int(self.steps))
 
     def message(self) -> str:
-        """The refusal: route, where, how much, the likely cause and the fix."""
-        what = ("overflowed (a non-finite adjoint)" if not np.isfinite(self.growth) else
-                f"grew {self.growth:.3g}-fold (bound {self.bound:.0e})")
-        return (f"gradient '{self.route}' refused: its backward pass {what} by frame "
-                f"{self.frame} of {self.steps}, growing fastest at step {self.fastest_step} "
-                f"(x{self.fastest:.3g} in one step); the simulation itself is fine. Likely "
-                f"cause: {likely_cause(self.route, self.problem.model)}")
+        """The refusal (:func:`refusal`)."""
+        return refusal(self.route, self.problem, self.result(), self.bound)
+
+
+def refusal(route: str, problem, growth: Growth, bound: float = GROWTH_BOUND) -> str:
+    """Why ``route``'s gradient is refused: where its backward pass went past ``bound``, how
+    far, the likely cause and the fix."""
+    what = ("overflowed (a non-finite adjoint)" if not np.isfinite(growth.growth) else
+            f"grew {growth.growth:.3g}-fold (bound {bound:.0e})")
+    return (f"gradient '{route}' refused: its backward pass {what} by frame {growth.frame} "
+            f"of {growth.steps}, growing fastest at step {growth.fastest_step} "
+            f"(x{growth.fastest:.3g} in one step); the simulation itself is fine. Likely "
+            f"cause: {likely_cause(route, problem.model)}")
 
 
 def likely_cause(route: str, model) -> str:

@@ -266,6 +266,15 @@ def cmd_study(args) -> int:
                              **_runner_options(args))
         report(result, out)
         return result.exit_code
+    if args.study == "swap-validity":  # the map's slices, on the sweep runner
+        from .swap_validity import format_swap_validity, swap_validity
+
+        if args.set:
+            raise ValueError("--set goes with --grid (a study grid run as a sweep)")
+        out = ensure_writable(args.out or Path("results") / f"study-{args.study}")
+        study = swap_validity(args.quick, sweep={"out": out, **_runner_options(args)})
+        print(format_swap_validity(study))
+        return study["sweep"]["exit_code"]
     if args.set or args.out:
         raise ValueError("--set and --out go with --grid (a study grid run as a sweep)")
     if args.study == "gradient-accuracy":
@@ -445,16 +454,21 @@ def _study_parser(sub) -> None:
                         epilog=SWEEP_EXIT_CODES + "\n\nexample: casadi-keyframe study "
                         "gradient-accuracy --grid dt=1/30,1/60,1/120 --grid stretch=50,500",
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy"))
+    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy",
+                                      "swap-validity"))
     st.add_argument("--quick", action="store_true", help="small sizes (as CASADI_KEYFRAME_QUICK=1)")
     st.add_argument("--grid", action="append", metavar="KEY=V1,V2,...",
                     help="run the study at every combination of these values on the sweep "
                          "runner (gradient-accuracy: dt, horizon, stretch, amplitude, seed; "
-                         "integrator-accuracy: dt, stretch, rows, seed)")
+                         "integrator-accuracy: dt, stretch, rows, seed; swap-validity: "
+                         "contact, collision, stiffness, dt, amplitude, horizon, speed, "
+                         "damping, rows, solve, maxiter, seed; without --grid it runs its "
+                         "whole map on the runner)")
     st.add_argument("--set", action="append", metavar="KEY=VALUE",
                     help="a fixed value for every point of the grid")
     st.add_argument("--figure", help="the figure ranked and plotted (gradient-accuracy: "
-                                     "relative_error; integrator-accuracy: gap_x or gap_v)")
+                                     "relative_error; integrator-accuracy: gap_x or gap_v; "
+                                     "swap-validity: relative_error, growth_swapped, cosine)")
     st.add_argument("--out", help="output folder (default results/study-STUDY)")
     _add_runner_options(st)
     st.set_defaults(func=cmd_study)

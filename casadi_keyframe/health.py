@@ -143,9 +143,10 @@ def likely_cause(route: str, model) -> str:
                 "a reduced dt does not help (the growth compounds per step)")
     if route == "adjoint":
         return ("the motion itself is this sensitive (a long horizon through many contact "
-                "switches, or a simulation near blowing up): the exact gradient's linear "
-                "model holds only for tiny steps. Fix: shorten the horizon or the window "
-                "optimized, start from a better guess, or reduce the forces")
+                "switches, springs collapsed to almost no length, a simulation near blowing "
+                "up): the exact gradient's linear model holds only for tiny steps. Fix: "
+                "shorten the horizon or the window optimized, start from a better guess, or "
+                "reduce the forces")
     return "a non-finite value in the gradient. Fix: use --gradient adjoint (exact)"
 
 

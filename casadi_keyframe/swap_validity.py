@@ -165,23 +165,26 @@ def touching(prob, x) -> float:
 
 
 def optimizer_outcome(prob, maxiter: int) -> dict:
-    """L-BFGS-B from rest with the exact and the swapped route (``maxiter`` each): both
-    objectives, and whether the swapped one ``reaches`` within 10 % of the exact one (a
-    swapped search refused at its start has not)."""
+    """L-BFGS-B from rest with the exact and the swapped route (``maxiter`` each): each
+    route's best objective (NaN when the search cannot start: its gradient refused there,
+    ``failed_ROUTE`` says why), the evaluations it had refused, and whether the swapped one
+    ``reaches`` within 10 % of the exact one (None when the exact one cannot start)."""
     from .optimize import solve
 
     out = {"start_objective": prob.objective(prob.initial_controls())}
     for route in ("adjoint", "swapped"):
+        out[f"failed_{route}"] = ""
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", GradientRouteWarning)
                 result = solve(prob, "lbfgsb", gradient=route, maxiter=maxiter, quiet=True)
             out[f"objective_{route}"] = result.fun
             out[f"refused_{route}"] = result.stages[0].get("gradient_refused", 0)
-        except SimulationError:  # refused at the start, or a failed simulation there
-            out[f"objective_{route}"] = out["start_objective"]
-            out[f"refused_{route}"] = 1
-    out["reaches"] = bool(out["objective_swapped"] <= REACH * out["objective_adjoint"])
+        except SimulationError as err:  # its gradient refused at the start (GradientError)
+            out[f"objective_{route}"], out[f"refused_{route}"] = np.nan, 1
+            out[f"failed_{route}"] = " ".join(str(err).split())[:200]
+    exact, swapped = out["objective_adjoint"], out["objective_swapped"]
+    out["reaches"] = None if not np.isfinite(exact) else bool(swapped <= REACH * exact)
     return out
 
 
@@ -317,7 +320,7 @@ def _table(rows, key: str, optimizer: bool) -> list[str]:
                 f"{r['growth_exact']:6.2g}")
         if optimizer and "reaches" in r:
             line += (f" {r['objective_adjoint']:8.3g} {r['objective_swapped']:8.3g} "
-                     f"{'yes' if r['reaches'] else 'no'}")
+                     f"{ {True: 'yes', False: 'no', None: 'n/a'}[r['reaches']]}")
         out.append(line)
     return out
 
@@ -351,10 +354,16 @@ def reading(study: dict) -> list[str]:
         label = case[0] if case[0] in ("none", "self") else f"{case[0]} ({case[1]})"
         out.append(f"{label}: cosine >= 0.99 up to dt sqrt(k/m) = {good}, >= 0.9 up to "
                    f"{fair}; L-BFGS-B within 10 % of the exact route at stiffness "
-                   f"{', '.join(reached) or 'none'}; error order in dt {order:.2f} "
-                   f"({'consistent with' if order >= 1.8 else 'not'} the paper's O(dt^3) per "
-                   f"step); largest backward growth {worst:.2g} (exact adjoint: {exact:.2g})")
+                   f"{', '.join(reached) or 'none'}; {_order(order)}; largest backward "
+                   f"growth {worst:.2g} (exact adjoint: {exact:.2g})")
     return out
+
+
+def _order(order: float) -> str:
+    if not np.isfinite(order):
+        return "no order in dt (the error does not shrink)"
+    return (f"error order in dt {order:.2f} ({'consistent with' if order >= 1.8 else 'short of'}"
+            " the 2 that the paper's O(dt^3) per step gives)")
 
 
 def _largest(rows, cosine: float) -> str:

@@ -30,6 +30,7 @@ exact route for comparison) is :mod:`casadi_keyframe.health_report`.
 """
 from __future__ import annotations
 
+import math
 import warnings
 import weakref
 from dataclasses import dataclass
@@ -74,40 +75,45 @@ class Growth:
 
 class BackwardWatch:
     """Watches one backward pass (:func:`~casadi_keyframe.simulate.backward` calls it) for the
-    route ``route`` of ``problem``: :meth:`start` with the last frame's cotangent, then
+    route ``route`` of ``problem``: :meth:`start` with every frame's objective gradient, then
     :meth:`step` after each backward step.  With ``guard`` it raises :class:`GradientError`
     past ``bound`` or at a non-finite adjoint; without, it only records (the health report
-    wants the growth of a route that overflows)."""
+    wants the growth of a route that overflows).  Two dot products per step, in Python
+    floats (no floating-point state to save and restore)."""
 
     def __init__(self, route: str, problem, *, bound: float = GROWTH_BOUND,
                  guard: bool = True):
         self.route, self.problem, self.bound, self.guard = route, problem, bound, guard
-        self.dt, self.steps = problem.dt, problem.steps
-        self.source = 0.0  # the largest |s_m| fed in so far (frames after the current one)
+        self.dt2, self.steps = problem.dt ** 2, problem.steps
+        self.sources = None  # |s_m| of every frame
+        self.source = 0.0  # the largest |s_m| fed in after the current frame
         self.previous = 0.0  # |a_{n+1}| as the last step received it
         self.growth, self.frame = 0.0, problem.steps
         self.fastest, self.fastest_step = 0.0, problem.steps - 1
 
     def _norm(self, x, v) -> float:
-        return float(np.sqrt(self.dt * self.dt * np.vdot(x, x) + np.vdot(v, v)))
+        return math.sqrt(self.dt2 * float(np.vdot(x, x)) + float(np.vdot(v, v)))
 
-    def start(self, a) -> None:
-        """The last frame's cotangent, ``dphi/ds_N``."""
-        self.source = self.previous = self._norm(a.x, a.v)
+    def start(self, gx, gv) -> None:
+        """Every frame's objective gradient ``(gx, gv)``, ``(steps + 1, n, dim)`` each."""
+        frames = len(gx)
+        x, v = np.reshape(gx, (frames, -1)), np.reshape(gv, (frames, -1))
+        self.sources = np.sqrt(self.dt2 * np.einsum("fk,fk->f", x, x)
+                               + np.einsum("fk,fk->f", v, v)).tolist()
+        self.source = self.previous = self.sources[-1]
 
-    def step(self, n: int, a, gx, gv) -> None:
-        """After backward step n: ``a`` the cotangent pulled back to frame n, before frame
-        n's own objective gradient ``(gx, gv)`` is added."""
-        with np.errstate(over="ignore", invalid="ignore"):
-            size = self._norm(a.x, a.v)
-            if self.previous > 0 and size / self.previous > self.fastest:
-                self.fastest, self.fastest_step = size / self.previous, n
-            if not np.isfinite(size):
-                self.growth, self.frame = np.inf, n
-            elif self.source > 0 and size / self.source > self.growth:
-                self.growth, self.frame = size / self.source, n
-            self.source = max(self.source, self._norm(gx, gv))
-            self.previous = self._norm(a.x + gx, a.v + gv)
+    def step(self, n: int, pulled, total) -> None:
+        """After backward step n: ``pulled`` the cotangent pulled back to frame n, ``total``
+        the same plus frame n's own objective gradient (what step n - 1 receives)."""
+        size = self._norm(pulled.x, pulled.v)
+        if self.previous > 0 and size / self.previous > self.fastest:
+            self.fastest, self.fastest_step = size / self.previous, n
+        if not math.isfinite(size):
+            self.growth, self.frame = math.inf, n
+        elif self.source > 0 and size / self.source > self.growth:
+            self.growth, self.frame = size / self.source, n
+        self.source = max(self.source, self.sources[n])
+        self.previous = self._norm(total.x, total.v)
         if self.guard and not self.growth <= self.bound:
             raise GradientError(self.message(), n, self.route, self.growth)
 

@@ -60,7 +60,7 @@ def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop
     gradients, earlier ones zero, and the State returned is ``dphi/ds_stop`` without the
     frames before it (``gx, gv`` there are not read).  ``watch`` (a
     :class:`~casadi_keyframe.health.BackwardWatch`) sees the cotangent after every backward
-    step, before the frame's own gradient is added; it may stop the pass by raising.
+    step, without and with the frame's own gradient added; it may stop the pass by raising.
     """
     step_vjp = integrator.step_vjp if step_vjp is None else step_vjp
     steps, dt = traj.steps, traj.dt
@@ -71,11 +71,11 @@ def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop
     g_external = np.zeros((steps,) + traj.x.shape[1:])
     a = State(gx[steps], gv[steps])
     if watch is not None:
-        watch.start(a)
+        watch.start(gx, gv)
     for n in range(steps - 1, stop - 1, -1):
-        a, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1), traj.record(n),
-                                    n, dt, a, work)
+        pulled, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1),
+                                         traj.record(n), n, dt, a, work)
+        a = State(pulled.x + gx[n], pulled.v + gv[n])
         if watch is not None:
-            watch.step(n, a, gx[n], gv[n])
-        a = State(a.x + gx[n], a.v + gv[n])
+            watch.step(n, pulled, a)
     return g_external, a

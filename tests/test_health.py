@@ -75,16 +75,22 @@ def test_the_watch_measures_growth_against_what_was_fed_in():
         dt, steps, model = 0.5, 3, None
 
     watch = BackwardWatch("adjoint", Stub())
+    gx, gv = np.zeros((4, 1, 1)), np.zeros((4, 1, 1))
+    gv[3], gv[1] = 1.0, 100.0  # |s_3| = 1, |s_1| = 100
+    watch.start(gx, gv)
     one = np.ones((1, 1))
-    watch.start(State(0 * one, one))  # |s_3| = 1
-    watch.step(2, State(0 * one, 10 * one), 0 * one, 0 * one)  # pulled back to 10
-    watch.step(1, State(0 * one, 50 * one), 0 * one, 100 * one)  # 50; then s_1 = 100 joins
-    watch.step(0, State(0 * one, 200 * one), 0 * one, 0 * one)  # 200 of max source 100
+
+    def step(n, pulled):
+        watch.step(n, State(0 * one, pulled * one), State(gx[n], pulled + gv[n]))
+
+    step(2, 10.0)  # pulled back to 10: growth 10, fastest x10
+    step(1, 50.0)  # 50 of the largest source after frame 1 (1): growth 50; then s_1 joins
+    step(0, 200.0)  # 200 of 100: growth 2
     result = watch.result()
     assert result.growth == pytest.approx(50.0) and result.frame == 1
     assert result.fastest == pytest.approx(10.0) and result.fastest_step == 2
     with pytest.raises(GradientError, match="overflowed"):
-        watch.step(0, State(0 * one, np.inf * one), 0 * one, 0 * one)
+        step(0, np.inf)
 
 
 class Exploding(Adjoint):

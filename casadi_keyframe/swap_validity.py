@@ -43,7 +43,8 @@ from .models import Capsule, ClothModel, ClothParams, Plane, Sphere
 from .models.colliders import Contact, signed_distances
 from .objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from .problem import ControlProblem
-from .state import SimulationError
+from .simulate import simulate
+from .state import SimulationError, State
 from .studies import fitted_order, quick_mode, relative_error_and_cosine
 
 KINDS = ("none", "ground", "sphere", "capsule", "self")
@@ -123,9 +124,13 @@ def swap_validity_point(contact: str = "none", collision: str = "guarded",
                         stiffness: float = 4.0, dt: float = 1 / 60, amplitude: float = 1.0,
                         horizon: float = 1 / 3, speed: float = 1.0, damping: float = 1.0,
                         rows: int = 5, solve: bool = False, maxiter: int = 40,
-                        seed: int = 0) -> dict:
+                        seed: int = 0, measure: str = "horizon") -> dict:
     """One row of the map (module docstring); a simulation that fails at the random forces
-    gives a row of NaNs with its ``reason``."""
+    gives a row of NaNs with its ``reason``.  ``measure="step"``: one backward step instead
+    (:func:`one_step_error`; ``horizon``, ``solve`` and ``maxiter`` unused)."""
+    if measure == "step":
+        return one_step_error(contact, collision, stiffness, dt, amplitude, speed, damping,
+                              rows, seed)
     prob = sheet_problem(contact, stiffness=stiffness, dt=dt, horizon=horizon,
                          collision=collision, rows=rows, speed=speed, damping=damping)
     rng = np.random.default_rng(seed)
@@ -151,6 +156,41 @@ def swap_validity_point(contact: str = "none", collision: str = "guarded",
 
 
 FIGURES = ("touching", "cosine", "relative_error", "growth_swapped", "growth_exact")
+def one_step_error(contact: str = "none", collision: str = "guarded",
+                   stiffness: float = 4.0, dt: float = 1 / 60, amplitude: float = 1.0,
+                   speed: float = 1.0, damping: float = 1.0, rows: int = 5,
+                   seed: int = 0) -> dict:
+    """The paper's claim itself: one swapped backward step against the exact one, from the
+    state the sheet reaches after 1/6 s under random forces of ``amplitude`` m/s^2 rms (at
+    1/60), stepping ``dt`` from there, for a random cotangent ``(a_x, a_v)`` with
+    ``|dt a_x| = |a_v|``: ``local_error = |swapped - exact| / |a|`` in the norm
+    ``|(dt a_x, a_v)|``.  O(dt^3) if the paper's bound holds."""
+    model, x0 = sheet_model(contact, stiffness=stiffness, collision=collision, rows=rows,
+                            speed=speed, damping=damping)
+    integrator, rng = LinearizedBackwardEuler("direct"), np.random.default_rng(seed)
+    forces = amplitude * rng.standard_normal((10, model.n, 3)) * model.masses[:, None]
+    start = simulate(integrator, model, x0, np.zeros_like(x0), forces, REFERENCE_DT)
+    first = frame_at(10 * REFERENCE_DT, dt, "one_step_error: 1/6 s")
+    work, state, records = integrator.init(model), start.state(10), [None] * first
+    states = [state]
+    for n in (first, first + 1):  # the step, and the next one (the swapped step's matrix)
+        state, record = integrator.step(model, state, np.zeros_like(x0), n, dt, work)
+        states.append(state)
+        records.append(record)
+    free = model.free_mask().reshape(x0.shape)
+    a = State(free * rng.standard_normal(x0.shape) / dt, free * rng.standard_normal(x0.shape))
+    norm = lambda b: np.sqrt(dt * dt * np.vdot(b.x, b.x) + np.vdot(b.v, b.v))  # noqa: E731
+    out = []
+    for backward_step in (integrator.step_vjp, integrator.swapped_step_vjp):
+        work = integrator.init(model)
+        work.records = records
+        out.append(backward_step(model, states[0], states[1], records[first], first, dt, a,
+                                 work)[0])
+    error = State(out[1].x - out[0].x, out[1].v - out[0].v)
+    return {"omega_dt": float(dt * np.sqrt(model.params.stretch / model.masses.mean())),
+            "local_error": float(norm(error) / norm(a))}
+
+
 def touching(prob, x) -> float:
     """The fraction of frames ``x`` in which a particle is within a body's contact layer or
     two particles within the self-contact layer."""
@@ -190,7 +230,7 @@ def optimizer_outcome(prob, maxiter: int) -> dict:
 
 DEFAULTS = {"contact": "none", "collision": "guarded", "stiffness": 4.0, "dt": 1 / 60,
             "amplitude": 1.0, "horizon": 1 / 3, "speed": 1.0, "damping": 1.0, "rows": 5,
-            "solve": False, "maxiter": 40}
+            "solve": False, "maxiter": 40}  # (and measure="step" for the one-step slice)
 CASES = (("none", "guarded"), ("ground", "guarded"), ("ground", "penalty"),
          ("sphere", "guarded"), ("sphere", "penalty"), ("capsule", "guarded"),
          ("capsule", "penalty"), ("self", "guarded"))
@@ -208,7 +248,9 @@ def map_points(quick: bool | None = None) -> dict[str, list[dict]]:
     * ``speed``: the sphere's and capsule's sliding speed, 0.25 to 4 m/s;
     * ``horizon``: 1/3 to 2 s at stiffness 7 (the cape's contact);
     * ``damping``: the contact damping on curved bodies, 0.01 to 1 of the cape's, at
-      stiffness 7 over 1 s.
+      stiffness 7 over 1 s;
+    * ``step``: one backward step (:func:`one_step_error`) at dt 1/60 ... 1/960 for the
+      sheets of stiffness 1 and 4 at 1/60: the paper's O(dt^3) itself.
 
     ``quick``: two cases and two values per slice on a 4 x 4 sheet (the notebook test)."""
     quick = quick_mode() if quick is None else quick
@@ -231,6 +273,10 @@ def map_points(quick: bool | None = None) -> dict[str, list[dict]]:
                           stiffness=7.0),
         "damping": slice_(curved, "damping", pick([0.01, 0.1, 1.0], [0.01, 1.0]),
                           stiffness=7.0, horizon=1.0),
+        "step": [p for w in pick([1.0, 4.0], [1.0])
+                 for p in slice_(cases, "dt", pick([1 / 60, 1 / 120, 1 / 240, 1 / 480, 1 / 960],
+                                                   [1 / 60, 1 / 240]),
+                                 stiffness=w, measure="step")],
     }
 
 
@@ -251,17 +297,23 @@ def swap_validity(quick: bool | None = None, *, sweep: dict | None = None) -> di
         study = {name: [by_key.get(_key(p), {**p, "reason": "not run"}) for p in points]
                  for name, points in slices.items()}
         study["sweep"] = {"exit_code": result.exit_code, "failed": len(result.failed)}
+    cases = dict.fromkeys((r["contact"], r["collision"]) for r in study["dt"])
     study["order"] = {f"{c} {k}": dt_order([r for r in study["dt"]
                                             if (r["contact"], r["collision"]) == (c, k)])
-                      for c, k in dict.fromkeys((r["contact"], r["collision"])
-                                                for r in study["dt"])}
+                      for c, k in cases}
+    study["step_order"] = {
+        f"{c} {k} {w:g}": dt_order([r for r in study["step"] if r["stiffness"] == w
+                                    and (r["contact"], r["collision"]) == (c, k)][-3:],
+                                   "local_error")
+        for c, k in cases for w in dict.fromkeys(r["stiffness"] for r in study["step"])}
     return study
 
 
 def _key(values: dict) -> tuple:
-    """A point's identity: its keywords' values, in :data:`DEFAULTS`' order."""
+    """A point's identity: its keywords' values, in :data:`DEFAULTS`' order, and what it
+    measures."""
     return tuple(round(values[k], 12) if isinstance(values[k], float) else values[k]
-                 for k in DEFAULTS)
+                 for k in DEFAULTS) + (values.get("measure", "horizon"),)
 
 
 def _run_here(slices: dict) -> dict:
@@ -273,18 +325,18 @@ def _run_here(slices: dict) -> dict:
     return {name: [done[_key(p)] for p in points] for name, points in slices.items()}
 
 
-def dt_order(rows) -> float:
-    """The relative error's fitted order in dt over ``rows`` (NaN for fewer than two finite
-    errors)."""
-    rows = [r for r in rows if np.isfinite(r.get("relative_error", np.nan))]
+def dt_order(rows, figure: str = "relative_error") -> float:
+    """``figure``'s fitted order in dt over ``rows`` (NaN for fewer than two finite, positive
+    values)."""
+    rows = [r for r in rows if r.get(figure, np.nan) > 0 and np.isfinite(r[figure])]
     if len(rows) < 2:
         return float("nan")
-    return fitted_order([r["dt"] for r in rows], [r["relative_error"] for r in rows])
+    return fitted_order([r["dt"] for r in rows], [r[figure] for r in rows])
 
 
 SLICES = {"stiffness": ("stiffness", "by stiffness dt sqrt(k/m), dt 1/60, 1/3 s, with L-BFGS-B "
                         "from rest (same iterations)"),
-          "dt": ("dt", "by dt, the same sheets (stiffness 4 at 1/60)"),
+          "dt": ("dt", "by dt, the same sheets (stiffness 4 at 1/60), 1/3 s"),
           "amplitude": ("amplitude", "by the random forces' rms (m/s^2), stiffness 4"),
           "speed": ("speed", "by the body's sliding speed (m/s), stiffness 4"),
           "horizon": ("horizon", "by horizon (s), stiffness 7"),
@@ -298,8 +350,14 @@ def format_swap_validity(study: dict) -> str:
     for name, (key, title) in SLICES.items():
         if study.get(name):
             lines += [f"{title}:", *_table(study[name], key, optimizer=name == "stiffness")]
-    lines.append("order in dt of the relative error (the paper's O(dt^3) per step would give 2):")
+    lines.append("order in dt of the relative error over 1/3 s (the paper's O(dt^3) per step "
+                 "would give 2):")
     lines += [f"  {case:18s} {order:6.2f}" for case, order in study["order"].items()]
+    if study.get("step"):
+        lines += ["one backward step, swapped vs exact, relative error (the paper: O(dt^3)):",
+                  *_step_table(study["step"]),
+                  "  fitted order over the three finest dt (3 if the paper's bound holds):"]
+        lines += [f"  {case:22s} {order:6.2f}" for case, order in study["step_order"].items()]
     return "\n".join(lines + ["reading:"] + [f"  {s}" for s in reading(study)])
 
 
@@ -310,18 +368,30 @@ def _table(rows, key: str, optimizer: bool) -> list[str]:
         head += f" {'f exact':>8s} {'f swap':>8s} reaches"
     out = [head]
     for r in rows:
-        if "cosine" not in r or not np.isfinite(r["cosine"]):
-            out.append(f"  {r['contact']:8s} {_collision(r):9s} {_value(r[key], key):>9s} "
-                       f"failed: {r.get('reason', '?')[:60]}")
+        start = f"  {r['contact']:8s} {_collision(r):9s} {_value(r[key], key):>9s} "
+        if not np.isfinite(r.get("cosine", np.nan)):
+            out.append(start + f"failed: {r.get('reason', '?')[:60]}")
             continue
-        line = (f"  {r['contact']:8s} {_collision(r):9s} {_value(r[key], key):>9s} "
-                f"{r['omega_dt']:5.2g} {r['touching']:5.2f} {r['cosine']:7.3f} "
+        line = (start + f"{r['omega_dt']:5.2g} {r['touching']:5.2f} {r['cosine']:7.3f} "
                 f"{r['relative_error']:8.2g} {r['growth_swapped']:9.2g} "
                 f"{r['growth_exact']:6.2g}")
         if optimizer and "reaches" in r:
             line += (f" {r['objective_adjoint']:8.3g} {r['objective_swapped']:8.3g} "
                      f"{ {True: 'yes', False: 'no', None: 'n/a'}[r['reaches']]}")
         out.append(line)
+    return out
+
+
+def _step_table(rows) -> list[str]:
+    """One line per contact case and stiffness: the one-step error at each dt."""
+    dts = sorted({r["dt"] for r in rows}, reverse=True)
+    out = [f"  {'contact':8s} {'collision':9s} {'stiffness':>9s} "
+           + "".join(f"{_value(dt, 'dt'):>9s}" for dt in dts)]
+    for case in dict.fromkeys((r["contact"], _collision(r), r["stiffness"]) for r in rows):
+        errors = {r["dt"]: r.get("local_error", np.nan) for r in rows
+                  if (r["contact"], _collision(r), r["stiffness"]) == case}
+        out.append(f"  {case[0]:8s} {case[1]:9s} {case[2]:9g} "
+                   + "".join(f"{errors.get(dt, np.nan):9.2g}" for dt in dts))
     return out
 
 
@@ -336,41 +406,46 @@ def _value(value, key: str) -> str:
     return f"{value:g}"
 
 
+BANDS = ((0, 2), (4, 4), (7, 10))  # dt sqrt(k/m): soft, the default cloth's, stiff
+
+
 def reading(study: dict) -> list[str]:
-    """The map in sentences: per contact case, up to which stiffness the swapped gradient
-    points the right way (cosine >= 0.99, >= 0.9), where L-BFGS-B with it reached the exact
-    route's objective within 10 %, its order in dt, and where it grew or was refused."""
+    """The map in sentences, per contact case: the swapped gradient's cosine in each band of
+    stiffness, how often L-BFGS-B with it reached the exact route's objective within 10 %,
+    its cosine over the longest horizon, its largest backward growth, and the one-step
+    error's order in dt (the paper's O(dt^3) holds where it is about 3)."""
     out = []
-    cases = dict.fromkeys((r["contact"], r["collision"]) for r in study.get("stiffness", []))
-    for case in cases:
-        rows = [r for r in study["stiffness"] if (r["contact"], r["collision"]) == case]
-        good, fair = _largest(rows, 0.99), _largest(rows, 0.9)
-        reached = [f"{r['stiffness']:g}" for r in rows if r.get("reaches")]
-        order = study["order"].get(f"{case[0]} {case[1]}", np.nan)
-        grown = [r for k in ("horizon", "damping", "speed", "amplitude")
-                 for r in study.get(k, []) if (r["contact"], r["collision"]) == case]
-        worst, exact = (max((r[k] for r in grown + rows if np.isfinite(r.get(k, np.nan))),
+    for case in dict.fromkeys((r["contact"], r["collision"]) for r in study.get("stiffness", [])):
+        mine = lambda key: [r for r in study.get(key, [])  # noqa: E731
+                            if (r["contact"], r["collision"]) == case]
+        rows = mine("stiffness")
+        bands = "; ".join(f"{_span(rows, low, high)} at {low:g}-{high:g}" if low < high else
+                          f"{_span(rows, low, high)} at {low:g}" for low, high in BANDS)
+        judged = [r for r in rows if r.get("reaches") is not None]
+        long = max(mine("horizon"), key=lambda r: r["horizon"], default=None)
+        grown = [r for k in ("stiffness", "horizon", "damping", "speed", "amplitude")
+                 for r in mine(k)]
+        worst, exact = (max((r[k] for r in grown if np.isfinite(r.get(k, np.nan))),
                             default=np.nan) for k in ("growth_swapped", "growth_exact"))
+        steps = {k.rsplit(" ", 1)[1]: v for k, v in study.get("step_order", {}).items()
+                 if k.rsplit(" ", 1)[0] == f"{case[0]} {case[1]}"}
         label = case[0] if case[0] in ("none", "self") else f"{case[0]} ({case[1]})"
-        out.append(f"{label}: cosine >= 0.99 up to dt sqrt(k/m) = {good}, >= 0.9 up to "
-                   f"{fair}; L-BFGS-B within 10 % of the exact route at stiffness "
-                   f"{', '.join(reached) or 'none'}; {_order(order)}; largest backward "
-                   f"growth {worst:.2g} (exact adjoint: {exact:.2g})")
+        out.append(
+            f"{label}: cosine {bands} (dt sqrt(k/m)); L-BFGS-B within 10 % of the exact "
+            f"route at {sum(bool(r['reaches']) for r in judged)} of {len(judged)} stiffnesses"
+            + (f"; over {_value(long['horizon'], 'horizon')} s cosine {long['cosine']:.2f}"
+               if long else "")
+            + f"; backward growth up to {worst:.2g} (exact: {exact:.2g})"
+            + ("; one step's error order in dt " + ", ".join(
+                f"{order:.1f} at stiffness {w}" for w, order in steps.items()) if steps else ""))
     return out
 
 
-def _order(order: float) -> str:
-    if not np.isfinite(order):
-        return "no order in dt (the error does not shrink)"
-    return (f"error order in dt {order:.2f} ({'consistent with' if order >= 1.8 else 'short of'}"
-            " the 2 that the paper's O(dt^3) per step gives)")
-
-
-def _largest(rows, cosine: float) -> str:
-    """The largest stiffness up to which every row's cosine is at least ``cosine``."""
-    best = "none"
-    for r in sorted(rows, key=lambda r: r["stiffness"]):
-        if not r.get("cosine", np.nan) >= cosine:
-            break
-        best = f"{r['stiffness']:g}"
-    return best
+def _span(rows, low: float, high: float) -> str:
+    """The range of cosines of ``rows`` with stiffness in [low, high]."""
+    cosines = [r["cosine"] for r in rows if low <= r["stiffness"] <= high
+               and np.isfinite(r.get("cosine", np.nan))]
+    if not cosines:
+        return "-"
+    return (f"{min(cosines):.2f}" if len(cosines) == 1 or min(cosines) == max(cosines) else
+            f"{min(cosines):.2f}-{max(cosines):.2f}")

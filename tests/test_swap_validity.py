@@ -6,8 +6,10 @@ import numpy as np
 import pytest
 
 from casadi_keyframe.cli import main
+from casadi_keyframe.studies import fitted_order
 from casadi_keyframe.swap_validity import (KINDS, format_swap_validity, map_points,
-                                           sheet_problem, swap_validity_point)
+                                           one_step_error, sheet_problem,
+                                           swap_validity_point)
 
 
 def test_without_contact_the_swap_is_close_and_near_a_sliding_capsule_it_grows():
@@ -19,6 +21,14 @@ def test_without_contact_the_swap_is_close_and_near_a_sliding_capsule_it_grows()
     assert capsule["touching"] > 0.2  # it does slide over the capsule
     assert capsule["growth_exact"] < 100 < 1e3 < capsule["growth_swapped"]
     assert capsule["cosine"] < 0.5
+
+
+def test_one_swapped_step_errs_at_third_order_in_dt_without_contact():
+    dts = [1 / 240, 1 / 480, 1 / 960]
+    free = [one_step_error("none", stiffness=1.0, dt=dt, rows=4)["local_error"] for dt in dts]
+    folded = [one_step_error("self", stiffness=1.0, dt=dt, rows=4)["local_error"] for dt in dts]
+    assert fitted_order(dts, free) > 2.5  # the paper's O(dt^3)
+    assert 1.5 < fitted_order(dts, folded) < 2.5  # self-contact: one order short
 
 
 def test_every_contact_kind_touches_what_it_names():

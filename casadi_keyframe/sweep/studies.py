@@ -32,7 +32,8 @@ STUDIES = {
                        "collision": ("guarded", "penalty", "constraint"),
                        "stiffness": "(0, inf)", "dt": "(0, inf)", "amplitude": "[0, inf)",
                        "horizon": "(0, inf)", "speed": "[0, inf)", "damping": "[0, inf)",
-                       "rows": "[2, inf)", "maxiter": "[1, inf)", "seed": "[0, inf)"},
+                       "rows": "[2, inf)", "maxiter": "[1, inf)", "seed": "[0, inf)",
+                       "measure": ("horizon", "step")},
                       ("relative_error", "growth_swapped", "cosine")),
 }
 

@@ -61,7 +61,7 @@ def test_the_optimizer_comparison_and_its_table():
     study = {name: [row] for name in ("stiffness", "dt")}
     study["order"] = {"none guarded": np.nan}
     text = format_swap_validity(study)
-    assert "reaches" in text and "none: cosine >= 0.99 up to" in text
+    assert "reaches" in text and "none: cosine 1.00 at 0-2" in text and "1 of 1" in text
 
 
 def test_the_study_runs_a_grid_of_it_on_the_sweep_runner(tmp_path):

@@ -217,36 +217,25 @@ def cmd_export(args) -> int:
 
 
 def cmd_gradcheck(args) -> int:
-    from .adjoints import FiniteDifference, get_gradient
-    from .studies import relative_error_and_cosine
+    from .health_report import compare_routes, format_health, gradient_health
 
     prob = load_problem(args.problem, **parse_overrides(args.set))
-    rng = np.random.default_rng(args.seed)
-    u = args.scale * rng.standard_normal(prob.size)
-    names = [n.strip() for n in args.routes.split(",")]
+    route = args.gradient or solve_defaults(load_module(args.problem))["gradient"]
+    names = [n.strip() for n in args.routes.split(",")] if args.routes else []
     unknown = [n for n in names if n not in GRADIENT_ROUTES]
     if unknown:
         raise ValueError(f"--routes: unknown gradient route(s) {unknown}; choose from "
                          f"{', '.join(GRADIENT_ROUTES)}")
-    routes = {}
-    for name in names:
-        t = time.perf_counter()
-        _, g = get_gradient(name)(prob, u)
-        routes[name] = (g, time.perf_counter() - t)
-    ref_name = names[-1]
-    ref = routes[ref_name][0]
-    print(f"{prob.name}: {prob.size} controls; reference route '{ref_name}'")
-    for name, (g, sec) in routes.items():
-        rel, cos = relative_error_and_cosine(g, ref)
-        print(f"  {name:8s} {sec:8.3f} s   relative error {rel:.3e}   cosine {cos:.12f}")
-    fd = FiniteDifference(args.h)
-    for k in range(args.directions):
-        d = rng.standard_normal(prob.size)
-        d /= np.linalg.norm(d)
-        slope = fd.directional(prob, u, d)
-        tangent = prob.directional_derivative(u, d)
-        print(f"  direction {k}: central difference {slope:+.10e}  tangent {tangent:+.10e}  "
-              + "  ".join(f"{n} {g @ d:+.10e}" for n, (g, _) in routes.items()))
+    rng = np.random.default_rng(args.seed)
+    u = prob.initial_controls() + args.scale * rng.standard_normal(prob.size)
+    report = gradient_health(prob, u, route, steps=(1e4 * args.h, 1e2 * args.h, args.h),
+                             directions=args.directions, seed=args.seed,
+                             radius=not args.no_radius)
+    where = "the start" if args.scale == 0 else f"the start + {args.scale:g} x N(0, 1)"
+    print(f"{prob.name} at {where}:")
+    print(format_health(report))
+    if names:
+        print(compare_routes(prob, u, names))
     return 0
 
 
@@ -262,6 +251,15 @@ def cmd_study(args) -> int:
                              **_runner_options(args))
         report(result, out)
         return result.exit_code
+    if args.study == "swap-validity":  # the map's slices, on the sweep runner
+        from .swap_validity import format_swap_validity, swap_validity
+
+        if args.set:
+            raise ValueError("--set goes with --grid (a study grid run as a sweep)")
+        out = writable_folder(_out(args, f"study-{args.study}"), "--out")
+        study = swap_validity(args.quick, sweep={"out": out, **_runner_options(args)})
+        print(format_swap_validity(study))
+        return study["sweep"]["exit_code"]
     if args.set or args.out is not None:
         raise ValueError("--set and --out go with --grid (a study grid run as a sweep)")
     if args.study == "gradient-accuracy":
@@ -415,14 +413,26 @@ def _solve_parser(sub) -> None:
 
 def _gradcheck_parser(sub) -> None:
     """The ``gradcheck`` command's arguments."""
-    g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
+    g = sub.add_parser("gradcheck", help="a gradient route's health at a point: backward "
+                                          "growth, dot-product test, central differences, "
+                                          "linearity radius, and a verdict")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
-    g.add_argument("--routes", default="adjoint,casadi",
-                   help="comma-separated gradient routes; the last is the reference")
-    g.add_argument("--directions", type=at_least(int, 0), default=3, help="random central-difference checks")
-    g.add_argument("--h", type=at_least(float, 0, strict=True), default=1e-6, help="finite-difference step")
-    g.add_argument("--scale", type=at_least(float, 0), default=0.5, help="size of the random controls")
+    g.add_argument("--gradient", choices=GRADIENT_ROUTES,
+                   help="the route checked (default: the problem's SOLVE, else 'adjoint'); "
+                        "an approximate one is compared with the exact adjoint")
+    g.add_argument("--routes", help="also compare these comma-separated routes' gradients; "
+                                    "the last is the reference (e.g. adjoint,casadi)")
+    g.add_argument("--directions", type=at_least(int, 0), default=1,
+                   help="random directions for central differences (beside the gradient's)")
+    g.add_argument("--h", type=at_least(float, 0, strict=True), default=1e-6,
+                   help="the smallest central-difference step (also 100x and 10000x it), "
+                        "times max(|u|, 1)")
+    g.add_argument("--scale", type=at_least(float, 0), default=0.0,
+                   help="check at the problem's start plus this rms of random controls "
+                        "(default 0: at the start)")
+    g.add_argument("--no-radius", action="store_true",
+                   help="skip the linearity radius (a ladder of simulations)")
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(func=cmd_gradcheck)
 
@@ -434,16 +444,21 @@ def _study_parser(sub) -> None:
                         epilog=SWEEP_EXIT_CODES + "\n\nexample: casadi-keyframe study "
                         "gradient-accuracy --grid dt=1/30,1/60,1/120 --grid stretch=50,500",
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy"))
+    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy",
+                                      "swap-validity"))
     st.add_argument("--quick", action="store_true", help="small sizes (as CASADI_KEYFRAME_QUICK=1)")
     st.add_argument("--grid", action="append", metavar="KEY=V1,V2,...",
                     help="run the study at every combination of these values on the sweep "
                          "runner (gradient-accuracy: dt, horizon, stretch, amplitude, seed; "
-                         "integrator-accuracy: dt, stretch, rows, seed)")
+                         "integrator-accuracy: dt, stretch, rows, seed; swap-validity: "
+                         "contact, collision, stiffness, dt, amplitude, horizon, speed, "
+                         "damping, rows, solve, maxiter, seed; without --grid it runs its "
+                         "whole map on the runner)")
     st.add_argument("--set", action="append", metavar="KEY=VALUE",
                     help="a fixed value for every point of the grid")
     st.add_argument("--figure", help="the figure ranked and plotted (gradient-accuracy: "
-                                     "relative_error; integrator-accuracy: gap_x or gap_v)")
+                                     "relative_error; integrator-accuracy: gap_x or gap_v; "
+                                     "swap-validity: relative_error, growth_swapped, cosine)")
     st.add_argument("--out", help="output folder (default results/study-STUDY)")
     _add_runner_options(st)
     st.set_defaults(func=cmd_study)

@@ -14,32 +14,46 @@ The step gathers A's free block from the model's 3x3 blocks into the pass's fixe
 (:meth:`LinearizedBackwardEuler.step_system`), so a sparse Cholesky analyses it once.
 
 Swapped backward step (:meth:`swapped_step_vjp`, the "swapped" gradient route, APPROXIMATE):
-the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D), a
-3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler,
-``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the adjoint variables.  Its Jacobians
-belong to the step's end state n+1, so its matrix is the A the forward pass factorised at
-step n+1 (its factor reused when the forward pass kept it, else made again):
+the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D).
+Following the paper (eqs. 13-15) we use instead the exact adjoint of FULL backward Euler,
+eq. (9), ``v+ = v + dt M^-1 f(x+, v+, t+)``, ``x+ = x + dt v+``, which needs first derivatives
+only.  Differentiating eq. (9) puts its Jacobians at the step's END state: the backward step
+from frame n+1 to frame n is
 
-    w   = a_v(n+1) + dt a_x(n+1)
-    A^T mu = w            (free components; mu = 0 on pinned and attached ones)
+    w      = a_v(n+1) + dt a_x(n+1)                   (the cotangent of v+)
+    A^T mu = w,   A = M - dt D - dt^2 K  at frame n+1  (mu = 0 on pinned and attached
+                                                        components; the contacts forward
+                                                        step n+1 holds project w and A)
     dphi/de_n = dt mu
-    a_v(n) = M mu + dphi/dv_n
-    a_x(n) = a_x(n+1) + dt J^T mu + dphi/dx_n,    J = df/dx at n+1 (all of it)
+    a_v(n) = M mu                       + dphi/dv_n
+    a_x(n) = a_x(n+1) + dt J^T mu       + dphi/dx_n,   J = df/dx at frame n+1, all of it
 
-The paper's eqs. (13)-(15) are written in "hat" variables; the code's ``mu`` is the paper's
-adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal masses are right).
+The paper's eqs. (13)-(15) write the same in "hat" variables; the code's ``mu`` is the
+paper's adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal masses are
+right).  The two deviations from a literal reading, and why:
 
-A holds the model's clamped stiffness K (so it stays positive definite), but the position
-adjoint needs the true force Jacobian J: with K there the gradient misses the compressed
-springs' transverse stiffness every step and does not converge as dt shrinks (measured on
-the 5 x 5 contact case: relative error 0.71 at dt 1/60, 0.86 at 1/480, against 0.12 and
-0.015 with J).  For smooth forces the two schemes agree through second order in dt, so each
-step's adjoint carries an O(dt^3) local error.  Stiff springs (dt sqrt(k/m) not small), fast
-changes of stiffness (springs entering buckling or contact within a step), the clamping and
-the damping term left out of K make the error larger in practice; for forces linear in x and
-v it is exact.
-The "casadi" gradient route (reverse mode through :meth:`symbolic_step`) is the reference
-that measures this error.
+* **n+1 indexing.**  The matrix at frame n+1 is what differentiating eq. (9) gives, and it
+  is the very matrix forward step n+1 factorised (same state, same contacts held), so the
+  backward pass reuses that factor and costs about one forward pass.
+* **K in A, J in the update.**  A holds the model's clamped stiffness K (compressed springs'
+  transverse term and contact curvature left out, damping's position derivative left out),
+  so it stays symmetric positive definite for CG and Cholesky and is the forward factor.  The
+  position adjoint takes the true force Jacobian J: with K there too, every step would drop
+  the same destabilising terms, and the error would not shrink as dt does.  J in A as well
+  (indefinite: a direct solve), or the step's start state, changed the gradient by about
+  1 % or made it worse when measured.
+
+The cost of the mix: where J's destabilising part is large against ``m / dt^2`` (penalty
+springs on curved bodies, whose curvature and damping terms grow with the contact stiffness,
+the sliding speed and 1 / radius), nothing in A damps what the update adds: the backward
+pass grows every step, up to overflow, while the simulation is fine (see ``health``).
+
+For smooth forces the two schemes agree through second order in dt, so each step's adjoint
+carries the paper's O(dt^3) local error; that bound is asymptotic in ``dt sqrt(k/m)``, and at
+animation steps (stiff springs and contact, springs buckling or touching within a step) the
+error is larger and of lower order.  It is exact for forces linear in x and v.  The
+"adjoint" route (below) is exact at the same cost; ``casadi-keyframe study swap-validity``
+maps where the swap suffices.
 
 Exact backward step (:meth:`step_vjp`, the "adjoint" route): the exact adjoint of the
 linearized scheme by hand: the same solve with A per step plus per-spring contractions of

@@ -35,8 +35,8 @@ def test_the_swapped_route_refuses_its_overflow_near_the_capes_capsules(cape):
     assert "by frame" in text and "fastest at step" in text
     assert "curved bodies" in text and "--gradient adjoint" in text
     assert caught.value.route == "swapped" and caught.value.growth > GROWTH_BOUND
-    f, g = cape.objective_and_gradient(u, "adjoint")  # the exact route stays healthy
-    assert np.all(np.isfinite(g)) and 1 < np.linalg.norm(g) < 1e4
+    f, g = cape.objective_and_gradient(u, "adjoint")  # the exact route passes the same watch
+    assert np.all(np.isfinite(g)) and np.linalg.norm(g) > 1
 
 
 def test_gradcheck_prints_the_growth_and_calls_the_swapped_route_unreliable(capsys):
@@ -45,7 +45,7 @@ def test_gradcheck_prints_the_growth_and_calls_the_swapped_route_unreliable(caps
                  "0", "--no-radius"]) == 0
     out = capsys.readouterr().out
     growth = next(line for line in out.splitlines() if "backward growth" in line)
-    assert float(growth.split()[2]) > 1e30  # about 5e40 at the passive start
+    assert float(growth.split()[2]) > GROWTH_BOUND  # far past it at the passive start
     assert "verdict: UNRELIABLE: gradient 'swapped' refused" in out
     assert "known limits" in out and "exact adjoint's" in out
 

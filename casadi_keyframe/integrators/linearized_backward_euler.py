@@ -86,7 +86,7 @@ from ..models.blocks import GrowingPattern, SparseJacobian
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 
-MAX_REVISIONS = 4  # a step solved again at most this often when its end shows it chose wrong
+MAX_REVISIONS = 6  # a step solved again at most this often when its end shows it chose wrong
 from .contact_filter import (adjoint_multiplier, constrained_rhs, contact_q, impulses,
                              projected_matrix)
 

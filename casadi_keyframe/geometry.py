@@ -1,5 +1,6 @@
 """Plotting-free geometry that pictures and exports share: colliders at a time, circles,
-capsule surfaces and plane patches, and the triangles of a surface grid.
+capsule surfaces and plane patches, the triangles of a surface grid, and the rigid motion
+that best carries one set of points onto another (keyframes and scenes measure by it).
 
 Both the matplotlib renderers (:mod:`.render`) and the exporters (:mod:`.export`) draw or
 write the same bodies, so they read them here, once, without importing a plotting library.
@@ -7,6 +8,7 @@ write the same bodies, so they read them here, once, without importing a plottin
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from .models.colliders import Plane, Sphere
 
@@ -72,3 +74,15 @@ def moves(body, times) -> bool:
     first = body_geometry(body, times[0])
     return any(not all(np.array_equal(p, q) for p, q in zip(first[1:], body_geometry(body, t)[1:]))
                for t in times[1:])
+
+
+def best_rigid_motion(source, dest, weights=None) -> tuple[np.ndarray, np.ndarray]:
+    """``(R, t)``, the rotation and translation that carry the points ``source`` closest to
+    ``dest`` (both ``(n, 3)``): they minimise ``sum_i w_i |dest_i - (R source_i + t)|^2``
+    (Kabsch, weighted, centroids removed; a proper rotation, no reflection)."""
+    w = np.ones(len(source)) if weights is None else np.asarray(weights, float)
+    ca, cb = (np.average(np.asarray(p, float), axis=0, weights=w) for p in (source, dest))
+    turn, _ = Rotation.align_vectors(np.asarray(dest, float) - cb,
+                                     np.asarray(source, float) - ca, weights=w)
+    R = turn.as_matrix()
+    return R, cb - R @ ca

@@ -4,6 +4,8 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..geometry import best_rigid_motion
+
 
 def rotation(axis, angle: float) -> np.ndarray:
     """3x3 rotation by ``angle`` radians about ``axis``: a coordinate axis 0, 1 or 2 (its
@@ -51,18 +53,6 @@ def soft_min(values, softness: float) -> float:
 def soft_max(a: float, b: float, softness: float) -> float:
     """A smooth upper bound of ``max(a, b)``, within ``softness log 2``."""
     return max(a, b) + softness * np.log1p(np.exp(-abs(a - b) / softness))
-
-
-def best_rigid_motion(source, dest, weights=None) -> tuple[np.ndarray, np.ndarray]:
-    """``(R, t)``, the rotation and translation that carry the points ``source`` closest to
-    ``dest`` (both ``(n, 3)``): they minimise ``sum_i w_i |dest_i - (R source_i + t)|^2``
-    (Kabsch, weighted, centroids removed; a proper rotation, no reflection)."""
-    w = np.ones(len(source)) if weights is None else np.asarray(weights, float)
-    ca, cb = (np.average(np.asarray(p, float), axis=0, weights=w) for p in (source, dest))
-    turn, _ = Rotation.align_vectors(np.asarray(dest, float) - cb,
-                                     np.asarray(source, float) - ca, weights=w)
-    R = turn.as_matrix()
-    return R, cb - R @ ca
 
 
 def turn_angle(rest, moved, weights=None) -> float:

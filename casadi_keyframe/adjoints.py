@@ -15,7 +15,8 @@ backward pass and is called as ``strategy(problem, u) -> (phi, dphi/du)``.
 
 Every strategy watches its gradient (:mod:`casadi_keyframe.health`): "adjoint" and
 "swapped" watch their backward pass and raise :class:`~casadi_keyframe.health.GradientError`
-when it grows past :data:`~casadi_keyframe.health.GROWTH_BOUND` or overflows (``guard=False``
+when it grows past the route's bound (:func:`~casadi_keyframe.health.growth_bound`) or
+overflows (``guard=False``
 only records); each keeps the last pass's :class:`~casadi_keyframe.health.Growth` in
 ``growth``; "casadi" and "fd" refuse a non-finite gradient.
 """
@@ -27,7 +28,7 @@ import weakref
 import casadi as ca
 import numpy as np
 
-from .health import GROWTH_BOUND, BackwardWatch, check_finite, warn_route_limits
+from .health import BackwardWatch, check_finite, growth_bound, warn_route_limits
 from .simulate import backward
 
 
@@ -39,11 +40,13 @@ class Adjoint:
 
     name = "adjoint"
     exact = True
-    guard, bound = True, GROWTH_BOUND  # (class defaults: subclasses may skip __init__)
+    guard = True  # class defaults (subclasses may skip __init__)
+    bound = growth_bound("adjoint")
     growth = None  # the last backward pass's health.Growth
 
-    def __init__(self, *, guard: bool = True, bound: float = GROWTH_BOUND):
-        self.guard, self.bound = guard, bound
+    def __init__(self, *, guard: bool = True, bound: float | None = None):
+        self.guard = guard
+        self.bound = growth_bound(self.name) if bound is None else bound
 
     def backward_step(self, integrator):
         """The integrator's backward step this strategy runs in eq. (5)."""
@@ -75,6 +78,7 @@ class Swapped(Adjoint):
 
     name = "swapped"
     exact = False
+    bound = growth_bound("swapped")
 
     def backward_step(self, integrator):
         step = getattr(integrator, "swapped_step_vjp", None)

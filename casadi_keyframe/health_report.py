@@ -33,8 +33,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .adjoints import Adjoint, FiniteDifference, Swapped, get_gradient
-from .health import (GROWTH_BOUND, GradientError, GradientRouteWarning, Growth, check_finite,
-                     refusal, route_limits)
+from .health import (GradientError, GradientRouteWarning, Growth, check_finite,
+                     growth_bound, refusal, route_limits)
 from .state import SimulationError
 
 STEPS = (1e-2, 1e-4, 1e-6)  # central-difference steps, times max(|u|, 1)
@@ -123,7 +123,8 @@ def gradient_health(problem, u=None, route: str = "adjoint", *, steps=STEPS,
 
 def _refusal(route, problem, g, growth) -> str | None:
     """The guard's message if the guarded route would refuse this gradient."""
-    if growth is not None and not growth.growth <= GROWTH_BOUND:
+    if growth is not None and not (np.isfinite(growth.growth)
+                                   and growth.growth <= growth_bound(route)):
         return refusal(route, problem, growth)
     try:
         check_finite(route, g, problem)
@@ -225,9 +226,9 @@ def format_health(report: HealthReport) -> str:
     lines = [f"gradient health of '{report.route}' on {report.problem} ({report.size} "
              f"controls)", f"  objective                  {report.value:.6g}",
              f"  gradient norm              {report.norm:.3g}"]
-    lines.append(f"  backward growth            {_growth(report.growth)}")
+    lines.append(f"  backward growth            {_growth(report.growth, report.route)}")
     if report.exact_growth is not None:
-        lines.append(f"    exact adjoint's          {_growth(report.exact_growth)}")
+        lines.append(f"    exact adjoint's          {_growth(report.exact_growth, 'adjoint')}")
     lines.append(f"  dot test (vs tangent)      {report.dot_test:.2e}")
     if report.versus_exact is not None:
         rel, cos = report.versus_exact
@@ -248,11 +249,13 @@ def format_health(report: HealthReport) -> str:
     return "\n".join(lines)
 
 
-def _growth(growth) -> str:
+def _growth(growth, route: str) -> str:
     if growth is None:
         return "not watched (no backward loop of its own)"
-    return (f"{growth.growth:.3g} by frame {growth.frame} (bound {GROWTH_BOUND:.0e}); fastest "
-            f"x{growth.fastest:.3g} in step {growth.fastest_step}")
+    bound = growth_bound(route)
+    held = f"bound {bound:.0e}" if np.isfinite(bound) else "exact: refused only if not finite"
+    return (f"{growth.growth:.3g} by frame {growth.frame} ({held}); "
+            f"fastest x{growth.fastest:.3g} in step {growth.fastest_step}")
 
 
 def compare_routes(problem, u, names) -> str:

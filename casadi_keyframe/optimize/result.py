@@ -11,6 +11,8 @@ without ``objective`` would draw an empty convergence plot) fails at once, by na
 """
 from __future__ import annotations
 
+import math
+
 import time
 from dataclasses import dataclass
 from typing import TypedDict
@@ -211,16 +213,19 @@ class Result:
                 "method": self.method, "gradient": self.gradient, "timings": self.timings,
                 "breakdown": self.breakdown, "stages": self.stages,
                 "gradient_norm": float(np.linalg.norm(self.jac)),
-                "gradient_health": _health(self.stages)}
+                "gradient_health": _health(self.stages, self.gradient)}
 
 
-def _health(stages) -> dict:
+def _health(stages, route: str) -> dict:
     """The gradients' health over ``stages``: the largest backward growth (None if no stage
-    watched one), the bound it is held to and the evaluations refused."""
-    from ..health import GROWTH_BOUND
+    watched one), the bound ``route`` is held to (None: an exact route, refused only when
+    not finite) and the evaluations refused."""
+    from ..health import growth_bound
 
+    bound = growth_bound(route)
     growth = [s["gradient_growth"] for s in stages if "gradient_growth" in s]
-    return {"largest_growth": max(growth) if growth else None, "bound": GROWTH_BOUND,
+    return {"largest_growth": max(growth) if growth else None,
+            "bound": bound if math.isfinite(bound) else None,
             "refused": sum(s.get("gradient_refused", 0) for s in stages)}
 
 

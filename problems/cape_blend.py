@@ -60,7 +60,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     m = model.masses.mean()
     objective = (StateKeyframe(steps, x=target_x, v=target_v,
                                position_weight=position_weight / model.n,
-                               velocity_weight=velocity_weight / model.n)
+                               velocity_weight=velocity_weight / model.n,
+                               tolerance=(0.006, 0.05))
                  + Smoothness(alpha / m, temporal=temporal / m))
     view = BlendView(camera=(15, 35), character=character, animation=motion, t_a=t_a, t_b=t_b,
                      fall=Clip(fall_model, fall_traj), walk=Clip(walk_model, walk_traj))

@@ -22,9 +22,10 @@ from ..interrupts import NAMES, handled
 from ..io import as_checkpoint
 from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
+from .goal import GoalReached, check_stop
 from .methods import check_options, get_method
 from .metrics import search_metric
-from .outcome import CONVERGED, INTERRUPTED, LIMIT
+from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
 from .result import Result, assemble
 from .stages import carry, stage_name, stage_problems
 
@@ -33,7 +34,7 @@ from .stages import carry, stage_name, stage_problems
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
           options: dict | None = None, continuation=None, resolutions=None,
-          time_limit: float | None = None) -> Result:
+          time_limit: float | None = None, stop: str | None = None, goal=None) -> Result:
     """Optimise the problem's controls.
 
     ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
@@ -69,21 +70,33 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     the rest mesh, momentum and impulse kept); stages and history records name the mesh's
     ``particles``, and the checkpoint always holds controls of ``problem`` itself.
 
+    ``stop`` says when a search is done: ``"goal"`` (the default where a keyframe declares
+    a tolerance, :mod:`.goal`) once every keyframe is within its tolerance, checked at every
+    iteration (and at the start); ``"method"`` at the method's own test.  Either way a
+    stage is "converged" (status 0) only with the goal met, and a search that stopped short
+    of it says which keyframes it still misses and by how much (:func:`~.outcome.judge`).
+    ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
+    same frames, e.g. the true problem of an augmented-Lagrangian round).
+
     A simulation that fails at the starting controls raises :class:`SimulationError`;
     during the search a failing point counts as a failed evaluation.
     """
     options = check_settings(method, maxiter, tol, time_limit, options)
+    stop = check_stop(stop, goal or problem)
     problems = stage_problems(problem, continuation, resolutions)
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
                      time_limit)
+    search.stop = stop
     u = None if u0 is None else carry(problem, problem.controls.check(u0), problems[0])
     stages = []
     for k, p in enumerate(problems):
-        ev = Evaluator(p, strategy, search.checkpoint, stage=k,
-                        export=lambda v, p=p: carry(p, v, problem))
-        stages.append(search.run(p, ev, p.initial_controls() if u is None else u,
-                                 (k, len(problems))))
+        judge_by = goal if (goal is not None and p is problem) else p
+        export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
+        ev = Evaluator(p, strategy, search.checkpoint, stage=k, export=export, goal=judge_by,
+                       stop=stop)
+        start = p.initial_controls() if u is None else u
+        stages.append(search.run(p, ev, start, (k, len(problems))))
         if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
         u = carry(p, ev.best_u, problems[k + 1])
@@ -138,6 +151,7 @@ class _Search:
     def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
         self.method, self.maxiter, self.tol, self.options = method, maxiter, tol, options
         self.quiet, self.checkpoint, self.time_limit = quiet, checkpoint, time_limit
+        self.stop = "method"
         self.history, self.start = [], time.perf_counter()
         self.deadline = None if time_limit is None else self.start + time_limit
 
@@ -150,6 +164,7 @@ class _Search:
         status, message = self._search(problem, ev, u0, stage)
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
+        status, message = judge(status, message, ev.verdict())
         return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
                 "particles": problem.model.n,
                 "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
@@ -171,6 +186,10 @@ class _Search:
                                      "finer dt or mesh" if k == 0 else "; the controls "
                                      "carried from the previous stage fail here: start the "
                                      "continuation at a finer dt or mesh"), 0)
+        try:
+            ev.check_goal(0)
+        except GoalReached:
+            return CONVERGED, "converged: the start already meets the goal (stop='goal')"
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
         run = get_method(self.method).run
@@ -180,6 +199,9 @@ class _Search:
         try:
             return run(problem, searched, start, self.maxiter, self.tol, self.options,
                        lambda: ev.record(self.history, self.start, bar), self.deadline)
+        except GoalReached as reached:
+            return CONVERGED, (f"converged: the goal is met at iteration {reached.iteration} "
+                               "(stop='goal')")
         except KeyboardInterrupt as err:
             handled()
             signum = getattr(err, "signum", signal.SIGINT)

@@ -1,0 +1,82 @@
+"""The method of multipliers, once, for every equality a search holds hard: keyframes in
+:func:`~.augmented_lagrangian.solve_augmented`'s rounds, and multiple shooting's
+continuity defects (:mod:`.shooting`).
+
+A constraint block ``c_b = 0`` (a keyframe's position miss, a segment's defect) enters the
+objective as ``0.5 w_b |c_b + lambda_b / w_b|^2`` (equal to ``lambda_b . c_b + 0.5 w_b
+|c_b|^2`` up to a constant): the penalty ``w_b`` aims past the target by the shift
+``lambda_b / w_b``.  After each inner search ``lambda_b += w_b c_b`` (the first-order
+update: the shift moves by the miss that is left), and the weights grow by ``growth``,
+either every time (a fixed schedule) or only where the miss did not fall below
+``shrink`` times its last size (the classical rule of Conn, Gould and Toint's LANCELOT).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+
+class Multipliers:
+    """Multipliers and penalty weights of named constraint blocks.
+
+    ``weights``: each block's starting penalty weight (a number); ``growth`` >= 1 the
+    factor a weight grows by; ``always``: grow every update (a schedule) rather than only
+    where the miss did not shrink by ``shrink``.
+    """
+
+    def __init__(self, weights: dict, *, growth: float = 1.0, always: bool = True,
+                 shrink: float = 0.25):
+        if not (np.isfinite(growth) and growth >= 1):
+            raise ValueError(f"the weight growth must be >= 1 (1: multipliers alone), got "
+                             f"{growth}")
+        self.weights = {b: float(w) for b, w in weights.items()}
+        self.lam = {b: 0.0 for b in weights}
+        self.growth, self.always, self.shrink = float(growth), bool(always), float(shrink)
+        self.last = {b: np.inf for b in weights}  # each block's miss norm at the last update
+        self.updates = 0
+
+    def shift(self, block) -> np.ndarray | float:
+        """Where block's penalty aims, relative to its target: ``lambda / w``."""
+        return self.lam[block] / self.weights[block]
+
+    def value(self, block, c) -> float:
+        """``0.5 w |c + lambda / w|^2``: the block's part of the objective at residual c."""
+        return 0.5 * self.weights[block] * float(np.sum((c + self.shift(block)) ** 2))
+
+    def gradient(self, block, c):
+        """d value / d c = ``w c + lambda``."""
+        return self.weights[block] * c + self.lam[block]
+
+    def update(self, residuals: dict, *, multipliers: bool = True) -> None:
+        """After an inner search that ended at these ``residuals`` (block -> c): ``lambda +=
+        w c`` (unless ``multipliers`` is False: the penalty schedule alone), then grow the
+        weights (every one, or those whose miss did not shrink enough)."""
+        for b, c in residuals.items():
+            c = np.asarray(c, dtype=float)
+            if multipliers:
+                self.lam[b] = self.lam[b] + self.weights[b] * c
+            size = float(np.linalg.norm(c))
+            if self.always or size > self.shrink * self.last[b]:
+                self.weights[b] *= self.growth
+            self.last[b] = size
+        self.updates += 1
+
+    def state(self, prefix: str = "") -> dict:
+        """Plain arrays (for a checkpoint): ``{prefix}lam:{b}``, ``{prefix}weight:{b}`` per
+        block (b as a string) and ``{prefix}updates``."""
+        out = {f"{prefix}updates": np.array(self.updates)}
+        for b in self.weights:
+            out[f"{prefix}lam:{b}"] = np.asarray(self.lam[b], dtype=float)
+            out[f"{prefix}weight:{b}"] = np.array(self.weights[b])
+        return out
+
+    def restore(self, state: dict, prefix: str = "") -> bool:
+        """Take the multipliers and weights :meth:`state` wrote, where every block has its
+        entries (True), else leave them (False: a run of another problem)."""
+        keys = [(f"{prefix}lam:{b}", f"{prefix}weight:{b}") for b in self.weights]
+        if f"{prefix}updates" not in state or any(k not in state for pair in keys for k in pair):
+            return False
+        for b, (lam, weight) in zip(self.weights, keys):
+            self.lam[b] = np.asarray(state[lam], dtype=float)
+            self.weights[b] = float(state[weight])
+        self.updates = int(state[f"{prefix}updates"])
+        return True

@@ -58,6 +58,7 @@ class SolveRun:
     continuation: list | None = None
     resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
     rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
+    shooting: dict | None = None  # multiple shooting's options (solve's shooting=)
     time_limit: float | None = None
     stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
     resume: str | None = None
@@ -71,18 +72,22 @@ class SolveRun:
 
 def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=None,
               gradient=None, maxiter=None, rounds=None, weight_growth=None,
-              resolutions=None, **options) -> SolveRun:
+              resolutions=None, shooting=None, **options) -> SolveRun:
     """The :class:`SolveRun` of a loaded problem file built with ``overrides`` (checked
     first), writing to ``out`` (default ``results/PROBLEM``): the search options not given
     (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
     each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
     The file's default ``resolutions`` keep only the meshes coarser than the problem built
     (none when it is built coarse itself), and give way to rounds asked for; rounds and
-    resolutions both given are refused (ValueError)."""
+    resolutions both given are refused (ValueError).  ``shooting`` (options of multiple
+    shooting, ``{"segments": 0}`` for none) goes over the file's."""
     from .loading import build_problem, default_resolutions, resolve, solve_defaults
 
     prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module)
+    defaults = solve_defaults(module, overrides)
+    shooting = {**defaults.get("shooting", {}), **(shooting or {})} or None
+    if shooting and shooting.get("segments", 1) <= 1:
+        shooting = None
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
              if v is not None}
     if given and resolutions:
@@ -98,7 +103,7 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
         overrides=overrides, method=method or defaults["method"],
         gradient=gradient or defaults["gradient"],
         maxiter=defaults["maxiter"] if maxiter is None else maxiter,
-        resolutions=[dict(r) for r in resolutions], rounds=rounds,
+        resolutions=[dict(r) for r in resolutions], rounds=rounds, shooting=shooting,
         **options)
 
 
@@ -200,7 +205,7 @@ def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
 
     options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
                    quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
-                   time_limit=spec.time_limit, u0=u0, stop=spec.stop)
+                   time_limit=spec.time_limit, u0=u0, stop=spec.stop, shooting=spec.shooting)
     if spec.rounds:
         from .optimize.augmented_lagrangian import solve_augmented
         return solve_augmented(spec.problem, **spec.rounds, **options,

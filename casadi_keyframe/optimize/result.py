@@ -49,13 +49,17 @@ class HistoryRecord(_HistoryFields, total=False):
 
     Producers may add:
 
-    * ``round``: the augmented-Lagrangian round (:func:`~.augmented_lagrangian.solve_augmented`);
+    * ``round``: the augmented-Lagrangian round (:func:`~.augmented_lagrangian.solve_augmented`,
+      and multiple shooting's rounds);
+    * ``defect``: multiple shooting's largest rms defect between segments, in units of the
+      keyframes' tolerances (1: as large as the tolerance);
     * ``control_cost``, ``damping``, ``misses``: :func:`~.constrained.lower_effort`'s
       control cost, the damping it stepped with, and each keyframe row's ``(kind, rms
       miss)``.
     """
 
     round: int
+    defect: float
     control_cost: float
     damping: float
     misses: list
@@ -116,10 +120,14 @@ class Stage(_StageFields, total=False):
 
     An augmented-Lagrangian round adds ``weight_scale`` (its keyframe weights' factor),
     ``control_cost`` and ``misses`` (the problem's keyframe misses at its controls, as
-    in ``breakdown``).
+    in ``breakdown``).  A multiple-shooting stage adds ``segments`` and ``defect`` (the
+    largest rms defect left, in tolerances); its ``fun`` is the objective on the stitched
+    segments.
     """
 
     weight_scale: float
+    segments: int
+    defect: float
     control_cost: float
     misses: list
 

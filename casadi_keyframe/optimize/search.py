@@ -15,6 +15,8 @@ import numbers
 import signal
 import time
 
+import numpy as np
+
 from tqdm.auto import tqdm
 
 from ..adjoints import get_gradient
@@ -26,6 +28,7 @@ from .goal import GoalReached, check_stop
 from .methods import check_options, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
+from .shooting_search import run_shooting, shooting_options
 from .result import Result, assemble
 from .stages import carry, stage_name, stage_problems
 
@@ -34,7 +37,8 @@ from .stages import carry, stage_name, stage_problems
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
           options: dict | None = None, continuation=None, resolutions=None,
-          time_limit: float | None = None, stop: str | None = None, goal=None) -> Result:
+          time_limit: float | None = None, stop: str | None = None, goal=None,
+          shooting=None) -> Result:
     """Optimise the problem's controls.
 
     ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
@@ -78,11 +82,19 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
     same frames, e.g. the true problem of an augmented-Lagrangian round).
 
+    ``shooting`` (a number of segments K, or :class:`~.shooting_search.ShootingOptions`
+    or a dict of them) runs multiple shooting first on each stage
+    (:mod:`.shooting_search`): controls and the states at K - 1 nodes searched together,
+    the segments' defects held by multipliers; its controls then start the stage's own
+    search (unless ``polish`` is off), which stops at once if the goal is already met.
+    Its stage record says ``segments`` and the largest scaled ``defect`` left.
+
     A simulation that fails at the starting controls raises :class:`SimulationError`;
     during the search a failing point counts as a failed evaluation.
     """
     options = check_settings(method, maxiter, tol, time_limit, options)
     stop = check_stop(stop, goal or problem)
+    multiple = shooting_options(shooting)
     problems = stage_problems(problem, continuation, resolutions)
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
@@ -96,11 +108,37 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
         ev = Evaluator(p, strategy, search.checkpoint, stage=k, export=export, goal=judge_by,
                        stop=stop)
         start = p.initial_controls() if u is None else u
+        if multiple is not None and multiple.segments > 1:
+            record, start = run_shooting(p, multiple, start, search, k, judge_by, export,
+                                         problem)
+            stages.append(record)
+            if not multiple.polish or record["status"] == INTERRUPTED or search.time_up():
+                evaluate_at(ev, start)
+                stages[-1]["status"], stages[-1]["message"] = judge(
+                    record["status"], record["message"], ev.verdict())
+                stages[-1]["success"] = stages[-1]["status"] == CONVERGED
+                if record["status"] == INTERRUPTED or search.time_up():
+                    break
+                if p is problem:
+                    break
+                u = carry(p, ev.best_u, problems[k + 1])
+                continue
         stages.append(search.run(p, ev, start, (k, len(problems))))
         if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
         u = carry(p, ev.best_u, problems[k + 1])
     return _result(problem, p, ev, strategy, search, stages, len(problems))
+
+
+def evaluate_at(ev, u) -> None:
+    """Evaluate ``ev`` at the controls ``u`` (its best point then), an interrupt during it
+    leaving the objective alone."""
+    try:
+        ev(u)
+    except KeyboardInterrupt:
+        handled()
+        f = ev.problem.objective(u)
+        ev.best_u, ev.best_f, ev.best_g = u, f, np.full(u.size, np.nan)
 
 
 def check_settings(method, maxiter, tol, time_limit, options) -> dict:

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .adjoints import ROUTES as GRADIENT_ROUTES
+from .cli_options import add_shooting_options, parse_levels, parse_shooting
 from .export import FORMATS as EXPORT_FORMATS
 from .export.alembic import BlenderError
 from .loading import (OverrideError, check_overrides, list_problems, load_module,
@@ -76,6 +77,11 @@ def _split_top(text: str) -> list[str]:
             continue
         current += char
     return [p.strip() for p in parts + [current] if p.strip()]
+
+
+def _items(texts) -> list[dict]:
+    """``["init=blend,workers=2", ...]`` (repeatable KEY=VALUE,... options) as dicts."""
+    return [parse_overrides(_split_top(t)) for t in texts or []]
 
 
 def parse_value(text: str):
@@ -156,23 +162,6 @@ def parse_resolutions(module, items) -> list[dict] | None:
     return out
 
 
-def parse_shooting(segments, items, scheduler) -> dict | None:
-    """``--segments K``, ``--shooting KEY=VALUE,...`` and ``--scheduler ADDRESS`` as
-    multiple shooting's options over the problem file's (None: the file's); checked here,
-    so a bad one is refused before the build."""
-    from .optimize.shooting_search import shooting_options
-
-    out = {} if segments is None else {"segments": segments}
-    for item in items or []:
-        out.update(parse_overrides(_split_top(item)))
-    if scheduler is not None:
-        out["scheduler"] = scheduler
-    if not out:
-        return None
-    shooting_options({"segments": 2, **out})  # every option checked (the count later)
-    return out
-
-
 def cmd_list(args) -> int:
     width = min(shutil.get_terminal_size((100, 24)).columns, 100)
     problems = list_problems()
@@ -230,11 +219,12 @@ def cmd_solve(args) -> int:
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
     out = ensure_writable(args.out) if args.out else None
-    shooting = parse_shooting(args.segments, args.shooting, args.scheduler)
+    shooting = parse_shooting(args.segments, _items(args.shooting), args.scheduler)
+    homotopy = parse_levels(module, _items(args.homotopy))
     spec = solve_run(module, args.problem, overrides, out, method=args.method,
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,
-                     resolutions=parse_resolutions(module, args.resolution),
+                     resolutions=parse_resolutions(module, args.resolution), homotopy=homotopy,
                      shooting=shooting, time_limit=args.time_limit, stop=args.stop,
                      resume=args.resume,
                      quiet=args.quiet,
@@ -434,18 +424,7 @@ def _solve_parser(sub) -> None:
                         "target by the miss left (hard keyframes; --maxiter per round)")
     s.add_argument("--weight-growth", type=float, metavar="G",
                    help="multiply the keyframe weights by G per round (a penalty schedule)")
-    s.add_argument("--segments", type=at_least(int, 1), metavar="K",
-                   help="multiple shooting with K segments: the controls and the states where "
-                        "segments meet searched together, the segments' defects held by "
-                        "multipliers, the segments swept in parallel (1: single shooting)")
-    s.add_argument("--shooting", action="append", metavar="KEY=VALUE,...",
-                   help="multiple shooting's options: init=passive|guess|target|blend (where "
-                        "the node states start), workers=N (processes, default 1), rounds=N, "
-                        "formulation=lagrangian|ipopt (defects as constraints for IPOPT), "
-                        "penalty=X, growth=X, polish=True|False")
-    s.add_argument("--scheduler", metavar="ADDRESS",
-                   help="sweep the segments on the running Dask cluster at ADDRESS (e.g. "
-                        "tcp://10.0.0.5:8786) instead of local processes")
+    add_shooting_options(s, at_least(int, 1))
     s.add_argument("--stop", choices=("goal", "method"),
                    help="when the search is done: 'goal' once every keyframe is within its "
                         "tolerance (the default where the problem declares tolerances), "

@@ -59,6 +59,7 @@ class SolveRun:
     resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
     rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
     shooting: dict | None = None  # multiple shooting's options (solve's shooting=)
+    homotopy: list | None = None  # build overrides of the homotopy's levels (solve's homotopy=)
     time_limit: float | None = None
     stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
     resume: str | None = None
@@ -86,6 +87,8 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
     prob = build_problem(module, **overrides)
     defaults = solve_defaults(module, overrides)
     shooting = {**defaults.get("shooting", {}), **(shooting or {})} or None
+    if options.get("homotopy") is None and defaults.get("homotopy"):
+        options["homotopy"] = [dict(h) for h in defaults["homotopy"]]
     if shooting and shooting.get("segments", 1) <= 1:
         shooting = None
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
@@ -205,7 +208,8 @@ def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
 
     options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
                    quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
-                   time_limit=spec.time_limit, u0=u0, stop=spec.stop, shooting=spec.shooting)
+                   time_limit=spec.time_limit, u0=u0, stop=spec.stop, shooting=spec.shooting,
+                   homotopy=spec.homotopy)
     if spec.rounds:
         from .optimize.augmented_lagrangian import solve_augmented
         return solve_augmented(spec.problem, **spec.rounds, **options,

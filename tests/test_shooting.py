@@ -234,3 +234,22 @@ def test_segments_on_a_dask_cluster_give_the_same_numbers():
     assert fd == f and np.array_equal(gd, g)
     with pytest.raises(ValueError, match="not built from a problem file"):
         DaskPool(sheet_problem(), shooting.spans, "tcp://127.0.0.1:1", 2)
+
+
+def test_a_new_round_evaluates_its_own_merit_at_the_point_the_last_one_ended():
+    """The multipliers move between rounds, so the memo of the last point is stale: a round
+    that started from it with the old merit's value and gradient failed its first line
+    search (seen: every other round of the cape's 1 iteration)."""
+    from casadi_keyframe.optimize.shooting_search import ShootingEvaluator
+
+    prob = sheet_problem()
+    shooting, z, mult = random_point(prob, 3, np.random.default_rng(4))
+    ev = ShootingEvaluator(shooting, Serial(prob, shooting.spans), mult)
+    before = ev(z)[0]
+    c = ev.last_info["defects"]
+    mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},
+                 **{(k, "v"): cv for k, (_, cv) in enumerate(c)}})
+    ev.reset()
+    after = ev(z)[0]
+    assert after != before and after == shooting.evaluate(z, Serial(prob, shooting.spans),
+                                                          mult)[0]

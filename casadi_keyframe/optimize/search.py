@@ -38,7 +38,7 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
           options: dict | None = None, continuation=None, resolutions=None,
           time_limit: float | None = None, stop: str | None = None, goal=None,
-          shooting=None) -> Result:
+          shooting=None, homotopy=None) -> Result:
     """Optimise the problem's controls.
 
     ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
@@ -74,6 +74,10 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     the rest mesh, momentum and impulse kept); stages and history records name the mesh's
     ``particles``, and the checkpoint always holds controls of ``problem`` itself.
 
+    ``homotopy`` (a third axis of stages, e.g. contact made soft and thick first) lists
+    levels of the model, each a problem or a dict of build overrides on the same particles
+    (:func:`~.stages.homotopy_levels`): every mesh is solved at each level, then as it is.
+
     ``stop`` says when a search is done: ``"goal"`` (the default where a keyframe declares
     a tolerance, :mod:`.goal`) once every keyframe is within its tolerance, checked at every
     iteration (and at the start); ``"method"`` at the method's own test.  Either way a
@@ -95,7 +99,7 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     options = check_settings(method, maxiter, tol, time_limit, options)
     stop = check_stop(stop, goal or problem)
     multiple = shooting_options(shooting)
-    problems = stage_problems(problem, continuation, resolutions)
+    problems = stage_problems(problem, continuation, resolutions, homotopy)
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
                      time_limit)

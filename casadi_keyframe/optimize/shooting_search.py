@@ -111,10 +111,11 @@ class ShootingEvaluator:
         self.reset()
 
     def reset(self) -> None:
-        """Forget the best point (a new round's merit)."""
+        """Forget the best point and the memo (a new round's merit: the multipliers moved)."""
         self.best_u = self.best_z = self.best_info = None
         self.best_f = np.inf
         self._judged = None
+        self.last_z = self.last = None
 
     def __call__(self, z, force: bool = False):
         """``(merit, gradient)`` at ``z``; ``force`` evaluates again even at the last point

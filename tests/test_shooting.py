@@ -253,3 +253,22 @@ def test_a_new_round_evaluates_its_own_merit_at_the_point_the_last_one_ended():
     after = ev(z)[0]
     assert after != before and after == shooting.evaluate(z, Serial(prob, shooting.spans),
                                                           mult)[0]
+
+
+def test_the_command_line_runs_multiple_shooting_and_refuses_bad_options(tmp_path, capsys):
+    import json
+
+    from casadi_keyframe.cli import main
+
+    small = ["solve", "flock_path", "--set", "agents=6", "--set", "steps=20", "--set",
+             "tolerance=2", "--quiet", "--no-animation", "--no-viewer"]
+    code = main(small + ["--segments", "2", "--shooting", "init=passive,workers=2",
+                         "--maxiter", "30", "--out", str(tmp_path)])
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert code in (0, 3) and summary["stages"][0]["segments"] == 2
+    assert "multiple shooting, 2 segments" in capsys.readouterr().out
+    for bad, message in ((["--shooting", "init=nowhere"], "shooting init must be one of"),
+                         (["--shooting", "nodes=blend"], "unknown option"),
+                         (["--homotopy", "nothing=3"], "nothing")):
+        assert main(small + ["--segments", "2", *bad, "--out", str(tmp_path / "b")]) == 2
+        assert message in capsys.readouterr().err

@@ -18,15 +18,20 @@ Strategies (``--only``; the issue's table is the default set):
 * ``single+homotopy``, ``ms6+homotopy``: first with the body's contact ``--softness``
   times softer and thicker (``contact`` override), then the model's own;
 * ``ms6+passive``, ``ms6+target``: ``ms6`` with its nodes on the passive run or the target;
+* ``ms3+path``, ``ms6+path``, ``ms12+path`` (``+2workers``, ``+homotopy``): nodes on the
+  problem's reference path (``cape_blend.path``: the cape held in the torso's frame
+  crossfaded into the walk clip's), as its ``SOLVE`` does from rest;
 * ``tracking``: the problem's default start, the PD tracking guess, for reference.
 
     .venv/bin/python benchmarks/cape_blend_strategies.py [--rows 8 --cols 6] [--maxiter 200]
         [--time-limit 1800] [--softness 3] [--only single ms6 ...] [--toss 50]
 
 ``--toss N`` also compares single and multiple shooting (K = 3) on ``cloth_toss`` at N x N.
-Each strategy gets ``--maxiter`` iterations per stage.
+Each strategy gets ``--maxiter`` iterations per stage.  ``--json FILE`` appends each row (the
+notebook's cape section shows ``notebooks/cape_blend_strategies.jsonl``).
 """
 import argparse
+import json
 import resource
 import sys
 import time
@@ -36,6 +41,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from casadi_keyframe import load_problem, solve  # noqa: E402
+from casadi_keyframe.loading import load_module  # noqa: E402
 from casadi_keyframe.optimize import STATUS  # noqa: E402
 from casadi_keyframe.scenes.capes import clip_report  # noqa: E402
 
@@ -52,6 +58,11 @@ STRATEGIES = {
     "ms6+homotopy": {"shooting": {"segments": 6, "init": "blend"}, "homotopy": True},
     "ms6+passive": {"shooting": {"segments": 6, "init": "passive"}},
     "ms6+target": {"shooting": {"segments": 6, "init": "target"}},
+    "ms3+path": {"shooting": {"segments": 3, "init": "path"}},
+    "ms6+path": {"shooting": {"segments": 6, "init": "path"}},
+    "ms12+path": {"shooting": {"segments": 12, "init": "path"}},
+    "ms6+path+2workers": {"shooting": {"segments": 6, "init": "path", "workers": 2}},
+    "ms6+path+homotopy": {"shooting": {"segments": 6, "init": "path"}, "homotopy": True},
     "tracking": {"guess": "tracking"},
 }
 DEFAULT = ["single", "single+ipopt", "ms3", "ms6", "ms12", "ms6+2workers", "single+homotopy",
@@ -80,6 +91,8 @@ def run(name, build, maxiter, time_limit, softness) -> dict:
     spec = dict(STRATEGIES[name])
     prob = build(guess=spec.pop("guess", "passive"))
     homotopy = [{"contact": softness}] if spec.pop("homotopy", False) else None
+    if spec.get("shooting", {}).get("init") == "path":
+        spec["shooting"] = {**spec["shooting"], "init": load_module("cape_blend").path}
     start = free_misses(prob, prob.simulate(prob.initial_controls(), records=False))
     wall, cpu = time.perf_counter(), cpu_seconds()
     res = solve(prob, spec.pop("method", "lbfgsb"), maxiter=maxiter, quiet=True,
@@ -131,6 +144,7 @@ def main(argv=None):
     ap.add_argument("--softness", type=float, default=3.0, help="the homotopy's first contact")
     ap.add_argument("--only", nargs="*", default=DEFAULT, choices=list(STRATEGIES))
     ap.add_argument("--toss", type=int, default=0, help="also cloth_toss at N x N")
+    ap.add_argument("--json", help="append each row to this JSON-lines file")
     args = ap.parse_args(argv)
 
     def build(**kw):
@@ -142,7 +156,13 @@ def main(argv=None):
           + (f", {args.time_limit:g} s at most" if args.time_limit else ""))
     print(HEAD)
     for name in args.only:
-        print(row(run(name, build, args.maxiter, args.time_limit, args.softness)), flush=True)
+        r = run(name, build, args.maxiter, args.time_limit, args.softness)
+        print(row(r), flush=True)
+        if args.json:
+            with open(args.json, "a") as f:
+                f.write(json.dumps({**r, "rows": args.rows, "cols": args.cols,
+                                    "maxiter": args.maxiter,
+                                    "time_limit": args.time_limit}) + "\n")
     if args.toss:
         toss(args.toss, args.maxiter, args.time_limit)
 

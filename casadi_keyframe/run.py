@@ -23,9 +23,10 @@ from .state import SimulationError
 
 EXIT_CODES = """\
 exit codes:
-  0    converged (IPOPT: also to its acceptable level); result and pictures written
-  1    the search failed (line search, IPOPT error, restoration failure...): the best
-       point is still written; or the simulation fails at the start (nothing written)
+  0    converged: every keyframe within its tolerance; result and pictures written
+  1    the search failed: the method stopped short of the goal (line search, no further
+       decrease, IPOPT error...), the keyframes missed named, the best point still
+       written; or the simulation fails at the start (nothing written)
   2    bad input (problem, overrides, options, --resume source)
   3    stopped at --maxiter or --time-limit before converging; result written: raise the
        limit or continue with --resume OUT

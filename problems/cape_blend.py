@@ -31,14 +31,25 @@ from casadi_keyframe.scenes.skeleton import Character
 from casadi_keyframe.views import BlendView, Clip
 
 GUESSES = ("tracking", "passive")
-SHOOTING = {"segments": 6, "init": "blend"}
 
 
 def SOLVE(guess: str = "tracking", **_) -> dict:
     """From the tracking guess a search that stops at the goal; from zero forces multiple
-    shooting (``SHOOTING``), since one gradient through the whole blend stalls far off."""
+    shooting, its nodes on the blend's reference path (:func:`path`), since one gradient
+    through the whole blend stalls far off."""
     solve = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint"}
-    return solve if guess != "passive" else {**solve, "shooting": dict(SHOOTING)}
+    return solve if guess != "passive" else {**solve, "shooting": {"segments": 6,
+                                                                   "init": path}}
+
+
+def path(prob):
+    """The blend's reference path (:func:`reference_path`: the cape held in the torso's
+    frame crossfaded into the walk clip's) for ``prob`` built by this file: where multiple
+    shooting's nodes start."""
+    view = prob.view
+    motion, dt = view.animation, prob.dt
+    walk = (view.walk.trajectory, motion.second, frame_at(view.t_b, dt, "cape_blend: t_b"))
+    return reference_path(view.character, motion, prob.x0, walk, prob.steps, dt)
 RANGES = {"rows": "[2, inf)", "cols": "[3, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
           "t_a": "[0, inf)", "t_b": "[0, inf)", "window": "(0, inf)",
           "position_weight": "[0, inf)", "velocity_weight": "[0, inf)", "alpha": "[0, inf)",

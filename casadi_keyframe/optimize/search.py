@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 import numbers
+from dataclasses import replace
 import signal
 import time
 
@@ -90,7 +91,8 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     or a dict of them) runs multiple shooting first on each stage
     (:mod:`.shooting_search`): controls and the states at K - 1 nodes searched together,
     the segments' defects held by multipliers; its controls then start the stage's own
-    search (unless ``polish`` is off), which stops at once if the goal is already met.
+    search (unless ``polish`` is off), which stops at once if the goal is already met.  After
+    the first stage the nodes start on the run of the controls carried over (``"guess"``).
     Its stage record says ``segments`` and the largest scaled ``defect`` left.
 
     A simulation that fails at the starting controls raises :class:`SimulationError`;
@@ -113,8 +115,8 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
                        stop=stop)
         start = p.initial_controls() if u is None else u
         if multiple is not None and multiple.segments > 1:
-            record, start = run_shooting(p, multiple, start, search, k, judge_by, export,
-                                         problem)
+            opts = multiple if k == 0 else replace(multiple, init="guess")
+            record, start = run_shooting(p, opts, start, search, k, judge_by, export, problem)
             stages.append(record)
             if not multiple.polish or record["status"] == INTERRUPTED or search.time_up():
                 evaluate_at(ev, start)

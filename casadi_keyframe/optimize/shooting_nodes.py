@@ -8,7 +8,10 @@
 * ``"blend"``: from the passive run towards that target, linearly in time: a node at frame
   a before a keyframe at frame f takes ``(1 - a/f)`` of the passive state and ``a/f`` of
   the target (from the previous full keyframe's target rather than the passive run, once
-  one has passed).
+  one has passed);
+* a function ``path(problem) -> (steps + 1, n, dim)`` positions: a problem's own guess of
+  the states it passes through (a cape blended in its body's frame), velocities by central
+  differences of the path.
 
 Pinned and attached particles keep their prescribed motion (from the reference run) in
 every case; ``target`` and ``blend`` need a StateKeyframe over every particle with a
@@ -34,6 +37,8 @@ def initial_nodes(problem, shooting, init: str, reference) -> list:
     """The starting node States of ``shooting`` (see the module)."""
     if init == "guess":
         return shooting.nodes_of(reference)
+    if callable(init):
+        return _on_path(problem, shooting, init(problem))
     passive = shooting.nodes_of(problem.simulate(records=False))
     if init == "passive":
         return passive
@@ -57,6 +62,22 @@ def initial_nodes(problem, shooting, init: str, reference) -> list:
             x, v = ((1 - tau) * q0 + tau * q1 for q0, q1 in zip(start, end))
         x, v = np.where(shooting.free, x, ref.x), np.where(shooting.free, v, ref.v)
         nodes.append(State(np.array(x), np.array(v)))
+    return nodes
+
+
+def _on_path(problem, shooting, path) -> list:
+    """Nodes on the positions ``path`` (``(steps + 1, n, dim)``), velocities by central
+    differences, prescribed components from the reference run."""
+    path = np.asarray(path, dtype=float)
+    if path.shape != (problem.steps + 1,) + shooting.free.shape:
+        raise ValueError(f"{problem.name}: a shooting init path must give "
+                         f"{(problem.steps + 1,) + shooting.free.shape} positions, got "
+                         f"{path.shape}")
+    nodes = []
+    for (a, _), ref in zip(shooting.spans[1:], shooting.reference):
+        v = (path[a + 1] - path[a - 1]) / (2 * problem.dt)
+        nodes.append(State(np.where(shooting.free, path[a], ref.x),
+                           np.where(shooting.free, v, ref.v)))
     return nodes
 
 

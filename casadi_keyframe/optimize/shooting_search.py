@@ -12,7 +12,7 @@ already met and otherwise closes what the defects left.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -37,8 +37,9 @@ class ShootingOptions:
     """How multiple shooting runs (``solve(..., shooting=...)``).
 
     * ``segments``: K, the segments the horizon is cut into (1: single shooting);
-    * ``init``: where the node states start (:data:`~.shooting_nodes.INITS`): ``"passive"``
-      (the start controls' run: no defect), ``"target"``, ``"blend"`` or ``"guess"``;
+    * ``init``: where the node states start (:mod:`.shooting_nodes`): ``"passive"``,
+      ``"guess"`` (the start controls' run: no defect), ``"target"``, ``"blend"``, or a
+      function of the problem giving a path of positions (a problem's own guess of states);
     * ``rounds``: augmented-Lagrangian rounds at most (the stage's ``maxiter`` is shared
       among them);
     * ``workers``: processes sweeping the segments (1: this one); ``scheduler``: a Dask
@@ -85,8 +86,9 @@ def shooting_options(value) -> ShootingOptions | None:
     if opts.formulation not in FORMULATIONS:
         raise ValueError(f"shooting formulation must be one of {', '.join(FORMULATIONS)}, got "
                          f"{opts.formulation!r}")
-    if opts.init not in INITS:
-        raise ValueError(f"shooting init must be one of {', '.join(INITS)}, got {opts.init!r}")
+    if not callable(opts.init) and opts.init not in INITS:
+        raise ValueError(f"shooting init must be one of {', '.join(INITS)} or a function of "
+                         f"the problem giving a path of positions, got {opts.init!r}")
     for name in ("segments", "rounds", "workers"):
         got = getattr(opts, name)
         if isinstance(got, bool) or not isinstance(got, (int, np.integer)) or got < 1:
@@ -296,8 +298,3 @@ class _Hook:
             found = verdict(self.goal, self.problem.simulate(u, records=False))
             if found.met:
                 raise GoalReached(found, len(search.history))
-
-
-def with_shooting_defaults(opts: ShootingOptions, **changes) -> ShootingOptions:
-    """``opts`` with some fields changed (checked again)."""
-    return shooting_options(replace(opts, **changes))

@@ -14,6 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..io import Checkpoint
+from ..objectives import Objective, StateKeyframe
+
 
 class Multipliers:
     """Multipliers and penalty weights of named constraint blocks.
@@ -80,3 +83,69 @@ class Multipliers:
             self.weights[b] = float(state[weight])
         self.updates = int(state[f"{prefix}updates"])
         return True
+
+
+class KeyframeMultipliers:
+    """The :class:`~.multipliers.Multipliers` of a problem's StateKeyframes (one block per
+    position and per velocity target, keyed ``x3``, ``v3`` by the term's place among the
+    objective's terms) and the problem whose keyframes aim by them."""
+
+    def __init__(self, problem, growth: float):
+        self.base = problem
+        terms = problem.objective_terms.terms
+        self.terms = {i: t for i, t in enumerate(terms) if isinstance(t, StateKeyframe)}
+        if not self.terms:
+            raise ValueError(f"{problem.name}: no StateKeyframe term to hold hard; an "
+                             "augmented Lagrangian needs a state target (positions and/or "
+                             "velocities)")
+        self.start = {f"{kind}{i}": w for i, t in self.terms.items()
+                      for kind, target, w in (("x", t.position_target, t.position_weight),
+                                              ("v", t.velocity_target, t.velocity_weight))
+                      if target is not None and w > 0}
+        self.mult = Multipliers(self.start, growth=growth)
+        self.round = 0
+
+    @property
+    def scale(self) -> float:
+        """The keyframe weights' factor this round."""
+        return self.mult.growth ** self.mult.updates
+
+    def problem(self):
+        """The base problem with each keyframe aiming past its target by the shift (the base
+        problem itself before any update)."""
+        if not self.mult.updates:
+            return self.base
+        terms = []
+        for i, t in enumerate(self.base.objective_terms.terms):
+            if i in self.terms:
+                dx, dv = (-self.mult.shift(f"{k}{i}") if f"{k}{i}" in self.start else 0.0
+                          for k in "xv")
+                t = t.aiming(dx, dv, self.scale)
+            terms.append(t)
+        return self.base.with_objective(Objective(terms))
+
+    def update(self, traj, multipliers: bool = True) -> None:
+        """After a round that ended at ``traj``: the multipliers move by the misses left
+        and the weights grow."""
+        residuals = {}
+        for i, t in self.terms.items():
+            for kind, target, states in (("x", t.position_target, traj.x),
+                                         ("v", t.velocity_target, traj.v)):
+                if f"{kind}{i}" in self.start:
+                    residuals[f"{kind}{i}"] = states[t.frame][t.particles] - target
+        self.mult.update(residuals, multipliers=multipliers)
+        self.round += 1
+
+    def checkpoint(self, checkpoint, k: int):
+        """``checkpoint`` (or None) writing round ``k`` and the multipliers with the controls."""
+        if checkpoint is None:
+            return None
+        state = {key: value.tolist() for key, value in self.mult.state("rounds_").items()}
+        return Checkpoint(checkpoint.path, **checkpoint.meta, rounds_round=k, **state)
+
+    def resume(self, meta: dict | None) -> int:
+        """Take the multipliers a checkpoint's ``meta`` carries; the round to start at."""
+        if not meta or "rounds_round" not in meta or not self.mult.restore(meta, "rounds_"):
+            return 0
+        self.round = int(meta["rounds_round"])
+        return self.round

@@ -5,7 +5,10 @@ the segments' defects held by an augmented Lagrangian (:class:`~.multipliers.Mul
 shared with the keyframe rounds): rounds of the search method (L-BFGS-B by default) on the
 merit function, the multipliers moved by the defects left and the weights grown where a
 defect did not shrink, until the defects are within the keyframes' tolerances and the
-controls, simulated from the start as one trajectory, meet the goal.  Its controls then
+controls, simulated from the start as one trajectory, meet the goal.  The StateKeyframes
+are held the same way (``hold``): their multipliers move their aim by the miss left each
+round (their weights stay the problem's), since the penalty's own optimum misses by the
+control cost's pull over the weight, which can exceed the tolerance.  Its controls then
 start the stage's ordinary (single-shooting) search, which stops at once if the goal is
 already met and otherwise closes what the defects left.
 """
@@ -21,7 +24,7 @@ from ..objectives import StateKeyframe
 from ..state import SimulationError
 from .goal import GoalReached, verdict
 from .methods import get_method
-from .multipliers import Multipliers
+from .multipliers import KeyframeMultipliers, Multipliers
 from .outcome import CONVERGED, INTERRUPTED, LIMIT
 from .result import history_record
 from .shooting import Shooting
@@ -48,6 +51,7 @@ class ShootingOptions:
       tolerance costs what the keyframe's miss of that size costs); ``growth``: factor a
       weight grows by where its defect did not shrink to a quarter;
     * ``polish``: end with the stage's single-shooting search from the result;
+    * ``hold``: hold the StateKeyframes by multipliers too (``"lagrangian"`` only);
     * ``formulation``: ``"lagrangian"`` (the defects held by multipliers, rounds of the
       solve's method on the merit function) or ``"ipopt"`` (IPOPT with the defects as
       constraints and their Jacobian by one backward sweep per row,
@@ -62,6 +66,7 @@ class ShootingOptions:
     penalty: float = 1.0
     growth: float = 10.0
     polish: bool = True
+    hold: bool = True
     formulation: str = "lagrangian"
 
 
@@ -188,9 +193,10 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
         runner.close()
     info = ev.best_info or {}
     u = shooting.unpack(ev.best_z)[0] if ev.best_z is not None else u0
+    fun = true_objective(problem, u, info)[1] if info else np.nan
     record = {"stage": stage, "dt": problem.dt, "steps": problem.steps,
               "particles": problem.model.n, "nit": len(search.history) - first,
-              "nfev": ev.nfev, "njev": ev.njev, "fun": float(info.get("objective", np.nan)),
+              "nfev": ev.nfev, "njev": ev.njev, "fun": float(fun),
               "start_objective": None, "start_keyframe_error": None,
               "success": status == CONVERGED, "status": status,
               "message": f"multiple shooting, {opts.segments} segments, {rounds} rounds: "
@@ -221,6 +227,8 @@ def _rounds(problem, opts, search, ev, z, stage, goal, export):
     shooting, run = ev.shooting, get_method(search.method).run
     variables = _Variables(shooting)
     budget = search.maxiter
+    hard = (KeyframeMultipliers(problem, 1.0) if opts.hold and any(
+        isinstance(t, StateKeyframe) for t in problem.objective_terms.state_terms) else None)
     for r in range(opts.rounds):
         ev.reset()
         maxiter = max(budget // (opts.rounds - r), 1)
@@ -239,7 +247,17 @@ def _rounds(problem, opts, search, ev, z, stage, goal, export):
             return LIMIT, "iteration limit reached before the goal was met", r + 1
         ev.mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},
                         **{(k, "v"): cv for k, (_, cv) in enumerate(c)}})
+        if hard is not None:
+            hard.update(ev.best_info["trajectory"])
+            shooting.problem = hard.problem()
     return LIMIT, f"{opts.rounds} rounds ended before the goal was met", opts.rounds
+
+
+def true_objective(problem, u, info) -> tuple[float, float]:
+    """``(keyframe error, objective)`` of ``problem`` (its true targets, not a round's aim)
+    on the stitched trajectory of an evaluation's ``info``, at controls ``u``."""
+    keyframe = problem.state_cost(info["trajectory"], gradient=False)[0]
+    return keyframe, keyframe + problem.control_cost(u)[0]
 
 
 def _nlp(problem, opts, search, ev, z, stage, goal, export):
@@ -282,13 +300,14 @@ class _Hook:
         info = ev.best_info
         u = ev.shooting.unpack(ev.best_z)[0]
         defect = ev.shooting.defect_size(info["defects"])
+        keyframe, objective = true_objective(self.problem, u, info)
         search.history.append(history_record(
-            self.problem, u, objective=info["objective"],
-            keyframe_error=info["keyframe_error"], iteration=len(search.history) + 1,
+            self.problem, u, objective=objective,
+            keyframe_error=keyframe, iteration=len(search.history) + 1,
             stage=self.stage, seconds=time.perf_counter() - search.start, nfev=ev.nfev,
             round=self.round, defect=defect))
         if search.checkpoint is not None:
-            search.checkpoint.write(self.export(u), fun=float(info["objective"]),
+            search.checkpoint.write(self.export(u), fun=float(objective),
                                     nit=len(search.history), stage=self.stage,
                                     stage_dt=float(self.problem.dt))
         check()

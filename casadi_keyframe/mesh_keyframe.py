@@ -125,11 +125,11 @@ class MeshKeyframe(StateKeyframe):
                              f"rotation is an SVD); use the 'adjoint' or 'fd' gradient route")
         return super().symbolic(X, V)
 
-    def aiming(self, dx=0.0, dv=0.0, weight_scale: float = 1.0):
+    def aiming(self, dx=0.0, dv=0.0, weight_scale: float = 1.0, velocity_scale=None):
         if self.align:
             raise ValueError(f"{self.label}: an aligned target cannot be moved by a miss (its "
                              f"frame turns with the cloth); use align=False for hard keyframes")
-        return super().aiming(dx, dv, weight_scale)
+        return super().aiming(dx, dv, weight_scale, velocity_scale)
 
     def miss(self, traj):
         """rms and max distance to the target (after the best rigid motion with ``align``)

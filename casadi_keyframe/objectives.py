@@ -279,16 +279,18 @@ class StateKeyframe(StateTerm):
 
     aim = (0.0, 0.0)  # where the penalty aims, relative to the targets (see aiming)
 
-    def aiming(self, dx=0.0, dv=0.0, weight_scale: float = 1.0) -> "StateKeyframe":
+    def aiming(self, dx=0.0, dv=0.0, weight_scale: float = 1.0,
+               velocity_scale: float | None = None) -> "StateKeyframe":
         """An unbound copy (after ``bind``) whose penalty aims at the targets moved by
-        ``dx``, ``dv`` (per particle) with both weights times ``weight_scale``, while its
+        ``dx``, ``dv`` (per particle) with both weights times ``weight_scale`` (the velocity
+        weight times ``velocity_scale`` if given), while its
         targets, :meth:`miss` and :meth:`shortfall` stay the true ones: an augmented
         Lagrangian's keyframe (the multipliers move the aim; the goal stays put)."""
         out = self.at_frame(self.frame)
         out.agents = self._idx
         out.aim = (np.asarray(dx, dtype=float), np.asarray(dv, dtype=float))
         out.position_weight = self.position_weight * weight_scale
-        out.velocity_weight = self.velocity_weight * weight_scale
+        out.velocity_weight = self.velocity_weight * (velocity_scale or weight_scale)
         return out
 
     def miss(self, traj):

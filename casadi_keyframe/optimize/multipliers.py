@@ -6,9 +6,11 @@ A constraint block ``c_b = 0`` (a keyframe's position miss, a segment's defect) 
 objective as ``0.5 w_b |c_b + lambda_b / w_b|^2`` (equal to ``lambda_b . c_b + 0.5 w_b
 |c_b|^2`` up to a constant): the penalty ``w_b`` aims past the target by the shift
 ``lambda_b / w_b``.  After each inner search ``lambda_b += w_b c_b`` (the first-order
-update: the shift moves by the miss that is left), and the weights grow by ``growth``,
-either every time (a fixed schedule) or only where the miss did not fall below
-``shrink`` times its last size (the classical rule of Conn, Gould and Toint's LANCELOT).
+update: the shift moves by the miss that is left) and the weights grow by ``growth``,
+either every time (a fixed schedule: the keyframe rounds), or as Conn, Gould and Toint's
+LANCELOT does: where the miss fell below ``shrink`` times its last size the multiplier
+moves, elsewhere the weight grows and the multiplier stays (moving it by a miss the inner
+search could not shrink only winds it up).
 """
 from __future__ import annotations
 
@@ -22,8 +24,8 @@ class Multipliers:
     """Multipliers and penalty weights of named constraint blocks.
 
     ``weights``: each block's starting penalty weight (a number); ``growth`` >= 1 the
-    factor a weight grows by; ``always``: grow every update (a schedule) rather than only
-    where the miss did not shrink by ``shrink``.
+    factor a weight grows by; ``always``: move every multiplier and grow every weight at
+    each update (a schedule), rather than the LANCELOT rule (see the module).
     """
 
     def __init__(self, weights: dict, *, growth: float = 1.0, always: bool = True,
@@ -55,10 +57,12 @@ class Multipliers:
         weights (every one, or those whose miss did not shrink enough)."""
         for b, c in residuals.items():
             c = np.asarray(c, dtype=float)
-            if multipliers:
-                self.lam[b] = self.lam[b] + self.weights[b] * c
             size = float(np.linalg.norm(c))
-            if self.always or size > self.shrink * self.last[b]:
+            progress = self.always or size <= self.shrink * self.last[b] or not np.isfinite(
+                self.last[b])
+            if multipliers and progress:
+                self.lam[b] = self.lam[b] + self.weights[b] * c
+            if self.always or not progress:
                 self.weights[b] *= self.growth
             self.last[b] = size
         self.updates += 1
@@ -90,7 +94,7 @@ class KeyframeMultipliers:
     position and per velocity target, keyed ``x3``, ``v3`` by the term's place among the
     objective's terms) and the problem whose keyframes aim by them."""
 
-    def __init__(self, problem, growth: float):
+    def __init__(self, problem, growth: float, always: bool = True):
         self.base = problem
         terms = problem.objective_terms.terms
         self.terms = {i: t for i, t in enumerate(terms) if isinstance(t, StateKeyframe)}
@@ -102,13 +106,13 @@ class KeyframeMultipliers:
                       for kind, target, w in (("x", t.position_target, t.position_weight),
                                               ("v", t.velocity_target, t.velocity_weight))
                       if target is not None and w > 0}
-        self.mult = Multipliers(self.start, growth=growth)
+        self.mult = Multipliers(self.start, growth=growth, always=always)
         self.round = 0
 
     @property
     def scale(self) -> float:
-        """The keyframe weights' factor this round."""
-        return self.mult.growth ** self.mult.updates
+        """The keyframe weights' factor this round (the largest, where they differ)."""
+        return max(self.mult.weights[b] / w for b, w in self.start.items())
 
     def problem(self):
         """The base problem with each keyframe aiming past its target by the shift (the base
@@ -120,7 +124,9 @@ class KeyframeMultipliers:
             if i in self.terms:
                 dx, dv = (-self.mult.shift(f"{k}{i}") if f"{k}{i}" in self.start else 0.0
                           for k in "xv")
-                t = t.aiming(dx, dv, self.scale)
+                sx, sv = (self.mult.weights[f"{k}{i}"] / self.start[f"{k}{i}"]
+                          if f"{k}{i}" in self.start else None for k in "xv")
+                t = t.aiming(dx, dv, sx or sv, sv)
             terms.append(t)
         return self.base.with_objective(Objective(terms))
 

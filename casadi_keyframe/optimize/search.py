@@ -113,27 +113,36 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
         export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
         ev = Evaluator(p, strategy, search.checkpoint, stage=k, export=export, goal=judge_by,
                        stop=stop)
-        start = p.initial_controls() if u is None else u
+        start, polish = p.initial_controls() if u is None else u, True
         if multiple is not None and multiple.segments > 1:
-            opts = multiple if k == 0 else replace(multiple, init="guess")
-            record, start = run_shooting(p, opts, start, search, k, judge_by, export, problem)
-            stages.append(record)
-            if not multiple.polish or record["status"] == INTERRUPTED or search.time_up():
-                evaluate_at(ev, start)
-                stages[-1]["status"], stages[-1]["message"] = judge(
-                    record["status"], record["message"], ev.verdict())
-                stages[-1]["success"] = stages[-1]["status"] == CONVERGED
-                if record["status"] == INTERRUPTED or search.time_up():
-                    break
-                if p is problem:
-                    break
-                u = carry(p, ev.best_u, problems[k + 1])
-                continue
-        stages.append(search.run(p, ev, start, (k, len(problems))))
+            start, ev, polish = _shoot(p, k, multiple, start, search, stages, ev, problem)
+        if polish:
+            stages.append(search.run(ev.problem, ev, start, (k, len(problems))))
         if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
         u = carry(p, ev.best_u, problems[k + 1])
     return _result(problem, p, ev, strategy, search, stages, len(problems))
+
+
+def _shoot(p, k, opts, start, search, stages, ev, origin):
+    """Stage ``k``'s multiple shooting (its record appended to ``stages``): ``(controls,
+    evaluator, polish?)``.  The polish searches the problem whose keyframes aim where the
+    shooting's multipliers left them (judged by the true targets); without a polish, or
+    after an interrupt or the time limit, the shooting's controls are evaluated and judged
+    as they are."""
+    opts = opts if k == 0 else replace(opts, init="guess")
+    record, start, aimed = run_shooting(p, opts, start, search, k, ev.goal, ev.export, origin)
+    stages.append(record)
+    if opts.polish and record["status"] != INTERRUPTED and not search.time_up():
+        if aimed is not p:
+            ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=k, export=ev.export,
+                           goal=ev.goal, stop=ev.stop)
+        return start, ev, True
+    evaluate_at(ev, start)
+    record["status"], record["message"] = judge(record["status"], record["message"],
+                                                ev.verdict())
+    record["success"] = record["status"] == CONVERGED
+    return start, ev, False
 
 
 def evaluate_at(ev, u) -> None:
@@ -171,8 +180,11 @@ def _positive(value) -> bool:
 def _result(problem, p, ev, strategy, search, stages, count) -> Result:
     """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``)."""
     status, message = stages[-1]["status"], stages[-1]["message"]
-    if p is problem:
+    if p is problem and ev.problem is problem:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
+    elif p is problem:  # a polish whose keyframes aimed past their targets
+        u = ev.best_u
+        fun, jac = evaluate_final(problem, strategy, u)
     else:
         u = carry(p, ev.best_u, problem)
         fun, jac = evaluate_final(problem, strategy, u)

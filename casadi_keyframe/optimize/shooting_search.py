@@ -165,7 +165,9 @@ class _Variables:
 
 def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, export,
                  origin=None):
-    """The multiple-shooting stage of ``problem`` from controls ``u0``: ``(Stage, u)``.
+    """The multiple-shooting stage of ``problem`` from controls ``u0``: ``(Stage, u,
+    aimed)``, ``aimed`` the problem with its keyframes aiming where the multipliers left them
+    (``problem`` itself when they hold none).
 
     ``search`` is the solve's shared state (method, limits, history, checkpoint, clock),
     ``goal`` the problem whose keyframes judge, ``export`` maps controls to the solve's
@@ -204,7 +206,7 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
               "evaluation_seconds": ev.seconds, "failed_simulations": ev.failures,
               "segments": opts.segments,
               "defect": shooting.defect_size(info.get("defects", []))}
-    return record, u
+    return record, u, shooting.problem
 
 
 def _start_weights(shooting, penalty) -> dict:
@@ -227,7 +229,7 @@ def _rounds(problem, opts, search, ev, z, stage, goal, export):
     shooting, run = ev.shooting, get_method(search.method).run
     variables = _Variables(shooting)
     budget = search.maxiter
-    hard = (KeyframeMultipliers(problem, 1.0) if opts.hold and any(
+    hard = (KeyframeMultipliers(problem, opts.growth, always=False) if opts.hold and any(
         isinstance(t, StateKeyframe) for t in problem.objective_terms.state_terms) else None)
     for r in range(opts.rounds):
         ev.reset()

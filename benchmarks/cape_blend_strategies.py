@@ -98,9 +98,7 @@ def run(name, build, maxiter, time_limit, softness) -> dict:
     res = solve(prob, spec.pop("method", "lbfgsb"), maxiter=maxiter, quiet=True,
                 time_limit=time_limit, homotopy=homotopy, **spec)
     wall, cpu = time.perf_counter() - wall, cpu_seconds() - cpu
-    view = prob.view
-    report = clip_report(prob.model, res.trajectory, view.character,
-                         view.animation.shifted(-view.t_a))
+    report = clip_report(prob.model, res.trajectory)
     defect = [s["defect"] for s in res.stages if "defect" in s]
     return {**report, **free_misses(prob, res.trajectory), "strategy": name,
             "start": start["rms_x"], "nit": res.nit, "cpu": cpu, "wall": wall,

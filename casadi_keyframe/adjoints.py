@@ -12,6 +12,12 @@ backward pass and is called as ``strategy(problem, u) -> (phi, dphi/du)``.
   independent witness for tests.
 
 "exact" is a deprecated name of "casadi".
+
+Every strategy watches its gradient (:mod:`casadi_keyframe.health`): "adjoint" and
+"swapped" watch their backward pass and raise :class:`~casadi_keyframe.health.GradientError`
+when it grows past :data:`~casadi_keyframe.health.GROWTH_BOUND` or overflows (``guard=False``
+only records); each keeps the last pass's :class:`~casadi_keyframe.health.Growth` in
+``growth``; "casadi" and "fd" refuse a non-finite gradient.
 """
 from __future__ import annotations
 
@@ -21,26 +27,45 @@ import weakref
 import casadi as ca
 import numpy as np
 
+from .health import GROWTH_BOUND, BackwardWatch, check_finite, warn_route_limits
 from .simulate import backward
 
 
 class Adjoint:
-    """Exact: the discrete adjoint of the simulated scheme, by its hand-written backward step."""
+    """Exact: the discrete adjoint of the simulated scheme, by its hand-written backward step.
+
+    ``guard`` (default): the evaluation fails with a GradientError if the backward pass
+    grows past ``bound`` or overflows; without, its growth is only recorded (``growth``)."""
 
     name = "adjoint"
+    exact = True
+    guard, bound = True, GROWTH_BOUND  # (class defaults: subclasses may skip __init__)
+    growth = None  # the last backward pass's health.Growth
+
+    def __init__(self, *, guard: bool = True, bound: float = GROWTH_BOUND):
+        self.guard, self.bound = guard, bound
 
     def backward_step(self, integrator):
         """The integrator's backward step this strategy runs in eq. (5)."""
         return integrator.step_vjp
 
     def __call__(self, problem, u):
+        self.growth = None
+        step_vjp = self.backward_step(problem.integrator)
         traj = problem.simulate(u)
         value, gx, gv = problem.state_cost(traj)
-        g_ext, g0 = backward(problem.integrator, problem.model, traj, gx, gv,
-                             step_vjp=self.backward_step(problem.integrator))
-        problem.integrator.release(traj)
+        watch = BackwardWatch(self.name, problem, guard=self.guard, bound=self.bound)
+        try:
+            g_ext, g0 = backward(problem.integrator, problem.model, traj, gx, gv,
+                                 step_vjp=step_vjp, watch=watch)
+        finally:
+            self.growth = watch.result()
+            problem.integrator.release(traj)
         c_val, c_grad = problem.control_cost(u)
-        return value + c_val, problem.controls.pullback(g_ext, g0.v) + c_grad
+        grad = problem.controls.pullback(g_ext, g0.v) + c_grad
+        if self.guard:
+            check_finite(self.name, grad, problem)
+        return value + c_val, grad
 
 
 class Swapped(Adjoint):
@@ -49,6 +74,7 @@ class Swapped(Adjoint):
     against "adjoint" or "casadi" in the gradient-accuracy study."""
 
     name = "swapped"
+    exact = False
 
     def backward_step(self, integrator):
         step = getattr(integrator, "swapped_step_vjp", None)
@@ -59,14 +85,20 @@ class Swapped(Adjoint):
                 "exact adjoint")
         return step
 
+    def __call__(self, problem, u):
+        warn_route_limits(self.name, problem.model)  # once per model
+        return super().__call__(problem, u)
 
-def unrolled_objective(problem, U):
+
+def unrolled_objective(problem, U, P):
     """The whole objective as an MX expression of the controls U, through the unrolled
-    symbolic simulation (the integrator's ``symbolic_step`` at every step)."""
+    symbolic simulation (the integrator's ``symbolic_step`` at every step); ``P`` holds every
+    step's parameters S, one after another (:func:`step_parameters`)."""
     forces, dv0 = problem.controls.symbolic(U)
     X = ca.DM(problem.x0.T)
     V = ca.DM(problem.v0.T) + (dv0 if dv0 is not None else 0)
     step = problem.integrator.symbolic_step(problem.model)
+    size = step.size1_in(4)
     by_frame: dict[int, list] = {}
     for t in problem.objective_terms.state_terms:
         by_frame.setdefault(t.frame, []).append(t)
@@ -81,30 +113,47 @@ def unrolled_objective(problem, U):
             E = ca.DM(problem.external[n].T)
             if forces is not None:
                 E = E + forces[n]
-            S = problem.integrator.step_parameters(problem.model, n * problem.dt, problem.dt)
-            X, V = step(X, V, E, problem.dt, S)
+            X, V = step(X, V, E, problem.dt, P[n * size:(n + 1) * size])
     return J + problem.control_expression(U)
 
 
+def step_parameters(problem, u) -> np.ndarray:
+    """Every step's symbolic parameters for controls u: what depends on time and, for a
+    scheme that decides something per step (the contacts a step holds), what the numeric
+    simulation decided, so the unrolled graph follows the path actually simulated."""
+    integrator, model, dt = problem.integrator, problem.model, problem.dt
+    records = problem.simulate(u).records if integrator.decides_per_step(model) else None
+    return np.concatenate([integrator.step_parameters(model, n * dt, dt,
+                                                      None if records is None else records[n])
+                           for n in range(problem.steps)] or [np.zeros(0)])
+
+
 class CasADiReverse:
-    """Exact, the reference: CasADi reverse mode through the unrolled simulation; its
+    """Exact, the reference: CasADi reverse mode through the unrolled simulation of the path
+    the numeric simulation takes (the contacts it holds, for a cloth that holds them); its
     Function is built once per problem and kept while the problem lives."""
 
     name = "casadi"
+    exact = True
+    growth = None  # no backward loop of its own to watch: a non-finite gradient is refused
     _functions: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
     def function(self, problem) -> ca.Function:
         fn = self._functions.get(problem)
         if fn is None:
             U = ca.MX.sym("U", problem.size)
-            J = unrolled_objective(problem, U)
-            fn = self._functions[problem] = ca.Function("casadi_gradient", [U],
+            step = problem.integrator.symbolic_step(problem.model)
+            P = ca.MX.sym("P", step.size1_in(4) * problem.steps)
+            J = unrolled_objective(problem, U, P)
+            fn = self._functions[problem] = ca.Function("casadi_gradient", [U, P],
                                                         [J, ca.gradient(J, U)])
         return fn
 
     def __call__(self, problem, u):
-        val, grad = self.function(problem)(u)
-        return float(val), np.asarray(grad).ravel()
+        val, grad = self.function(problem)(u, step_parameters(problem, u))
+        grad = np.asarray(grad).ravel()
+        check_finite(self.name, grad, problem)
+        return float(val), grad
 
 
 class Exact(CasADiReverse):
@@ -122,6 +171,8 @@ class FiniteDifference:
     """Central differences with step ``h``: ``(phi(u + h e_i) - phi(u - h e_i)) / 2h``."""
 
     name = "fd"
+    exact = False
+    growth = None
 
     def __init__(self, h: float = 1e-6):
         self.h = h
@@ -130,6 +181,7 @@ class FiniteDifference:
         grad = np.empty_like(u)
         for i in range(u.size):
             grad[i] = self.directional(problem, u, _unit(u.size, i))
+        check_finite(self.name, grad, problem)
         return problem.objective(u), grad
 
     def directional(self, problem, u, direction) -> float:

@@ -7,9 +7,9 @@ import ast
 import inspect
 import shutil
 import sys
-import tempfile
 import textwrap
 import time
+import traceback
 from fractions import Fraction
 from pathlib import Path
 
@@ -19,8 +19,9 @@ from .adjoints import ROUTES as GRADIENT_ROUTES
 from .cli_options import add_shooting_options, parse_levels, parse_shooting
 from .export import FORMATS as EXPORT_FORMATS
 from .export.alembic import BlenderError
-from .loading import (OverrideError, check_overrides, list_problems, load_module,
-                      load_problem, overrides_of, solve_defaults)
+from .files import writable_folder
+from .loading import (OverrideError, ProblemFileError, check_overrides, list_problems,
+                      load_module, load_problem, overrides_of, solve_defaults)
 from .optimize import METHODS
 from .run import EXIT_CODES, run_export, run_render, run_solve, solve_run
 from .sweep.plan import SWEEP_EXIT_CODES
@@ -116,23 +117,6 @@ def at_least(kind, low, *, strict: bool = False):
 positive_int = at_least(int, 1)
 
 
-def ensure_writable(folder) -> Path:
-    """Create ``folder`` (and its parents) and check a file can be written in it, so a bad
-    ``--out`` is refused before the build and the solve, not at the first checkpoint."""
-    out = Path(folder)
-    try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
-    except OSError as err:
-        blocker = next((p for p in (out, *out.parents) if p.exists() and not p.is_dir()), None)
-        reason = (f"{blocker} is a file, not a folder" if blocker is not None
-                  else err.strerror or str(err))
-        raise ValueError(f"cannot write the output folder {out}: {reason}; choose another "
-                         f"--out") from None
-    return out
-
-
 def parse_time_steps(text: str | None) -> list[float] | None:
     """``"1/15,1/30,1/60"`` (fractions or decimals, seconds) -> ``[0.0667, 0.0333, 0.0167]``."""
     if not text:
@@ -218,7 +202,7 @@ def cmd_solve(args) -> int:
     module = load_module(args.problem)
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
-    out = ensure_writable(args.out) if args.out else None
+    out = writable_folder(args.out, "--out") if args.out is not None else None
     shooting = parse_shooting(args.segments, _items(args.shooting), args.scheduler)
     homotopy = parse_levels(module, _items(args.homotopy))
     spec = solve_run(module, args.problem, overrides, out, method=args.method,
@@ -230,7 +214,7 @@ def cmd_solve(args) -> int:
                      quiet=args.quiet,
                      animation=not args.no_animation, exports=tuple(args.export or ()),
                      viewer=not args.no_viewer)
-    ensure_writable(spec.out)
+    writable_folder(spec.out, "--out")
     return run_solve(spec)
 
 
@@ -243,36 +227,25 @@ def cmd_export(args) -> int:
 
 
 def cmd_gradcheck(args) -> int:
-    from .adjoints import FiniteDifference, get_gradient
-    from .studies import relative_error_and_cosine
+    from .health_report import compare_routes, format_health, gradient_health
 
     prob = load_problem(args.problem, **parse_overrides(args.set))
-    rng = np.random.default_rng(args.seed)
-    u = args.scale * rng.standard_normal(prob.size)
-    names = [n.strip() for n in args.routes.split(",")]
+    route = args.gradient or solve_defaults(load_module(args.problem))["gradient"]
+    names = [n.strip() for n in args.routes.split(",")] if args.routes else []
     unknown = [n for n in names if n not in GRADIENT_ROUTES]
     if unknown:
         raise ValueError(f"--routes: unknown gradient route(s) {unknown}; choose from "
                          f"{', '.join(GRADIENT_ROUTES)}")
-    routes = {}
-    for name in names:
-        t = time.perf_counter()
-        _, g = get_gradient(name)(prob, u)
-        routes[name] = (g, time.perf_counter() - t)
-    ref_name = names[-1]
-    ref = routes[ref_name][0]
-    print(f"{prob.name}: {prob.size} controls; reference route '{ref_name}'")
-    for name, (g, sec) in routes.items():
-        rel, cos = relative_error_and_cosine(g, ref)
-        print(f"  {name:8s} {sec:8.3f} s   relative error {rel:.3e}   cosine {cos:.12f}")
-    fd = FiniteDifference(args.h)
-    for k in range(args.directions):
-        d = rng.standard_normal(prob.size)
-        d /= np.linalg.norm(d)
-        slope = fd.directional(prob, u, d)
-        tangent = prob.directional_derivative(u, d)
-        print(f"  direction {k}: central difference {slope:+.10e}  tangent {tangent:+.10e}  "
-              + "  ".join(f"{n} {g @ d:+.10e}" for n, (g, _) in routes.items()))
+    rng = np.random.default_rng(args.seed)
+    u = prob.initial_controls() + args.scale * rng.standard_normal(prob.size)
+    report = gradient_health(prob, u, route, steps=(1e4 * args.h, 1e2 * args.h, args.h),
+                             directions=args.directions, seed=args.seed,
+                             radius=not args.no_radius)
+    where = "the start" if args.scale == 0 else f"the start + {args.scale:g} x N(0, 1)"
+    print(f"{prob.name} at {where}:")
+    print(format_health(report))
+    if names:
+        print(compare_routes(prob, u, names))
     return 0
 
 
@@ -282,13 +255,22 @@ def cmd_study(args) -> int:
     if args.grid:
         from .sweep import report, study_sweep
 
-        out = ensure_writable(args.out or Path("results") / f"study-{args.study}")
+        out = writable_folder(_out(args, f"study-{args.study}"), "--out")
         result = study_sweep(args.study, parse_grid(args.grid), out=out,
                              overrides=parse_overrides(args.set), figure=args.figure,
                              **_runner_options(args))
         report(result, out)
         return result.exit_code
-    if args.set or args.out:
+    if args.study == "swap-validity":  # the map's slices, on the sweep runner
+        from .swap_validity import format_swap_validity, swap_validity
+
+        if args.set:
+            raise ValueError("--set goes with --grid (a study grid run as a sweep)")
+        out = writable_folder(_out(args, f"study-{args.study}"), "--out")
+        study = swap_validity(args.quick, sweep={"out": out, **_runner_options(args)})
+        print(format_swap_validity(study))
+        return study["sweep"]["exit_code"]
+    if args.set or args.out is not None:
         raise ValueError("--set and --out go with --grid (a study grid run as a sweep)")
     if args.study == "gradient-accuracy":
         print(studies.format_gradient_accuracy(studies.gradient_accuracy(quick=args.quick)))
@@ -301,7 +283,7 @@ def cmd_sweep(args) -> int:
     from .sweep import report, sweep
 
     grid = parse_grid(args.grid)
-    out = ensure_writable(args.out or Path("results") / f"sweep-{Path(args.problem).stem}")
+    out = writable_folder(_out(args, f"sweep-{Path(args.problem).stem}"), "--out")
     result = sweep(args.problem, grid, out=out, starts=args.starts,
                    overrides=parse_overrides(args.set), seed=args.seed, perturb=args.perturb,
                    figure=args.figure, pictures=args.pictures,
@@ -312,6 +294,11 @@ def cmd_sweep(args) -> int:
                    **_runner_options(args))
     report(result, out)
     return result.exit_code
+
+
+def _out(args, default: str):
+    """``--out`` as given (an empty one is refused by the check), else ``results/DEFAULT``."""
+    return Path("results") / default if args.out is None else args.out
 
 
 def _runner_options(args) -> dict:
@@ -442,14 +429,26 @@ def _solve_parser(sub) -> None:
 
 def _gradcheck_parser(sub) -> None:
     """The ``gradcheck`` command's arguments."""
-    g = sub.add_parser("gradcheck", help="compare the gradient routes on a problem")
+    g = sub.add_parser("gradcheck", help="a gradient route's health at a point: backward "
+                                          "growth, dot-product test, central differences, "
+                                          "linearity radius, and a verdict")
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
-    g.add_argument("--routes", default="adjoint,casadi",
-                   help="comma-separated gradient routes; the last is the reference")
-    g.add_argument("--directions", type=at_least(int, 0), default=3, help="random central-difference checks")
-    g.add_argument("--h", type=at_least(float, 0, strict=True), default=1e-6, help="finite-difference step")
-    g.add_argument("--scale", type=at_least(float, 0), default=0.5, help="size of the random controls")
+    g.add_argument("--gradient", choices=GRADIENT_ROUTES,
+                   help="the route checked (default: the problem's SOLVE, else 'adjoint'); "
+                        "an approximate one is compared with the exact adjoint")
+    g.add_argument("--routes", help="also compare these comma-separated routes' gradients; "
+                                    "the last is the reference (e.g. adjoint,casadi)")
+    g.add_argument("--directions", type=at_least(int, 0), default=1,
+                   help="random directions for central differences (beside the gradient's)")
+    g.add_argument("--h", type=at_least(float, 0, strict=True), default=1e-6,
+                   help="the smallest central-difference step (also 100x and 10000x it), "
+                        "times max(|u|, 1)")
+    g.add_argument("--scale", type=at_least(float, 0), default=0.0,
+                   help="check at the problem's start plus this rms of random controls "
+                        "(default 0: at the start)")
+    g.add_argument("--no-radius", action="store_true",
+                   help="skip the linearity radius (a ladder of simulations)")
     g.add_argument("--seed", type=int, default=0)
     g.set_defaults(func=cmd_gradcheck)
 
@@ -461,16 +460,21 @@ def _study_parser(sub) -> None:
                         epilog=SWEEP_EXIT_CODES + "\n\nexample: casadi-keyframe study "
                         "gradient-accuracy --grid dt=1/30,1/60,1/120 --grid stretch=50,500",
                         formatter_class=argparse.RawDescriptionHelpFormatter)
-    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy"))
+    st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy",
+                                      "swap-validity"))
     st.add_argument("--quick", action="store_true", help="small sizes (as CASADI_KEYFRAME_QUICK=1)")
     st.add_argument("--grid", action="append", metavar="KEY=V1,V2,...",
                     help="run the study at every combination of these values on the sweep "
                          "runner (gradient-accuracy: dt, horizon, stretch, amplitude, seed; "
-                         "integrator-accuracy: dt, stretch, rows, seed)")
+                         "integrator-accuracy: dt, stretch, rows, seed; swap-validity: "
+                         "contact, collision, stiffness, dt, amplitude, horizon, speed, "
+                         "damping, rows, solve, maxiter, seed; without --grid it runs its "
+                         "whole map on the runner)")
     st.add_argument("--set", action="append", metavar="KEY=VALUE",
                     help="a fixed value for every point of the grid")
     st.add_argument("--figure", help="the figure ranked and plotted (gradient-accuracy: "
-                                     "relative_error; integrator-accuracy: gap_x or gap_v)")
+                                     "relative_error; integrator-accuracy: gap_x or gap_v; "
+                                     "swap-validity: relative_error, growth_swapped, cosine)")
     st.add_argument("--out", help="output folder (default results/study-STUDY)")
     _add_runner_options(st)
     st.set_defaults(func=cmd_study)
@@ -498,31 +502,47 @@ def build_parser() -> argparse.ArgumentParser:
     _gradcheck_parser(sub)
     _study_parser(sub)
     _add_sweep_parser(sub)
+    debug = "print the whole traceback with an error (the library's own lines included)"
+    p.add_argument("--debug", action="store_true", help=debug)
+    for command in sub.choices.values():  # also after the command, where users type it
+        command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
+                             help=debug)
     return p
 
 
 def main(argv=None) -> int:
     """Run a command: 0 on success, 1 when the simulation fails, 2 on bad input (a message,
-    never a traceback)."""
+    never a traceback; ``--debug`` adds the traceback)."""
     args = build_parser().parse_args(argv)
+    debug = getattr(args, "debug", False)
     try:
         return args.func(args)
     except OverrideError as err:
-        print(f"error: {err}\n  'casadi-keyframe show {err.problem}' lists the overrides with "
-              f"their types, defaults and ranges", file=sys.stderr)
+        _error(err, debug, f"\n  'casadi-keyframe show {err.problem}' lists the overrides "
+                           "with their types, defaults and ranges")
         return 2
     except SimulationError as err:
         text = " ".join(str(err).split())
         text = text if "simulation" in text else f"the simulation failed: {text}"
         fix = "" if "reduce" in text else "; reduce dt (--set dt=...) or the forces"
-        print(f"error: {text}{fix}", file=sys.stderr)
+        _error(err, debug, text=text + fix)
         return 1
+    except ProblemFileError as err:
+        _error(err, debug, "" if debug else "\n  (--debug shows the whole traceback)")
+        return 2
     except (ValueError, TypeError, FileNotFoundError, ImportError) as err:
-        print(f"error: {err}", file=sys.stderr)
+        _error(err, debug)
         return 2
     except BlenderError as err:  # an export through Blender that Blender did not finish
-        print(f"error: {err}", file=sys.stderr)
+        _error(err, debug)
         return 1
+
+
+def _error(err, debug: bool, more: str = "", *, text: str | None = None) -> None:
+    """``error: MESSAGE`` on stderr (with ``--debug``, the traceback first)."""
+    if debug:
+        traceback.print_exception(err)
+    print(f"error: {err if text is None else text}{more}", file=sys.stderr)
 
 
 if __name__ == "__main__":

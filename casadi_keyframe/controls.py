@@ -15,6 +15,36 @@ import scipy.sparse as sp
 
 
 
+def _numbers(u, what: str) -> np.ndarray:
+    """``u`` as a float64 array if it holds real numbers only, else a TypeError that says
+    what it holds (``what`` says what it should be)."""
+    if u is None or isinstance(u, (str, bytes)):
+        raise TypeError(f"{what}, got {u!r}")
+    try:
+        arr = np.asarray(u)
+    except (ValueError, TypeError):  # ragged nested lists
+        raise TypeError(f"{what}, got a ragged {type(u).__name__}") from None
+    kind = arr.dtype.kind
+    if kind == "c":
+        raise TypeError(f"{what}, got complex numbers: pass the real part (u.real) if the "
+                        "imaginary part is meant to be zero")
+    if kind == "b":
+        raise TypeError(f"{what}, got booleans")
+    if kind == "O":
+        odd = next((v for v in arr.ravel() if not _is_real(v)), None)
+        if odd is not None or any(v is None for v in arr.ravel()):
+            raise TypeError(f"{what}, got Python objects that are not numbers (e.g. {odd!r})")
+        return arr.astype(float)
+    if kind not in "iuf":
+        raise TypeError(f"{what}, got {'text' if kind in 'US' else 'values'} of dtype "
+                        f"{arr.dtype}")
+    return arr.astype(float, copy=False)
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool)
+
+
 def resample_steps(values, steps: int) -> np.ndarray:
     """Per-step values ``(old_steps, ...)`` carried to ``steps`` equal steps of the same horizon.
 
@@ -114,13 +144,19 @@ class Controls:
         return lb, ub
 
     def check(self, u) -> np.ndarray:
-        u = np.asarray(u, dtype=float)
-        if u.shape != (self.size,):
-            raise ValueError(f"controls must be a flat vector of length {self.size} "
-                             f"({' x '.join(map(str, self.block_shape))}), got shape {u.shape}")
-        if not np.all(np.isfinite(u)):
-            raise ValueError("controls contain NaN or inf")
-        return u
+        """``u`` as a flat float64 vector of :attr:`size` finite real numbers; a TypeError
+        for anything that is not real numbers (None, text, complex, booleans), a ValueError
+        for a wrong length or NaN and inf."""
+        what = (f"controls must be a flat vector of {self.size} real numbers "
+                f"({' x '.join(map(str, self.block_shape))})")
+        arr = _numbers(u, what)
+        if arr.shape != (self.size,):
+            raise ValueError(f"{what}, got shape {arr.shape}"
+                             + (f" ({arr.size} values)" if arr.ndim > 1 else ""))
+        if not np.all(np.isfinite(arr)):
+            raise ValueError(f"controls contain NaN or inf (at {np.size(np.flatnonzero(~np.isfinite(arr)))} "
+                             "entries)")
+        return arr
 
     # numeric map and its transpose
     def external(self, u) -> np.ndarray | None:

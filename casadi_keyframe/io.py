@@ -16,6 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .files import FileDamaged, read_json, read_npz, writable_file, writable_folder
 from .interrupts import deferred
 
 RESULT, SUMMARY, CHECKPOINT = "result.npz", "summary.json", "checkpoint.npz"
@@ -66,10 +67,18 @@ class Checkpoint:
 
 
 def as_checkpoint(checkpoint) -> Checkpoint | None:
-    """None, a :class:`Checkpoint`, or a path made into one."""
-    if checkpoint is None or isinstance(checkpoint, Checkpoint):
-        return checkpoint
-    return Checkpoint(checkpoint)
+    """None, a :class:`Checkpoint`, or a path made into one; its path checked writable
+    (ValueError naming ``checkpoint=``) before a search starts, not at its first
+    iteration."""
+    if checkpoint is None:
+        return None
+    if not isinstance(checkpoint, Checkpoint):
+        if not isinstance(checkpoint, (str, os.PathLike)):
+            raise TypeError(f"checkpoint= is a file path (or a Checkpoint), got "
+                            f"{type(checkpoint).__name__}")
+        checkpoint = Checkpoint(checkpoint)
+    writable_file(checkpoint.path, "checkpoint=")
+    return checkpoint
 
 
 def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = None,
@@ -78,8 +87,7 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
 
     ``meta`` (e.g. ``problem_file``, ``resumed_from``) joins the summary and the npz's
     ``meta``."""
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    out = writable_folder(out_dir, "out_dir")
     summary = {"problem": problem_name, "overrides": overrides or {}, **meta,
                **result.summary()}
     traj, hist = result.trajectory, result.history
@@ -91,6 +99,9 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
               history_keyframe_error=np.array([h["keyframe_error"] for h in hist]),
               history_seconds=np.array([h["seconds"] for h in hist]),
               history_stage=np.array([h.get("stage", 0) for h in hist], dtype=int),
+              history_dt=np.array([h.get("dt", np.nan) for h in hist], dtype=float),
+              history_particles=np.array([h.get("particles", 0) for h in hist], dtype=int),
+              history_round=np.array([h.get("round", -1) for h in hist], dtype=int),
               start_objective=np.array(_or_nan(result.start["objective"])),
               start_keyframe_error=np.array(_or_nan(result.start["keyframe_error"])))
     write_json(out / SUMMARY, summary)
@@ -119,24 +130,85 @@ def run_file(source) -> Path:
 def read_run(source) -> dict:
     """``{"path", "u", "meta", "arrays"}`` of a checkpoint or a result (``source``: the file
     or its folder, see :func:`run_file`).  ``meta`` comes from the file, or for a result
-    written before files carried it, from the ``summary.json`` beside it."""
+    written before files carried it, from the ``summary.json`` beside it.  Read by
+    :func:`~casadi_keyframe.files.read_npz` (nothing unpickled); a damaged file, or one
+    whose arrays do not fit together, is a :class:`~casadi_keyframe.files.FileDamaged`
+    naming what is wrong and the run's other file to use instead."""
     path = run_file(source)
-    try:
-        with np.load(path) as data:
-            arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as err:
-        raise ValueError(f"cannot read {path}: {err}") from None
-    if "u" not in arrays:
-        raise ValueError(f"{path} holds no controls 'u': not a checkpoint or result of "
-                         "casadi-keyframe")
+    fix = _instead(path)
+    arrays = read_npz(path, required=("u",), fix=fix)
+    u = _real(arrays.pop("u"), "u", path, fix, ndim=1)
     if "meta" in arrays:
-        meta = json.loads(str(arrays.pop("meta")))
+        meta = _meta(arrays.pop("meta"), path, fix)
     elif (path.parent / SUMMARY).is_file():
-        meta = json.loads((path.parent / SUMMARY).read_text())
+        meta = _meta(read_json(path.parent / SUMMARY, fix=fix), path.parent / SUMMARY, fix)
     else:
-        raise ValueError(f"{path} does not say which problem it solves (no 'meta' and no "
-                         f"{SUMMARY} beside it)")
-    return {"path": path, "u": arrays.pop("u"), "meta": meta, "arrays": arrays}
+        raise FileDamaged(path, f"does not say which problem it solves (no 'meta' and no "
+                                f"{SUMMARY} beside it): not a checkpoint or result of "
+                                "casadi-keyframe", fix)
+    _check_trajectory(arrays, path, fix)
+    return {"path": path, "u": u, "meta": meta, "arrays": arrays}
+
+
+def _instead(path: Path) -> str:
+    """What to do when the run file ``path`` is damaged: the run's other file, if there is
+    one, or solve again."""
+    other = path.parent / (RESULT if path.name == CHECKPOINT else CHECKPOINT)
+    again = f"or solve again (--out {path.parent})"
+    if other != path and other.is_file():
+        what = "its best controls" if other.name == CHECKPOINT else "its result"
+        return f"give the run's other file {other} ({what}) instead, {again}"
+    return f"solve the problem again (--out {path.parent})"
+
+
+def _real(array, name: str, path: Path, fix: str, *, ndim: int) -> np.ndarray:
+    """``array`` as float64 if it is ``ndim``-dimensional, real and finite."""
+    if array.dtype.kind not in "fiu" or array.ndim != ndim or not np.all(np.isfinite(array)):
+        raise FileDamaged(path, f"has an array {name!r} that is not {ndim}-D finite real "
+                                f"numbers (dtype {array.dtype}, shape {array.shape})", fix)
+    return np.asarray(array, dtype=float)
+
+
+def _meta(value, path: Path, fix: str) -> dict:
+    """The run's ``meta`` (a JSON text in an npz, or a summary's dict), checked to name its
+    problem and overrides."""
+    if isinstance(value, np.ndarray):
+        if value.dtype.kind != "U" or value.ndim != 0:
+            raise FileDamaged(path, f"has a 'meta' that is not text (dtype {value.dtype})", fix)
+        try:
+            value = json.loads(str(value))
+        except json.JSONDecodeError as err:
+            raise FileDamaged(path, f"has a 'meta' that is not valid JSON ({err.msg})",
+                              fix) from None
+    if (not isinstance(value, dict) or not isinstance(value.get("problem"), str)
+            or not isinstance(value.get("overrides", {}), dict)):
+        raise FileDamaged(path, "has a 'meta' that does not name its problem and overrides",
+                          fix)
+    return value
+
+
+def _check_trajectory(arrays: dict, path: Path, fix: str) -> None:
+    """A stored trajectory's ``x``, ``v`` (frames, particles, dim) and ``dt`` agree, and the
+    history arrays have one entry per iteration each (converted to float in place)."""
+    if any(k in arrays for k in ("x", "v", "dt")):
+        missing = [k for k in ("x", "v", "dt") if k not in arrays]
+        if missing:
+            raise FileDamaged(path, f"is missing array {missing[0]!r} of its trajectory", fix)
+        x = arrays["x"] = _real(arrays["x"], "x", path, fix, ndim=3)
+        v = arrays["v"] = _real(arrays["v"], "v", path, fix, ndim=3)
+        dt = _real(arrays["dt"], "dt", path, fix, ndim=0)
+        if v.shape != x.shape or not dt > 0:
+            raise FileDamaged(path, f"has a trajectory that does not fit together (x "
+                                    f"{x.shape}, v {v.shape}, dt {dt})", fix)
+    history = {k: a for k, a in arrays.items() if k.startswith(("history_", "start_"))}
+    for name, a in history.items():
+        if a.dtype.kind not in "fiu" or a.ndim != (1 if name.startswith("h") else 0):
+            raise FileDamaged(path, f"has an array {name!r} that is not real numbers of "
+                                    f"the right shape (dtype {a.dtype}, shape {a.shape})", fix)
+    lengths = {k: len(a) for k, a in history.items() if k.startswith("history_")}
+    if len(set(lengths.values())) > 1:
+        raise FileDamaged(path, f"has history arrays of different lengths "
+                                f"({', '.join(f'{k} {n}' for k, n in lengths.items())})", fix)
 
 
 def _jsonable(obj):

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .problem import ControlProblem
+from .state import SimulationError
 
 
 class OverrideError(ValueError):
@@ -68,12 +69,16 @@ def problems_dir() -> Path:
 
 
 def list_problems() -> list[tuple[str, str]]:
-    """``(name, first sentence of the docstring)`` of every problem file."""
+    """``(name, first sentence of the docstring)`` of every problem file; a file that fails
+    to import is listed with why, so one broken file does not hide the others."""
     out = []
     for path in sorted(problems_dir().glob("*.py")):
         if path.name.startswith("_"):
             continue
-        out.append((path.stem, first_sentence(_module(path).__doc__ or "")))
+        try:
+            out.append((path.stem, first_sentence(_module(path).__doc__ or "")))
+        except ValueError as err:
+            out.append((path.stem, f"(cannot be loaded: {err})"))
     return out
 
 
@@ -185,7 +190,13 @@ def build_problem(module, **overrides) -> ControlProblem:
     """The problem of an already loaded problem file, ``overrides`` checked first; it can be
     rebuilt with more overrides (its :class:`ProblemSource`,
     :meth:`ControlProblem.at_resolution`)."""
-    prob = module.build(**check_overrides(module, overrides))
+    checked = check_overrides(module, overrides)
+    try:
+        prob = module.build(**checked)
+    except SimulationError:  # a problem whose build simulates (a warm start) and blows up
+        raise
+    except Exception as err:  # noqa: BLE001 - the user's code: any error, reported by line
+        raise ProblemFileError(module.__file__, "in build()", err) from err
     if not isinstance(prob, ControlProblem):
         raise TypeError(f"{module.__file__}: build() must return a ControlProblem")
     return prob.with_source(ProblemSource(module, dict(overrides)))
@@ -311,6 +322,38 @@ def _module(path: Path):
     try:
         spec.loader.exec_module(module)
     except SyntaxError as err:
-        raise ValueError(f"problem file {path} is not valid Python: {err.msg} (line "
-                         f"{err.lineno})") from None
+        where = f" (line {err.lineno})" if err.lineno else ""
+        raise ValueError(f"problem file {path} is not valid Python: {err.msg}{where}") from None
+    except Exception as err:  # noqa: BLE001 - the user's code: any error, reported by line
+        raise ProblemFileError(path, "to import", err) from err
     return module
+
+
+class ProblemFileError(ValueError):
+    """A problem file that fails to import or whose ``build()`` raises: the message names
+    the file, the line in that file the failure passed through and the exception; the
+    library's own frames are left out (the exception's ``__cause__`` keeps them, which the
+    command line prints with ``--debug``)."""
+
+    def __init__(self, path, doing: str, err: BaseException):
+        path = Path(path)
+        where = _line_in(path, err.__traceback__)
+        text = " ".join(str(err).split()) or "(no message)"
+        super().__init__(f"problem file {path} failed {doing}{where}: "
+                         f"{type(err).__name__}: {text}")
+        self.path = path
+
+
+def _line_in(path: Path, tb) -> str:
+    """`` at line N (`code`)`` for the last frame of traceback ``tb`` in the file ``path``
+    (the user's line nearest the failure), or a note that none is in it."""
+    import linecache
+    import traceback
+
+    target = os.path.realpath(path)
+    frames = [f for f in traceback.extract_tb(tb) if os.path.realpath(f.filename) == target]
+    if not frames:
+        return " (in code it calls, not in the file itself: --debug shows where)"
+    frame = frames[-1]
+    code = (frame.line or linecache.getline(frame.filename, frame.lineno)).strip()
+    return f" at line {frame.lineno}" + (f" ({code})" if code else "")

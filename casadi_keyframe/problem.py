@@ -198,10 +198,13 @@ class ControlProblem:
 
     def control_cost(self, u):
         """Value and gradient of the control terms (smoothness)."""
-        val, grad = self._control_fn(u)
+        val, grad = self._control_fn(self.controls.check(u))
         return float(val), np.asarray(grad).ravel()
 
     def objective(self, u) -> float:
+        """The objective at the controls ``u`` (a flat vector of :attr:`size` real numbers;
+        anything else is refused with what it should be)."""
+        u = self.controls.check(u)
         traj = self.simulate(u, records=False)
         return self.state_cost(traj, gradient=False)[0] + self.control_cost(u)[0]
 
@@ -229,6 +232,7 @@ class ControlProblem:
         """Objective split into keyframe error and control cost, plus per-term misses and,
         for a model that reports it (cloth), whether the motion stays physical
         (``physical``: largest spring stretch, deepest penetration of a collider)."""
+        u = self.controls.check(u)
         traj = self.simulate(u, records=False) if traj is None else traj
         keyframe = self.state_cost(traj, gradient=False)[0]
         control = self.control_cost(u)[0]

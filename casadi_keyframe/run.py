@@ -19,6 +19,7 @@ from .interrupts import NAMES, catching, check
 from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
 from .optimize.outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
 from .report import format_misses, format_physical, format_stage
+from .saved import check_trajectory
 from .state import SimulationError
 
 EXIT_CODES = """\
@@ -235,6 +236,7 @@ def resume_controls(spec: SolveRun):
     if run["u"].size != prob.size:
         raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
                          f"{prob.size}")
+    check_trajectory(run, prob)  # a stored trajectory that does not fit: an altered file
     return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun"),
                       "meta": meta}
 
@@ -320,9 +322,13 @@ def run_render(source, *, animation: bool = True) -> int:
 
 
 def _render(source, animation: bool) -> int:
-    from .saved import load_saved
+    from .files import writable_folder
+    from .saved import load_saved, saved_file
 
-    saved = load_saved(source)
+    path = saved_file(source)
+    writable_folder(path.parent, "the results folder", fix="render draws beside the run "
+                    "file: copy the folder somewhere you can write and render the copy")
+    saved = load_saved(path)
     prob, out = saved.problem, saved.path.parent
     draw(prob, saved.trajectory, _history(saved.meta, saved.arrays), out, animation=animation)
     print(f"{prob.name}: pictures drawn in {out}/ from {saved.path.name}")
@@ -334,8 +340,15 @@ def _history(meta, arrays) -> SimpleNamespace:
     objective = arrays.get("history_objective", ())
     history = [{"iteration": i + 1, "objective": float(f),
                 "keyframe_error": float(arrays["history_keyframe_error"][i]),
-                "seconds": float(arrays["history_seconds"][i])}
-               for i, f in enumerate(objective)]
+                "seconds": float(arrays["history_seconds"][i]),
+                **{key: cast(arrays[f"history_{key}"][i])
+                   for key, cast in (("stage", int), ("dt", float), ("particles", int),
+                                     ("round", int))
+                   if f"history_{key}" in arrays},  # older files lack some
+                } for i, f in enumerate(objective)]
+    for record in history:
+        if record.get("round", 0) < 0:  # written as -1: no rounds
+            del record["round"]
     start = {k: float(arrays[f"start_{k}"]) if f"start_{k}" in arrays else None
              for k in ("objective", "keyframe_error")}
     return SimpleNamespace(history=history, start=start, method=meta.get("method", "?"),

@@ -50,14 +50,17 @@ def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = 
     return traj if tangent is None else (traj, dx, dv)
 
 
-def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop: int = 0):
+def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop: int = 0,
+             watch=None):
     """Eq. (5): the frame gradients ``gx, gv`` ``(steps + 1, n, dim)`` pulled back to
     ``(dphi/d external (steps, n, dim), dphi/ds_0 as a State)``.
 
     ``step_vjp`` is the backward step (default: the integrator's exact one).  ``stop > 0``
     ends the pass at frame ``stop``: the external forces of steps ``stop ..`` get their
     gradients, earlier ones zero, and the State returned is ``dphi/ds_stop`` without the
-    frames before it (``gx, gv`` there are not read).
+    frames before it (``gx, gv`` there are not read).  ``watch`` (a
+    :class:`~casadi_keyframe.health.BackwardWatch`) sees the cotangent after every backward
+    step, without and with the frame's own gradient added; it may stop the pass by raising.
     """
     step_vjp = integrator.step_vjp if step_vjp is None else step_vjp
     steps, dt = traj.steps, traj.dt
@@ -67,8 +70,12 @@ def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop
         raise ValueError(f"backward: stop must be a frame in 0..{steps}, got {stop!r}")
     g_external = np.zeros((steps,) + traj.x.shape[1:])
     a = State(gx[steps], gv[steps])
+    if watch is not None:
+        watch.start(gx, gv)
     for n in range(steps - 1, stop - 1, -1):
-        a, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1), traj.record(n),
-                                    n, dt, a, work)
-        a = State(a.x + gx[n], a.v + gv[n])
+        pulled, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1),
+                                         traj.record(n), n, dt, a, work)
+        a = State(pulled.x + gx[n], pulled.v + gv[n])
+        if watch is not None:
+            watch.step(n, pulled, a)
     return g_external, a

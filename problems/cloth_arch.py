@@ -22,15 +22,17 @@ from casadi_keyframe.views import ClothView
 SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
           "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
-          "strain_limit": "[1, inf)", "strain_weight": "[0, inf)"}
+          "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
+          "collision": ("guarded", "constraint", "penalty")}
 
 
 def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,
           size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4,
-          strain_limit: float = 1.2, strain_weight: float = 1e3):
+          strain_limit: float = 1.2, strain_weight: float = 1e3, collision: str = "guarded"):
     ground = Plane((0.0, 0.0, 0.0))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
-                            origin=(0.0, 0.0, ground.contact.thickness), colliders=[ground])
+                            origin=(0.0, 0.0, ground.contact.thickness), colliders=[ground],
+                            collision=collision)
     target = bend_into_arch(model.rest_positions, axis=0, up=2)
     objective = (StateKeyframe(steps, x=target, v=np.zeros_like(target),
                                position_weight=weight / model.n, velocity_weight=weight / model.n,

@@ -13,10 +13,12 @@ from casadi_keyframe.models.colliders import Contact, Plane, Sphere
 from casadi_keyframe.simulate import simulate
 
 
-def scene_problem(integrator, steps=10, dt=1 / 30):
-    """4 x 4 sheet: a pin, an attachment on a path, a sphere and the ground in contact."""
+def scene_problem(integrator, steps=10, dt=1 / 30, collision="penalty"):
+    """4 x 4 sheet: a pin, an attachment on a path, a sphere and the ground in contact (the
+    paper's penalty contact: full backward Euler steps that)."""
     model = ClothModel.grid(4, 4, pinned=[3], colliders=[Sphere((0.5, 0.15, -0.8), 0.2),
                                                          Plane((0, 0, -1.005))],
+                            collision=collision,
                             self_contact=Contact(200.0, 0.5, 0.2, 0.05),
                             attachments=[Attachment([0], lambda t: np.array([[0.2 * t, 0, 0]]))])
     x0 = model.rest_positions
@@ -78,6 +80,12 @@ def test_one_step_difference_to_the_linearized_step_is_third_order():
         gaps.append(np.abs(full.x[1] - lin.x[1]).max())
     order = np.polyfit(np.log(dts), np.log(gaps), 1)[0]
     assert 2.6 < order < 3.4, (order, gaps)
+
+
+def test_contact_held_by_the_step_is_refused_with_the_way_out():
+    with pytest.raises(ValueError, match="collision='penalty'"):
+        scene_problem(BackwardEuler(), collision="guarded").simulate()
+    assert scene_problem(LinearizedBackwardEuler(), collision="guarded").simulate().steps == 10
 
 
 def test_bad_newton_options_are_refused():

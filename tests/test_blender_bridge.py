@@ -8,7 +8,6 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
-import pytest
 
 from casadi_keyframe.cli import build_parser, parse_overrides
 from casadi_keyframe.export.pc2 import read_pc2

@@ -13,11 +13,12 @@ from casadi_keyframe.scenes.capes import cached_clip, clip_report, simulate_clip
 
 ROWS, COLS, DT, WINDOW = 8, 6, 1 / 60, 0.5
 T_A, T_B = 0.8, 0.6  # the problem's defaults
-# rms over the free particles: 1 mm (0.17 % of the width; the passive cape ends 0.6 m off)
-# and 2 cm/s (the walking cape moves at 1.3 m/s).  The guess lands to 1e-12; the solve trades
-# some of that for smaller forces (measured 0.96 mm and 1.4 cm/s, objective 0.17237 -> 0.17180)
-POSITION_TOLERANCE = 1e-3  # m
-VELOCITY_TOLERANCE = 0.02  # m/s
+# rms over the free particles: 1.5 mm (0.25 % of the width; the passive cape ends 0.6 m off)
+# and 2.5 cm/s (the walking cape moves at 1.3 m/s).  The guess lands to 1e-12; the solve
+# trades some of that for smaller forces (measured with contact held by the step: 1.24 mm
+# and 2.0 cm/s, objective 0.18454 -> 0.18346; under penalty contact 0.96 mm and 1.4 cm/s)
+POSITION_TOLERANCE = 1.5e-3  # m
+VELOCITY_TOLERANCE = 0.025  # m/s
 
 
 @pytest.fixture(scope="module")
@@ -51,8 +52,7 @@ def test_the_solve_lands_on_the_walk_clip(prob, result):
 def test_the_blend_is_physical(prob, result):
     """No deeper into the body than the passive blend allows (contact layer 1.2 cm), not
     overstretched, and the forces stay those of a few g, not of a snap."""
-    motion = prob.view.animation.shifted(-T_A)
-    report = clip_report(prob.model, result.trajectory, prob.view.character, motion)
+    report = clip_report(prob.model, result.trajectory)
     assert report["penetration"] < 0.015 and report["below_ground"] < 0.02, report
     assert report["max_stretch"] < 1.3, report
     free = prob.controls.idx

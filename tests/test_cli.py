@@ -39,7 +39,7 @@ def test_solve_reports_bad_overrides(capsys):
 
 def test_gradcheck_prints_agreement(capsys):
     assert main(["gradcheck", "flock_race", "--set", "agents=6", "--set", "steps=15",
-                 "--directions", "1"]) == 0
+                 "--directions", "1", "--routes", "adjoint,casadi"]) == 0
     out = capsys.readouterr().out
     line = next(l for l in out.splitlines() if l.strip().startswith("adjoint"))
     assert float(line.split("relative error")[1].split()[0]) < 1e-8

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from casadi_keyframe import cli, load_problem
+from casadi_keyframe import cli, files, load_problem
 from casadi_keyframe.cli import main, parse_overrides
 from casadi_keyframe.loading import (OverrideError, check_overrides, list_problems,
                                      load_module, overrides_of)
@@ -103,18 +103,18 @@ def test_an_out_folder_under_a_file_is_refused_before_the_build(tmp_path, capsys
     monkeypatch.setattr(cli, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
     assert main(["solve", "flock_path", "--out", str(blocker / "run")]) == 2
     err = capsys.readouterr().err
-    assert f"cannot write the output folder {blocker / 'run'}: {blocker} is a file" in err
+    assert f"cannot write the output folder {blocker / 'run'} (--out): {blocker} is a file" in err
 
 
 def test_an_unwritable_out_folder_is_refused_before_the_build(tmp_path, capsys, monkeypatch):
     def read_only(*args, **kwargs):
         raise OSError(errno.EROFS, "Read-only file system")
 
-    monkeypatch.setattr(cli.tempfile, "TemporaryFile", read_only)
+    monkeypatch.setattr(files.tempfile, "TemporaryFile", read_only)
     monkeypatch.setattr(cli, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
     assert main(["solve", "flock_path", "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err
-    assert f"cannot write the output folder {tmp_path / 'run'}: Read-only file system" in err
+    assert f"cannot write the output folder {tmp_path / 'run'} (--out): Read-only file system" in err
 
 
 @pytest.mark.parametrize("command", ["solve", "gradcheck"])

@@ -16,7 +16,7 @@ def moving_scene():
     bodies = [Sphere(lambda t: np.array([0.5, 0.5, -0.3 + 0.1 * t]), 0.3),
               Plane((0, 0, -0.05), (0.1, 0, 1)),
               Capsule((0, 0.2, -0.04), lambda t: np.array([1.0, 0.3 + t, -0.02]), 0.03)]
-    return ClothModel.grid(4, 4, plane="xy", colliders=bodies,
+    return ClothModel.grid(4, 4, plane="xy", colliders=bodies, collision="penalty",
                            self_contact=Contact(500.0, 0.5, 0.4, 0.1))
 
 
@@ -72,6 +72,7 @@ def test_contact_stiffness_is_df_dx_without_curvature_terms():
     sphere = Sphere((0.3, 0.3, -0.25), 0.3)
     contact = Contact(500.0, 0.5, 0.4, 0.1)
     model = ClothModel.grid(4, 4, plane="xy", colliders=[sphere, Plane((0, 0, -0.05))],
+                            collision="penalty",
                             self_contact=contact)
     x, v = jammed_state(model)
     _, jx, _, _, _ = casadi_derivatives(model, x, v, 0.0)

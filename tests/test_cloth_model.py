@@ -51,9 +51,9 @@ def test_buckling_force_matches_the_arc_model():
     for s in (0.1, 0.5, 0.9, 0.999):
         y = sinc_inverse(np.array([s]))[0]
         assert abs(np.sin(y) / y - s) < 1e-5
-        f = np.array(force([s * L, 0, 0], [0, 0, 0], L, 100.0, kb, 0.0)).ravel()
+        f = np.array(force([s * L, 0, 0], [0, 0, 0], L, 100.0, kb, 0.0, 0.0)).ravel()
         np.testing.assert_allclose(f, [-kb * (2 * y / L) ** 2, 0, 0], rtol=1e-9)
-    f = np.array(force([1.5 * L, 0, 0], [1.0, 0, 0], L, 100.0, kb, 0.3)).ravel()
+    f = np.array(force([1.5 * L, 0, 0], [1.0, 0, 0], L, 100.0, kb, 0.3, 0.0)).ravel()
     np.testing.assert_allclose(f, [100.0 * 0.5 * L + 0.3, 0, 0], rtol=1e-9)
 
 
@@ -116,7 +116,7 @@ def transverse_blocks(model, x):
     d = x[s.j] - x[s.i]
     r = np.sqrt(np.einsum("pk,pk->p", d, d) + eps ** 2)
     force = spring_kernels(eps)["force"].map(s.i.size)
-    f = np.array(force(d.T, np.zeros_like(d.T), *[a.T for a in model.family("springs").parameters_per_spring])).T
+    f = np.array(force(d.T, np.zeros_like(d.T), *[a.T for a in model.family("springs").pair_parameters(s.i, s.j)])).T
     m = np.einsum("pk,pk->p", f, d) * r / np.einsum("pk,pk->p", d, d)  # f = m d / r
     outer = np.einsum("pa,pb->pab", d, d) / r[:, None, None] ** 3
     return (np.minimum(m, 0)[:, None, None] * (np.eye(3) / r[:, None, None] - outer)).reshape(-1, 9)

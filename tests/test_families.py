@@ -53,7 +53,7 @@ class Attraction(PairInteraction):
     def pairs(self, found):
         return self.ij
 
-    def pair_parameters(self, i, j):
+    def pair_parameters(self, i, j, found=None):
         return [self.k]
 
     def all_pairs(self):

@@ -120,7 +120,8 @@ def test_the_gathered_step_matrix_is_the_assembled_one(controls):
     x, v, t = traj.x[9], traj.v[9], 0.3
     contacts = model.interactions(x)
     work = prob.integrator.init(model)
-    A, K, J = prob.integrator.step_system(model, x, v, t, dt, work, True, contacts)
+    system = prob.integrator.step_system(model, x, v, t, dt, work, True, contacts)
+    A, K, J = system.matrix, system.K, system.df_dx
     A_full, K_full, J_full = step_matrices(model, x, v, dt, t, True, contacts)
     free = np.flatnonzero(model.free_mask())
     expected = A_full[free][:, free].toarray()

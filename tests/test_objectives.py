@@ -98,7 +98,7 @@ def test_bad_problems_get_clear_errors(kw, match):
 
 def test_bad_controls_and_overrides_get_clear_errors():
     prob = flock()
-    with pytest.raises(ValueError, match="flat vector of length 60"):
+    with pytest.raises(ValueError, match="flat vector of 60 real numbers"):
         prob.objective(np.zeros(7))
     with pytest.raises(ValueError, match="NaN"):
         prob.objective(np.full(60, np.nan))

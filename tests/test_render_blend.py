@@ -104,7 +104,8 @@ def test_animate_dispatches_and_writes_three_panels(blend, tmp_path, monkeypatch
     for (_, title), want in zip(seen["axes"], TITLES):
         assert title.startswith(want) and " s" in title
     assert "t = 0.50 s of 0.50 s" in seen["axes"][1][1]  # ends on the blend's last frame
-    assert {"cloth (front)", "cloth (back)", "blend (optimised)", "keyframe shape"} <= set(
+    assert {"cloth (front)", "cloth (back)", "blend (optimised)",
+            "keyframe shape (at its frame)"} <= set(
         seen["legend"])
     assert "keyframe target" not in seen["legend"]  # the shape is a wireframe, not crosses
 

@@ -134,12 +134,13 @@ def test_the_iteration_limit_exits_3_and_resume_goes_on(tmp_path, capsys):
 
 
 def test_the_time_limit_exits_3(tmp_path, capsys):
-    t = time.perf_counter()
+    """One finite-difference gradient takes longer than the limit, so the search stops at
+    its first iteration (counted, not timed: a loaded machine is slower, not wrong)."""
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--gradient", "fd", "--time-limit",
                  "0.5", "--quiet", "--no-animation"]) == 3
-    assert time.perf_counter() - t < 15
     assert "time limit reached (0.5 s)" in capsys.readouterr().out
-    assert json.loads((tmp_path / "summary.json").read_text())["status"] == 1
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["status"] == 1 and summary["nit"] == 1
 
 
 @pytest.mark.parametrize("change, message", [

@@ -21,10 +21,11 @@ from casadi_keyframe.state import State
 STEPS, DT = 12, 1 / 30
 
 
-def sheet_problem(rows=3, ground=True):
-    """A small sheet hanging from its top corners (its hem on the ground), swung forward to
-    a full keyframe with velocities, a centre keyframe halfway and a strain limit."""
-    model = hanging_sheet(rows, stretch=50.0, ground=ground)
+def sheet_problem(rows=3, ground=True, collision="guarded"):
+    """A small sheet hanging from its top corners (its hem on the ground, touched as
+    ``collision`` says), swung forward to a full keyframe with velocities, a centre keyframe
+    halfway and a strain limit."""
+    model = hanging_sheet(rows, stretch=50.0, ground=ground, collision=collision)
     x0 = model.rest_positions
     target = x0.copy()
     free = np.setdiff1d(np.arange(model.n), model.pinned)
@@ -108,13 +109,18 @@ def test_boundaries_cut_the_horizon_into_whole_steps():
 
 @pytest.mark.parametrize("K", [2, 4])
 def test_the_merit_and_its_gradient_match_casadi_and_central_differences(K):
-    prob = sheet_problem()
+    # CasADi's symbolic step is the paper's penalty step: compared on penalty contact
+    prob = sheet_problem(collision="penalty")
     rng = np.random.default_rng(K)
     shooting, z, mult = random_point(prob, K, rng)
     f, g, _ = shooting.evaluate(z, Serial(prob, shooting.spans), mult)
     f_ref, g_ref = (np.asarray(a).ravel() for a in casadi_merit(shooting, mult)(z))
     assert f == pytest.approx(float(f_ref[0]), rel=1e-10)
     assert np.linalg.norm(g - g_ref) <= 1e-8 * np.linalg.norm(g_ref)
+    # the default contact (held by the step) against central differences
+    prob = sheet_problem()
+    shooting, z, mult = random_point(prob, K, rng)
+    f, g, _ = shooting.evaluate(z, Serial(prob, shooting.spans), mult)
     runner, h = Serial(prob, shooting.spans), 1e-6
     for _ in range(2):
         d = rng.standard_normal(z.size)
@@ -124,7 +130,7 @@ def test_the_merit_and_its_gradient_match_casadi_and_central_differences(K):
 
 
 def test_one_segment_is_single_shooting_and_consistent_nodes_have_no_defect():
-    prob = sheet_problem()
+    prob = sheet_problem(collision="penalty")  # contact without memory between steps
     rng = np.random.default_rng(0)
     u = 0.05 * rng.standard_normal(prob.size)
     ref = prob.simulate(u)

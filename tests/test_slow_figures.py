@@ -76,14 +76,16 @@ def test_cloth_shapes_swings_through_its_shapes():
     assert max(prob.model.max_stretch(x) for x in result.trajectory.x) < 1.3
 
 
-def test_cloth_toss_flies_through_the_ring_and_turns_over():
+def test_cloth_toss_flies_through_the_ring_turns_over_and_lands_whole():
     prob, result = solve_figure("cloth_toss")
     ring, corners = result.breakdown["misses"]
     assert ring["position_error"] < 0.03 and corners["rms_position_error"] < 0.15
     flip = max(t.frame for t in prob.objective_terms.state_terms)
     x = result.trajectory.x
     assert turn_angle(prob.model.rest_positions, x[flip], prob.model.masses) > 150
-    assert result.breakdown["physical"]["max_stretch"] < 1.3
+    assert prob.steps == 72 and x[-1, :, 2].min() < 0.05  # the clip ends on the ground
+    physical = result.breakdown["physical"]  # over every frame, the landing included
+    assert physical["max_stretch"] < 1.3 and physical["max_penetration"] <= 0.005, physical
 
 
 def test_cloth_arch_holds_the_arch():
@@ -96,8 +98,7 @@ def test_cape_blend_lands_on_the_walk_clip_and_stays_physical():
     prob, result = solve_figure("cape_blend")
     (miss,) = result.breakdown["misses"]
     assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 2e-2
-    motion = prob.view.animation.shifted(-prob.view.t_a)
-    report = clip_report(prob.model, result.trajectory, prob.view.character, motion)
+    report = clip_report(prob.model, result.trajectory)
     assert report["max_stretch"] < 1.3 and report["penetration"] < 0.015, report
 
 
@@ -114,8 +115,7 @@ def test_cape_blend_keeps_its_landing_for_less_effort():
     assert prob.control_cost(result.x)[0] < 0.8 * prob.control_cost(guess)[0]
     (miss,) = result.breakdown["misses"]
     assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 5e-2
-    motion = prob.view.animation.shifted(-prob.view.t_a)
-    report = clip_report(prob.model, result.trajectory, prob.view.character, motion)
+    report = clip_report(prob.model, result.trajectory)
     assert report["max_stretch"] < 1.3 and report["penetration"] < 0.015, report
 
 
@@ -126,6 +126,5 @@ def test_cape_blend_from_rest_lands_by_multiple_shooting():
     prob, result = solve_figure("cape_blend", time_limit=1800, guess="passive")
     (miss,) = result.breakdown["misses"]
     assert miss["rms_position_error"] <= 6e-3 and miss["rms_velocity_error"] <= 5e-2
-    motion = prob.view.animation.shifted(-prob.view.t_a)
-    report = clip_report(prob.model, result.trajectory, prob.view.character, motion)
+    report = clip_report(prob.model, result.trajectory)
     assert report["max_stretch"] <= 1.3 and report["penetration"] <= 0.015, report

@@ -20,16 +20,17 @@ from casadi_keyframe.simulate import backward, simulate
 from helpers import small_flock
 
 
-def cloth_scene():
-    """4 x 4 sheet: a pin, an attachment on a path, a sphere, the ground and self-contact."""
+def cloth_scene(collision="guarded"):
+    """4 x 4 sheet: a pin, an attachment on a path, a sphere, the ground and self-contact;
+    the bodies' contact as ``collision`` says (the model's)."""
     return ClothModel.grid(4, 4, pinned=[3], colliders=[Sphere((0.5, 0.15, -0.8), 0.2),
                                                         Plane((0, 0, -1.005))],
-                           self_contact=Contact(200.0, 0.5, 0.2, 0.05),
+                           self_contact=Contact(200.0, 0.5, 0.2, 0.05), collision=collision,
                            attachments=[Attachment([0], lambda t: np.array([[0.2 * t, 0, 0]]))])
 
 
-def cloth_problem(integrator, steps=8, dt=1 / 30):
-    model = cloth_scene()
+def cloth_problem(integrator, steps=8, dt=1 / 30, collision="guarded"):
+    model = cloth_scene(collision)
     x0 = model.rest_positions
     obj = (StateKeyframe(steps, x=x0 + [0.0, 0.2, 0.05], v=0 * x0)
            + CenterOfMassKeyframe(steps // 2, x=x0.mean(0) + [0, 0.1, 0]) + Smoothness(1e-4))
@@ -37,21 +38,35 @@ def cloth_problem(integrator, steps=8, dt=1 / 30):
                           steps=steps, dt=dt, controls=StepForces(), objective=obj)
 
 
-def linearized(solver):
+def linearized(solver, collision="guarded"):
     """Linearized backward Euler with one linear solver; CG solves to round-off here, so the
     step's derivatives can be held to 1e-10 like the direct solvers'."""
     if solver == "cholmod" and not cholmod_available():
         pytest.skip("CHOLMOD (cvxopt) is not installed")
     tol = {"tol": 1e-13, "adjoint_tol": 1e-13} if solver == "cg" else {}
-    return cloth_problem(LinearizedBackwardEuler(solver, **tol))
+    return cloth_problem(LinearizedBackwardEuler(solver, **tol), collision=collision)
 
 
 SYSTEMS = {
     "symplectic_euler": lambda: small_flock(),
     **{f"linearized_backward_euler[{solver}]": functools.partial(linearized, solver)
        for solver in ("auto", "cholmod", "direct", "cg")},
-    "backward_euler": lambda: cloth_problem(BackwardEuler("direct", newton_tol=1e-13)),
+    "linearized_backward_euler[penalty]": functools.partial(linearized, "direct", "penalty"),
+    "linearized_backward_euler[constraint]": functools.partial(linearized, "direct",
+                                                               "constraint"),
+    "backward_euler": lambda: cloth_problem(BackwardEuler("direct", newton_tol=1e-13),
+                                            collision="penalty"),
 }
+
+
+def test_the_cloth_scene_holds_contacts_where_the_steps_are_checked():
+    prob = cloth_problem(LinearizedBackwardEuler("direct"), collision="constraint")
+    traj, _ = state_in_contact(prob)
+    held = [r.contacts.count if r.contacts is not None else 0 for r in traj.records]
+    assert held[5] >= 4  # the checked step holds contacts
+    penalty = cloth_problem(LinearizedBackwardEuler("direct"), collision="penalty")
+    traj, _ = state_in_contact(penalty)
+    assert all(r.contacts is None for r in traj.records)
 
 
 def state_in_contact(prob, n=5, seed=0):
@@ -62,14 +77,15 @@ def state_in_contact(prob, n=5, seed=0):
     return traj, external
 
 
-def step_jacobian(prob, start, external, n):
+def step_jacobian(prob, start, external, n, record=None):
     """Dense Jacobian of CasADi's symbolic step, outputs ``(x+, v+)`` over inputs
-    ``(x, v, e)``, all flat ``particles * dim`` in the numeric ordering."""
+    ``(x, v, e)``, all flat ``particles * dim`` in the numeric ordering (with what the
+    numeric step ``record`` decided, e.g. the contacts it held)."""
     integ, model, dt = prob.integrator, prob.model, prob.dt
     F = integ.symbolic_step(model)
     d, k = model.dim, model.n
     X, V, E = (ca.MX.sym(s, d, k) for s in "XVE")
-    xp, vp = F(X, V, E, dt, integ.step_parameters(model, n * dt, dt))
+    xp, vp = F(X, V, E, dt, integ.step_parameters(model, n * dt, dt, record))
     out, inp = ca.vertcat(ca.vec(xp), ca.vec(vp)), ca.vertcat(ca.vec(X), ca.vec(V), ca.vec(E))
     J = ca.Function("J", [X, V, E], [ca.jacobian(out, inp)])
     return np.array(J(start.x.T, start.v.T, external.T))
@@ -81,7 +97,7 @@ def test_one_step_matches_casadi_forward_and_reverse_mode(name):
     model, integ, dt, n = prob.model, prob.integrator, prob.dt, 5
     traj, external = state_in_contact(prob, n)
     start, end = traj.state(n), traj.state(n + 1)
-    J = step_jacobian(prob, start, external, n)
+    J = step_jacobian(prob, start, external, n, traj.record(n))
     size = model.n * model.dim
     free = model.free_mask().astype(float)
     rng = np.random.default_rng(1)

@@ -147,6 +147,8 @@ def test_a_worker_killed_mid_sweep_costs_only_its_point(tmp_path):
         pytest.fail("no point was still running when its worker was killed")
     text = proc.communicate(timeout=120)[0]
     assert proc.returncode == 0, text
+    assert (f"sweep: a worker died while solving {point.name}: Dask starts it again on "
+            "another worker (start 2 of 3)") in text
     done = rows(out)
     assert len(done) == 4 and all(r["status"] != "error" for r in done.values()), text
     assert done[point.name]["worker"].rsplit(":", 1)[1] != str(victim)  # solved again
@@ -159,8 +161,11 @@ def test_ctrl_c_keeps_finished_points_and_resume_solves_only_the_rest(tmp_path, 
     proc = start_sweep(out, *grid)
     wait_until(lambda: len(rows(out)) >= 1, proc, "a point finishing")
     proc.send_signal(signal.SIGINT)
+    time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)  # impatient: a second Ctrl-C while the cluster closes
     text = proc.communicate(timeout=60)[0]
     assert proc.returncode == 130, text
+    assert "Traceback" not in text and "leaked" not in text, text
     finished = rows(out)
     assert 1 <= len(finished) < 6, text
     assert "not run" in text and "--resume" in text
@@ -177,6 +182,24 @@ def test_ctrl_c_keeps_finished_points_and_resume_solves_only_the_rest(tmp_path, 
     assert {p: (out / "points" / p / "result.npz").stat().st_mtime_ns
             for p in finished} == stamps
     assert len(rows(out)) == 6 and len((out / "sweep.csv").read_text().splitlines()) == 7
+
+
+def test_a_signal_after_every_point_finished_loses_nothing(tmp_path):
+    """Exit 0 (not 130) when the points are all on disk, whenever the signal came."""
+    from casadi_keyframe.sweep.plan import Plan, _finish
+
+    specs = []
+    for name in ("a", "b"):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "row.json").write_text(json.dumps(
+            {"point": name, "k": 1, "status": "converged", "objective": 1.0, "spec_id": name,
+             "path": str(tmp_path / name)}))
+        specs.append({"folder": str(tmp_path / name), "id": name, "name": name})
+    plan = Plan(specs, tmp_path, ["k"], "objective", [])
+    assert _finish(plan, signal.SIGINT, 1.0, "local").exit_code == 0
+    assert json.loads((tmp_path / "sweep.json").read_text())["signal_after_complete"] == "SIGINT"
+    (tmp_path / "b" / "row.json").unlink()
+    assert _finish(plan, signal.SIGINT, 1.0, "local").exit_code == 130
 
 
 ROWS = [{"point": "a", "weight": 1.0, "start": 0, "status": "converged", "objective": 3.0,
@@ -246,7 +269,9 @@ def test_a_failing_point_is_a_row_with_its_reason(tmp_path):
             "overrides": {"k": 3}, "options": {"maxiter": 2}, "values": {"k": 3},
             "name": "k=3", "label": "k=3", "folder": str(tmp_path / "k=3"), "id": "x"}
     row = run_task(spec)
-    assert row["status"] == "error" and row["reason"] == "ValueError: k = 3 is cursed"
+    assert row["status"] == "error" and row["reason"] == (
+        f"problem file {path} failed in build() at line 9 (raise ValueError(\"k = 3 is "
+        f"cursed\")): ValueError: k = 3 is cursed")
     assert read_row(tmp_path / "k=3") == row
 
     class KilledWorker(Exception):
@@ -262,3 +287,34 @@ def test_a_failing_point_is_a_row_with_its_reason(tmp_path):
                             "folder": str(tmp_path / "k=4"), "id": "y"})
     assert lost["status"] == "error" and "died" in lost["reason"] and lost["k"] == 4
     assert read_row(tmp_path / "k=4")["reason"] == lost["reason"]
+
+
+def test_the_watch_names_a_dead_workers_points_from_outside():
+    """A scheduler that cannot run the library (a remote cluster without it) is watched by
+    its workers and what each was running."""
+    from casadi_keyframe.sweep.watch import WorkerWatch
+
+    class Remote:
+        def __init__(self):
+            self.workers, self.processing_now = {"a": 1, "b": 1}, {"a": ["k1"], "b": ["k2"]}
+
+        def run_on_scheduler(self, *args):
+            raise ModuleNotFoundError("No module named 'casadi_keyframe'")
+
+        def nthreads(self):
+            return self.workers
+
+        def processing(self):
+            return self.processing_now
+
+    said, client = [], Remote()
+    watch = WorkerWatch(said.append, tries=2)
+    labels = {"k1": "weight=1", "k2": "weight=2"}
+    watch.poll(client, labels)
+    client.workers, client.processing_now = {"b": 1, "c": 1}, {"b": ["k2"], "c": ["k1"]}
+    watch.poll(client, labels)
+    assert said == ["sweep: a worker died while solving weight=1: Dask starts it again on "
+                    "another worker (start 2 of 2)"]
+    client.workers = {"b": 1}
+    watch.poll(client, labels)
+    assert said[-1].endswith("that was its last of 2 starts (--tries): it is reported failed")

@@ -85,3 +85,22 @@ def test_the_page_loads_without_console_errors(solved, frame):
                and not any(note in line for note in BROWSER_NOTES)]
     assert not console, console
     assert f"frame {frame} / 10" in run.stdout  # the page drew, at the frame asked for
+
+
+@pytest.mark.parametrize("name, overrides", [("cloth_toss", {"rows": 4, "cols": 4, "steps": 10,
+                                                             "ring_at": 0.4}),
+                                             ("flock_shapes", {"agents": 4, "steps": 10})])
+def test_targets_are_named_with_their_frame_and_faint_elsewhere(name, overrides):
+    """Every target is drawn whole only at its own frame, named "target at frame N", and the
+    legend sits below the controls, over no data (issue 26: it hid part of the flock)."""
+    p = load_problem(name, **overrides)
+    fig = figure(scene_of(p, p.simulate(records=False)))
+    named = {t.name: i for i, t in enumerate(fig.data) if t.name.startswith("target at frame")}
+    assert set(named) == {f"target at frame {m.frame} ({m.label})"
+                          for m in p.objective_terms.markers()}
+    for trace_name, index in named.items():
+        frame = int(trace_name.split()[3])
+        opacity = {n: next(d.opacity for d, i in zip(f.data, f.traces) if i == index)
+                   for n, f in enumerate(fig.frames)}
+        assert opacity[frame] == 1.0 and max(o for n, o in opacity.items() if n != frame) < 0.5
+    assert fig.layout.legend.orientation == "h" and fig.layout.legend.y < 0

@@ -57,15 +57,23 @@ def export_scene(scene: Scene, fmt: str, out) -> list[Path]:
 def export(source, fmt: str, *, out=None) -> list[Path]:
     """Export the result in ``source`` (a results folder or its ``result.npz``) as ``fmt``
     (one of :data:`FORMATS`) into ``out`` (default: the result's folder); returns the files
-    written.  Refused with a ValueError for an unknown format, a FileNotFoundError for a
+    written.  Refused before the result is read with a ValueError for an output folder
+    that cannot be written or an unknown format, a FileNotFoundError for a
     folder with no result, an ImportError naming the extra to install when ``usd`` or
     ``html`` lacks its library."""
-    from ..saved import load_saved
+    from ..files import writable_folder
+    from ..saved import load_saved, saved_file
 
     check_library(fmt)
-    saved = load_saved(source)
-    return export_scene(scene_of(saved.problem, saved.trajectory), fmt,
-                        saved.path.parent if out is None else out)
+    path = saved_file(source)
+    if out is None:
+        out = writable_folder(path.parent, "--out", fix="export writes beside the result "
+                              "unless given --out (out= in Python): give a folder you can "
+                              "write")
+    else:
+        out = writable_folder(out, "--out")
+    saved = load_saved(path)
+    return export_scene(scene_of(saved.problem, saved.trajectory), fmt, out)
 
 
 def check_library(fmt: str) -> None:

@@ -71,12 +71,23 @@ def colliders(go, body_list, mid, half, scene, frames: int):
     return trace, lambda n: xyz(bodies_mesh(body_list, n, mid, half)[0])
 
 
+def target_name(target) -> str:
+    """``"target at frame 40 (StateKeyframe@40)"``: what the legend and a hover say."""
+    return f"target at frame {target.frame} ({target.label})"
+
+
+def target_opacity(target):
+    """A target's opacity at frame ``n``: whole at its own frame, faint elsewhere, so the
+    cloth is seen through the targets not due."""
+    return lambda n: {"opacity": 1.0 if n == target.frame else 0.2}
+
+
 def target_traces(go, targets, faces, scene):
     """Each keyframe target: a whole-cloth shape as its edges, points as crosses, a region
-    as its outline; all in one legend group."""
+    as its outline; all in one legend group, each named with its frame."""
     out = []
     for t in targets:
-        common = dict(name=f"target {t.label}", legendgroup="targets", scene=scene,
+        common = dict(name=target_name(t), legendgroup="targets", scene=scene,
                       hoverinfo="name")
         if t.kind == "shape":
             line = polylines(t.points[e] for e in mesh_edges(faces))
@@ -139,11 +150,11 @@ def flat_targets(go, targets):
     """A 2-D flock's targets: region outlines filled lightly, point targets as crosses."""
     out = []
     for t in targets:
-        common = dict(name=f"target {t.label}", legendgroup="targets", hoverinfo="name")
+        common = dict(name=target_name(t), legendgroup="targets", hoverinfo="name")
         if t.kind == "outline":
             p = np.vstack([t.points, t.points[:1]])
             out.append(go.Scatter(x=f32(p[:, 0]), y=f32(p[:, 1]), mode="lines", fill="toself",
-                                  line=dict(color=REGION, width=1.5), opacity=0.35, **common))
+                                  line=dict(color=REGION, width=1.5), **common))
         else:
             out.append(go.Scatter(x=f32(t.points[:, 0]), y=f32(t.points[:, 1]), mode="markers",
                                   marker=dict(symbol="x", size=9, color=COM), **common))

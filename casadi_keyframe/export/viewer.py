@@ -110,8 +110,9 @@ def build_3d(go, scene):
         if panel["bodies"]:
             add(tr.colliders(go, panel["bodies"], mid, float(half.max()), sid, scene.frames),
                 "colliders")
-        for t in tr.target_traces(go, panel["targets"], scene.faces, sid):
-            add(t, "targets")
+        for target, t in zip(panel["targets"],
+                             tr.target_traces(go, panel["targets"], scene.faces, sid)):
+            add((t, tr.target_opacity(target)), "targets")
         if scene.ring is not None and panel["targets"]:
             add(tr.ring_trace(go, scene.ring, sid), "targets")
         add(tr.com_path(go, pos, sid), "trails")
@@ -135,7 +136,8 @@ def build_2d(go, scene):
     pos, groups = scene.positions, {"targets": [], "colliders": [], "trails": []}
     data = tr.flat_targets(go, scene.targets)
     groups["targets"] = list(range(len(data)))
-    moving = []
+    moving = [(i, _typed(trace, tr.target_opacity(target)))
+              for i, (target, trace) in enumerate(zip(scene.targets, data))]
     for trace, update in (tr.trails(go, pos, False, None),
                           tr.agents(go, pos, scene.highlight, False, None)):
         if trace.name == "trails":
@@ -178,8 +180,10 @@ def figure(scene):
                        traces=[i for i, _ in moving], layout=dict(annotations=note(n)))
               for n in range(scene.frames)]
     fig = go.Figure(data=data, frames=frames)
-    fig.update_layout(**layout, annotations=note(0), height=760,
-                      margin=dict(l=10, r=10, t=110, b=150), legend=dict(x=1, xanchor="right"),
+    fig.update_layout(**layout, annotations=note(0), height=800,
+                      margin=dict(l=10, r=10, t=110, b=190),
+                      legend=dict(orientation="h", x=0, y=-0.3, xanchor="left",
+                                  yanchor="top"),  # below the controls: it hides no data
                       updatemenus=controls(scene, groups), sliders=[slider(scene)],
                       uirevision="keep")
     return fig

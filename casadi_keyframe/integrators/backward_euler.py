@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..linear import ModifiedPCG, SolveError, SolveInfo, SparseLU
-from ..models.base import ForceJacobians
+from ..models.base import ContactConstraints, ForceJacobians
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 from .linearized_backward_euler import step_matrices
@@ -85,6 +85,15 @@ class BackwardEuler(Integrator):
         self.newton_solver = ModifiedPCG(tol) if solver == "cg" else SparseLU(symmetric=False)
         self.jacobian_solver = SparseLU(symmetric=False)
         self.newton_tol, self.max_newton = newton_tol, int(max_newton)
+
+    def check_model(self, model) -> None:
+        """As every scheme's, and contact must be the paper's penalty springs: a step that
+        holds contacts (``collision="constraint"``) is the linearized scheme's."""
+        super().check_model(model)
+        if isinstance(model, ContactConstraints) and model.constraint_families:
+            raise ValueError("full backward Euler steps penalty contact only: build the cloth "
+                             "with collision='penalty', or step it with "
+                             "LinearizedBackwardEuler, which holds contacts")
 
     def init(self, model) -> Workspace:
         self.check_model(model)
@@ -165,7 +174,7 @@ class BackwardEuler(Integrator):
         return State((free * (dx + dt * dv1)).reshape(shape), dv1.reshape(shape))
 
     @staticmethod
-    def step_parameters(model, t: float, dt: float) -> np.ndarray:
+    def step_parameters(model, t: float, dt: float, record=None) -> np.ndarray:
         """The symbolic step's S for the step from t: the scene and attachments at t + dt."""
         return np.concatenate([model.scene_parameters(t + dt), model.constraint_targets(t + dt)])
 

@@ -73,6 +73,11 @@ class Integrator:
         self.check_model(model)
         return Workspace()
 
+    def decides_per_step(self, model) -> bool:
+        """Whether the scheme decides something per step from the state that its symbolic
+        step takes as a parameter (:meth:`step_parameters`' ``record``)."""
+        return False
+
     def release(self, trajectory) -> None:
         """Hand back what ``trajectory``'s records keep for derivative passes, once none is
         to come (nothing here; a scheme that keeps factorisations returns them)."""
@@ -89,8 +94,9 @@ class Integrator:
         raise NotImplementedError
 
     @staticmethod
-    def step_parameters(model, t: float, dt: float) -> np.ndarray:
-        """The symbolic step's time-dependent inputs S for the step from t."""
+    def step_parameters(model, t: float, dt: float, record=None) -> np.ndarray:
+        """The symbolic step's inputs S for the step from t: what depends on time, and what
+        the numeric step decided (``record``: e.g. the contacts it held)."""
         raise NotImplementedError
 
     def symbolic_step(self, model):

@@ -14,32 +14,46 @@ The step gathers A's free block from the model's 3x3 blocks into the pass's fixe
 (:meth:`LinearizedBackwardEuler.step_system`), so a sparse Cholesky analyses it once.
 
 Swapped backward step (:meth:`swapped_step_vjp`, the "swapped" gradient route, APPROXIMATE):
-the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D), a
-3p x 3p x 3p tensor.  Following the paper we use instead the adjoint of FULL backward Euler,
-``v+ = v + dt M^-1 f(x+, v+)``, which is linear in the adjoint variables.  Its Jacobians
-belong to the step's end state n+1, so its matrix is the A the forward pass factorised at
-step n+1 (its factor reused when the forward pass kept it, else made again):
+the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D).
+Following the paper (eqs. 13-15) we use instead the exact adjoint of FULL backward Euler,
+eq. (9), ``v+ = v + dt M^-1 f(x+, v+, t+)``, ``x+ = x + dt v+``, which needs first derivatives
+only.  Differentiating eq. (9) puts its Jacobians at the step's END state: the backward step
+from frame n+1 to frame n is
 
-    w   = a_v(n+1) + dt a_x(n+1)
-    A^T mu = w            (free components; mu = 0 on pinned and attached ones)
+    w      = a_v(n+1) + dt a_x(n+1)                   (the cotangent of v+)
+    A^T mu = w,   A = M - dt D - dt^2 K  at frame n+1  (mu = 0 on pinned and attached
+                                                        components; the contacts forward
+                                                        step n+1 holds project w and A)
     dphi/de_n = dt mu
-    a_v(n) = M mu + dphi/dv_n
-    a_x(n) = a_x(n+1) + dt J^T mu + dphi/dx_n,    J = df/dx at n+1 (all of it)
+    a_v(n) = M mu                       + dphi/dv_n
+    a_x(n) = a_x(n+1) + dt J^T mu       + dphi/dx_n,   J = df/dx at frame n+1, all of it
 
-The paper's eqs. (13)-(15) are written in "hat" variables; the code's ``mu`` is the paper's
-adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal masses are right).
+The paper's eqs. (13)-(15) write the same in "hat" variables; the code's ``mu`` is the
+paper's adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal masses are
+right).  The two deviations from a literal reading, and why:
 
-A holds the model's clamped stiffness K (so it stays positive definite), but the position
-adjoint needs the true force Jacobian J: with K there the gradient misses the compressed
-springs' transverse stiffness every step and does not converge as dt shrinks (measured on
-the 5 x 5 contact case: relative error 0.71 at dt 1/60, 0.86 at 1/480, against 0.12 and
-0.015 with J).  For smooth forces the two schemes agree through second order in dt, so each
-step's adjoint carries an O(dt^3) local error.  Stiff springs (dt sqrt(k/m) not small), fast
-changes of stiffness (springs entering buckling or contact within a step), the clamping and
-the damping term left out of K make the error larger in practice; for forces linear in x and
-v it is exact.
-The "casadi" gradient route (reverse mode through :meth:`symbolic_step`) is the reference
-that measures this error.
+* **n+1 indexing.**  The matrix at frame n+1 is what differentiating eq. (9) gives, and it
+  is the very matrix forward step n+1 factorised (same state, same contacts held), so the
+  backward pass reuses that factor and costs about one forward pass.
+* **K in A, J in the update.**  A holds the model's clamped stiffness K (compressed springs'
+  transverse term and contact curvature left out, damping's position derivative left out),
+  so it stays symmetric positive definite for CG and Cholesky and is the forward factor.  The
+  position adjoint takes the true force Jacobian J: with K there too, every step would drop
+  the same destabilising terms, and the error would not shrink as dt does.  J in A as well
+  (indefinite: a direct solve), or the step's start state, changed the gradient by about
+  1 % or made it worse when measured.
+
+The cost of the mix: where J's destabilising part is large against ``m / dt^2`` (penalty
+springs on curved bodies, whose curvature and damping terms grow with the contact stiffness,
+the sliding speed and 1 / radius), nothing in A damps what the update adds: the backward
+pass grows every step, up to overflow, while the simulation is fine (see ``health``).
+
+For smooth forces the two schemes agree through second order in dt, so each step's adjoint
+carries the paper's O(dt^3) local error; that bound is asymptotic in ``dt sqrt(k/m)``, and at
+animation steps (stiff springs and contact, springs buckling or touching within a step) the
+error is larger and of lower order.  It is exact for forces linear in x and v.  The
+"adjoint" route (below) is exact at the same cost; ``casadi-keyframe study swap-validity``
+maps where the swap suffices.
 
 Exact backward step (:meth:`step_vjp`, the "adjoint" route): the exact adjoint of the
 linearized scheme by hand: the same solve with A per step plus per-spring contractions of
@@ -67,10 +81,14 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..linear import SolveError, SolveInfo, System, linear_solver
-from ..models.base import BlockJacobians, ForceJacobians
+from ..models.base import BlockJacobians, ContactConstraints, ForceJacobians
 from ..models.blocks import GrowingPattern, SparseJacobian
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
+
+MAX_REVISIONS = 4  # a step solved again at most this often when its end shows it chose wrong
+from .contact_filter import (adjoint_multiplier, constrained_rhs, contact_q, impulses,
+                             projected_matrix)
 
 
 def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):
@@ -84,22 +102,42 @@ def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):
 @dataclass(frozen=True)
 class LinearizedStep:
     """What a linearized step keeps: the interactions at its start state (self-contact
-    pairs), how its linear solve went and, within the integrator's memory budget, the
-    prepared step matrix (``factor``, e.g. its Cholesky factor) for the derivative passes."""
+    pairs), how its linear solve went, within the integrator's memory budget the prepared
+    step matrix (``factor``, e.g. its Cholesky factor) for the derivative passes, and the
+    contacts it held (:class:`~casadi_keyframe.models.contact_constraint.Contacts`, None
+    if none) and how many times it was solved (more than once when it was revised)."""
 
     interactions: object
     solve: SolveInfo
     factor: object = None
+    contacts: object = None
+    solves: int = 1
+
+
+@dataclass(frozen=True)
+class StepSystem:
+    """A step's matrix as the linear solver sees it (``matrix``: A, or with contacts held the
+    projected ``S A S + M P``), the product ``product(y) = A y`` of the step matrix itself
+    (flat), and its stiffness ``K`` and, when asked, ``df_dx``, each with a ``matvec``."""
+
+    matrix: System
+    product: object
+    K: object
+    df_dx: object = None
 
 
 class StepWorkspace(Workspace):
-    """A pass's :class:`Workspace` plus the pattern its step matrices are gathered into and
-    the bytes of factorisations its records keep."""
+    """A pass's :class:`Workspace` plus the pattern its step matrices are gathered into, the
+    bytes of factorisations its records keep and the last step's contacts (a contact that
+    pulled is released at the next step)."""
 
     def __init__(self, plan, pattern: GrowingPattern):
         super().__init__(plan)
         self.pattern = pattern
         self.kept_bytes = 0
+        self.previous = None  # the last step's contacts
+        self.last_found = None  # and what it decided beyond them (springs taken taut)
+        self.planned = None  # what the next step starts from, when an inverse step chose it
 
 
 class LinearizedBackwardEuler(Integrator):
@@ -156,21 +194,34 @@ class LinearizedBackwardEuler(Integrator):
             if record.factor is not None:
                 record.factor.release()
 
-    def step_system(self, model, x, v, t, dt, work, with_df_dx=False, interactions=None):
-        """``(System of A, K[, df/dx])`` at (x, v, t), K and df/dx with a ``matvec``: the
-        model's :class:`~casadi_keyframe.models.blocks.Blocks`, A's free block gathered into
-        the pass's pattern; or, for a model with sparse ``jacobians`` only, those matrices."""
+    def step_system(self, model, x, v, t, dt, work, with_df_dx=False, interactions=None,
+                    contacts=None) -> StepSystem:
+        """The :class:`StepSystem` at (x, v, t): K and df/dx the model's
+        :class:`~casadi_keyframe.models.blocks.Blocks`, A's free block gathered into the
+        pass's pattern (projected when ``contacts`` are held); or, for a model with sparse
+        ``jacobians`` only, those matrices."""
         if work.pattern is None:
             A, *jacobians = step_matrices(model, x, v, dt, t, with_df_dx, interactions)
-            return (work.plan.system(A), *map(SparseJacobian, jacobians))
+            return StepSystem(work.plan.system(A), A.dot, *map(SparseJacobian, jacobians))
         K, D, *df_dx = model.jacobian_blocks(x, v, t, with_df_dx, interactions)
         A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
         pattern = work.pattern
         data = pattern.values(A)
+        product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
+        solved = product
+        if contacts is not None:
+            data, solved = projected_matrix(pattern.pattern, data, product, contacts,
+                                            model.masses)
         block = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
                               shape=(pattern.pattern.size,) * 2)
-        product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
-        return (System(block, product, product, pattern.pattern), K, *df_dx)
+        return StepSystem(System(block, solved, solved, pattern.pattern), product, K, *df_dx)
+
+    def _contacts(self, model, x, v, t, dt, previous):
+        """The contacts a step holds, or None (a model without them, or none touching)."""
+        if not isinstance(model, ContactConstraints):
+            return None
+        held = model.contacts(x, v, t, dt, previous)
+        return held if held.count else None
 
     def _factor(self, work, system, n: int, keep: bool = False, what: str = "step"):
         try:
@@ -183,25 +234,66 @@ class LinearizedBackwardEuler(Integrator):
         if the solve fails, the state is not finite or the cloth blows up."""
         work = self.init(model) if work is None else work
         x, v, t = state.x, state.v, n * dt
-        contacts = model.interactions(x)
-        A, K = self.step_system(model, x, v, t, dt, work, interactions=contacts)
-        b = dt * ((model.forces(x, v, t, contacts) + external).ravel() + dt * K.matvec(v).ravel())
+        if work.planned is not None:  # decided by force_for for this very step
+            (found, held), work.planned = work.planned, None
+        else:
+            found = model.carried_interactions(work.last_found, x)
+            held = self._contacts(model, x, v, t, dt, work.previous)
+        f = (model.forces(x, v, t, found) + external).ravel()
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
+        for revision in range(MAX_REVISIONS + 1):
+            system = self.step_system(model, x, v, t, dt, work, interactions=found,
+                                      contacts=held)
+            b = dt * (f + dt * system.K.matvec(v).ravel())
+            factor, keep = self._step_factor_kept(work, system, n)
+            try:
+                if held is None:
+                    dv, info = factor.solve(b, z, x0=work.warm)
+                    work.warm = dv
+                else:
+                    rhs, zc = constrained_rhs(held, b, system.product, z, v, work.plan.free)
+                    y, info = factor.solve(rhs, x0=work.warm)
+                    work.warm, dv = y, zc + y
+                    held = held.with_impulse(impulses(held, system.product(dv) - b))
+            except SolveError as err:
+                raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
+            x1 = x + dt * (v + dv.reshape(v.shape))
+            revised = self._revised(model, found, held, x, v, t, dt, x1)
+            if revised is None or revision == MAX_REVISIONS:
+                break
+            found, held = revised  # the step chose wrong: solve it again with the revision
+            if keep:
+                factor.release()
+        work.kept_bytes += factor.nbytes if keep else 0
+        work.previous, work.last_found = held, found
+        v1 = v + dv.reshape(v.shape)
+        model.check_state(x1, v1, n + 1)
+        return State(x1, v1), LinearizedStep(found, info, factor if keep else None, held,
+                                             revision + 1)
+
+    def _step_factor_kept(self, work, system, n):
+        """The step matrix's factorisation and whether the pass keeps it for the derivative
+        passes (within the memory budget)."""
         keep = (work.keep and work.plan.worth_keeping
                 and work.kept_bytes < self.max_factor_memory)
-        factor = self._factor(work, A, n, keep)
+        factor = self._factor(work, system.matrix, n, keep)
         if keep and work.kept_bytes + factor.nbytes > self.max_factor_memory:
             keep = False  # known only now for the first factor of a pattern
-        work.kept_bytes += factor.nbytes if keep else 0
-        try:
-            dv, info = factor.solve(b, z, x0=work.warm)
-        except SolveError as err:
-            raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
-        work.warm = dv
-        v1 = v + dv.reshape(v.shape)
-        x1 = x + dt * v1
-        model.check_state(x1, v1, n + 1)
-        return State(x1, v1), LinearizedStep(contacts, info, factor if keep else None)
+        return factor, keep
+
+    def _revised(self, model, found, held, x, v, t, dt, x1):
+        """``(found, held)`` revised after a step that ended at x1 (springs it should have
+        taken taut, particles it should have held), or None if the step stands."""
+        if not (isinstance(model, ContactConstraints) and model.constraint_families):
+            return None  # the paper's penalty springs alone: its step, as it was
+        more, touching = model.review_contacts(held, x, v, t, dt, x1)
+        # springs only where the cloth touches a body, where a stop within a step stretches
+        # them: taking springs taut elsewhere makes a keyframe objective rough for nothing
+        touching = touching or held is not None
+        taut = model.revised_interactions(found, x, x1) if touching else None
+        if taut is None and more is None:
+            return None
+        return (found if taut is None else taut), (held if more is None else more)
 
     def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
         """The exact backward step of the linearized scheme (module docstring)."""
@@ -209,14 +301,24 @@ class LinearizedBackwardEuler(Integrator):
         shape, t = start.x.shape, n * dt
         free = free_components(model, shape).ravel()
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
-        contacts = record.interactions
-        factor, K = self._step_factor(model, start, t, dt, work, record, n)
+        held, x, v, dv = record.contacts, start.x, start.v, end.v - start.v
+        factor, system = self._step_factor(model, start, t, dt, work, record, n)
         w = av + dt * ax
-        lam = self._derivative_solve(work, factor, w, n, transpose=True)
-        bx, bv = model.linearization_vjp(start.x, start.v, t, lam.reshape(shape), end.v,
-                                         end.v - start.v, dt, interactions=contacts)
-        ax = free * (ax + bx.ravel())
-        av = free * (w + bv.ravel() + dt * dt * K.matvec(lam, transpose=True).ravel())
+        if held is None:
+            lam = self._derivative_solve(work, factor, w, n, transpose=True)
+        else:  # the filter's multipliers (see contact_filter)
+            lam = self._derivative_solve(work, factor, held.tangential_part(w).ravel(), n,
+                                         transpose=True)
+        bx, bv = model.linearization_vjp(x, v, t, lam.reshape(shape), end.v, dv, dt,
+                                         interactions=record.interactions)
+        ax = ax + bx.ravel()
+        av = w + bv.ravel() + dt * dt * system.K.matvec(lam, transpose=True).ravel()
+        if held is not None:  # the normals' and targets' derivatives
+            full = adjoint_multiplier(held, lam, w, system.product).reshape(shape)
+            cx, cv = model.contact_vjp(x, v, t, dt, held, full, contact_q(held, dv, v),
+                                       held.normal_part(full))
+            ax, av = ax + cx.ravel(), av + cv.ravel()
+        ax, av = free * ax, free * av
         return State(ax.reshape(shape), av.reshape(shape)), (dt * lam).reshape(shape)
 
     def step_jvp(self, model, start, end, record, n, dt, tangent, d_external, work=None):
@@ -225,11 +327,21 @@ class LinearizedBackwardEuler(Integrator):
         shape, t = start.x.shape, n * dt
         free = free_components(model, shape)
         dx, dv = free * tangent.x, free * tangent.v
-        factor, K = self._step_factor(model, start, t, dt, work, record, n)
-        rhs = (dt * np.asarray(d_external).ravel() + dt * dt * K.matvec(dv).ravel()
+        factor, system = self._step_factor(model, start, t, dt, work, record, n)
+        rhs = (dt * np.asarray(d_external).ravel() + dt * dt * system.K.matvec(dv).ravel()
                + model.linearization_jvp(start.x, start.v, t, end.v, end.v - start.v, dt, dx,
                                          dv, interactions=record.interactions).ravel())
-        ddv = self._derivative_solve(work, factor, rhs, n, transpose=False)
+        held = record.contacts
+        if held is None:
+            ddv = self._derivative_solve(work, factor, rhs, n, transpose=False)
+        else:  # the filter's tangent (see contact_filter)
+            q = contact_q(held, end.v - start.v, start.v)
+            rhs = (held.tangential_part(rhs).ravel()
+                   + model.contact_jvp(start.x, start.v, t, dt, held, q, dx, dv).ravel())
+            normal = held.normal_part(rhs).ravel()
+            ddv = normal + self._derivative_solve(
+                work, factor, held.tangential_part(rhs - system.product(normal)).ravel(), n,
+                transpose=False)
         dv1 = free * (dv + ddv.reshape(shape))
         return State(free * (dx + dt * dv1), dv1)
 
@@ -241,27 +353,37 @@ class LinearizedBackwardEuler(Integrator):
         free = free_components(model, shape).ravel()
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
         later = work.records[n + 1] if n + 1 < len(work.records) else None  # step n+1's A
-        contacts = model.interactions(end.x) if later is None else later.interactions
+        found = model.interactions(end.x) if later is None else later.interactions
+        held = None if later is None else later.contacts
         if (later is not None and later.factor is not None and later.factor.usable
                 and work.pattern is not None):
-            df_dx = model.force_jacobian_blocks(end.x, end.v, t, contacts)
+            df_dx = model.force_jacobian_blocks(end.x, end.v, t, found)
             factor = later.factor
         else:
-            A, _, df_dx = self.step_system(model, end.x, end.v, t, dt, work, True, contacts)
-            factor = self._factor(work, A, n, what="derivative of step")
-        mu = self._derivative_solve(work, factor, av + dt * ax, n, transpose=True)
+            system = self.step_system(model, end.x, end.v, t, dt, work, True, found, held)
+            df_dx = system.df_dx
+            factor = self._factor(work, system.matrix, n, what="derivative of step")
+        w = av + dt * ax
+        if held is not None:  # step n+1's contacts, projected as its matrix is
+            w = held.tangential_part(w).ravel()
+        mu = self._derivative_solve(work, factor, w, n, transpose=True)
         ax = free * (ax + dt * df_dx.matvec(mu, transpose=True).ravel())
         av = free * (mass_diagonal(model) * mu)
         return State(ax.reshape(shape), av.reshape(shape)), (dt * mu).reshape(shape)
 
     def _step_factor(self, model, start, t, dt, work, record, n):
-        """Step n's prepared matrix A (kept by the forward pass, or made again) and its K."""
+        """Step n's prepared matrix (kept by the forward pass, or made again) and its
+        :class:`StepSystem` (its K and the step matrix's product)."""
         if record.factor is not None and record.factor.usable and work.pattern is not None:
-            K, _ = model.jacobian_blocks(start.x, start.v, t, interactions=record.interactions)
-            return record.factor, K
-        A, K = self.step_system(model, start.x, start.v, t, dt, work,
-                                interactions=record.interactions)
-        return self._factor(work, A, n, what="derivative of step"), K
+            K, D = model.jacobian_blocks(start.x, start.v, t, interactions=record.interactions)
+            product = None
+            if record.contacts is not None:  # the filter needs A y
+                A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
+                product = lambda y: A.matvec(y).ravel()  # noqa: E731
+            return record.factor, StepSystem(None, product, K)
+        system = self.step_system(model, start.x, start.v, t, dt, work,
+                                  interactions=record.interactions, contacts=record.contacts)
+        return self._factor(work, system.matrix, n, what="derivative of step"), system
 
     def _derivative_solve(self, work, factor, b, n: int, transpose: bool):
         """A solve of a backward or tangent step, warm-started from the pass's last one."""
@@ -273,28 +395,56 @@ class LinearizedBackwardEuler(Integrator):
         work.warm = out
         return out
 
-    @staticmethod
-    def force_for(model, x, v, v1, n: int, dt: float) -> np.ndarray:
+    def force_for(self, model, x, v, v1, n: int, dt: float, work=None) -> np.ndarray:
         """The inverse step: the external force ``(n, 3)`` under which :meth:`step` from
         ``(x, v)`` at step ``n`` ends with velocities ``v1`` (so positions ``x + dt v1``).
         Exact for the free particles; the constrained ones follow their prescribed motion
-        whatever the force (and ``v1`` there is ignored), so their force has no effect."""
+        whatever the force (``v1`` there is ignored), and so do the normal velocities of the
+        contacts the step holds.  With the pass's ``work``, the step it is for starts from
+        the decisions this one made (contacts held, springs taut), so it lands exactly."""
         t = n * dt
-        contacts = model.interactions(x)
-        A, K = step_matrices(model, x, v, dt, t, interactions=contacts)
+        last, previous = (None, None) if work is None else (work.last_found, work.previous)
+        found = model.carried_interactions(last, x)
+        held = self._contacts(model, x, v, t, dt, previous)
         prescribed = model.prescribed_velocity(x, t, dt)
-        dv = np.where(model.free_mask(), (v1 - v).ravel(), (prescribed - v).ravel())
+        for _ in range(MAX_REVISIONS + 1):  # the decisions the step will stand by at x1
+            dv = np.where(model.free_mask(), (v1 - v).ravel(), (prescribed - v).ravel())
+            if held is not None:
+                dv = (held.tangential_part(dv) + held.prescribed(v)).ravel()
+            revised = self._revised(model, found, held, x, v, t, dt,
+                                    x + dt * (v + dv.reshape(v.shape)))
+            if revised is None:
+                break
+            found, held = revised
+        if work is not None:
+            work.planned = (found, held)
+        A, K = step_matrices(model, x, v, dt, t, interactions=found)
         return ((A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape)
-                - model.forces(x, v, t, contacts))
+                - model.forces(x, v, t, found))
+
+    def decides_per_step(self, model) -> bool:
+        """True for a model whose steps decide something the symbolic step takes: which
+        contacts to hold, which springs to take taut."""
+        return ((isinstance(model, ContactConstraints) and bool(model.constraint_families))
+                or model.decision_parameters().size > 0)
 
     @staticmethod
-    def step_parameters(model, t: float, dt: float) -> np.ndarray:
-        """The symbolic step's S at time t: the scene then, attachment targets at t + dt."""
-        return np.concatenate([model.scene_parameters(t), model.constraint_targets(t + dt)])
+    def step_parameters(model, t: float, dt: float, record=None) -> np.ndarray:
+        """The symbolic step's S for the step from t: the scene then, attachment targets at
+        t + dt, for a model that holds contacts which ones the step ``record`` held, and what
+        else the step decided (springs it took taut)."""
+        parts = [model.scene_parameters(t), model.constraint_targets(t + dt)]
+        if isinstance(model, ContactConstraints) and model.constraint_families:
+            held = None if record is None else record.contacts
+            parts.append(np.zeros(len(model.constraint_families) * model.n) if held is None
+                         else model.contact_masks(held))
+            parts.append(model.contact_parameters(t, dt))
+        parts.append(model.decision_parameters(None if record is None else record.interactions))
+        return np.concatenate(parts)
 
     def symbolic_step(self, model) -> ca.Function:
         """``(X, V, E, dt, S) -> (X+, V+)``: the linearized step in CasADi, for exact reverse
-        mode; S from :meth:`step_parameters`.
+        mode; S from :meth:`step_parameters` (with the contacts the numeric step held).
 
         K and D come from the model's :meth:`symbolic_jacobians` (the same kernels as the
         numeric step), so second derivatives of the forces enter through them; the linear
@@ -302,24 +452,52 @@ class LinearizedBackwardEuler(Integrator):
         """
         n, d = model.n, model.dim
         n_scene = model.scene_parameters(0.0).size
-        n_s = n_scene + model.constraint_targets(0.0).size
+        n_targets = model.constraint_targets(0.0).size
+        n_decided = model.decision_parameters().size
+        n_s = self.step_parameters(model, 0.0, 1.0).size
         X, V, E = (ca.SX.sym(s, d, n) for s in "XVE")
         dt, S = ca.SX.sym("dt"), ca.SX.sym("S", n_s)
-        scene = S[:n_scene]
+        scene, decided = S[:n_scene], S[n_s - n_decided:]
         f = ca.vec(model.symbolic_forces(X, V, scene))
-        K, D = model.symbolic_jacobians(X, V, scene)
+        K, D = model.symbolic_jacobians(X, V, scene, decided if n_decided else None)
         mass = np.repeat(model.masses, d)
         A = ca.diag(ca.DM(mass)) - dt * D - dt * dt * K
         b = dt * (f + ca.vec(E) + dt * ca.mtimes(K, ca.vec(V)))
-        v_new = model.prescribed_velocity_symbolic(X, S[n_scene:], dt)
-        system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, ca.vec(v_new - V)])
-        Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
-        dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)
-        Am, bm, dvm = system(Xm, Vm, Em, dtm, Sm)
+        prescribed = ca.vec(model.prescribed_velocity_symbolic(
+            X, S[n_scene:n_scene + n_targets], dt) - V)
         free = model.free_mask()
         fi, ci = np.flatnonzero(free).tolist(), np.flatnonzero(~free).tolist()
-        dv = dvm
-        rhs = bm[fi] - (ca.mtimes(Am[fi, ci], dvm[ci]) if ci else 0)
-        dv[fi] = ca.solve(Am[fi, fi], rhs, "ldl")
+        Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
+        dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)
+        n_held = n_s - n_scene - n_targets - n_decided  # masks and the held bodies
+        if not n_held:  # no contacts held by the step
+            system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, prescribed])
+            Am, bm, dvm = system(Xm, Vm, Em, dtm, Sm)
+            dv = dvm
+            rhs = bm[fi] - (ca.mtimes(Am[fi, ci], dvm[ci]) if ci else 0)
+            dv[fi] = ca.solve(Am[fi, fi], rhs, "ldl")
+        else:
+            n_masks = len(model.constraint_families) * n
+            masks = S[n_scene + n_targets:n_scene + n_targets + n_masks]
+            bodies = S[n_scene + n_targets + n_masks:n_scene + n_targets + n_held]
+            system = ca.Function("lbe_system", [X, V, E, dt, S], _held_system(
+                model, X, V, bodies, dt, masks, A, b, prescribed, mass, free))
+            Am, rhs, dvm = system(Xm, Vm, Em, dtm, Sm)
+            dv = dvm
+            dv[fi] = dvm[fi] + ca.solve(Am[fi, fi], rhs[fi], "ldl")
         v_next = Vm + ca.reshape(dv, d, n)
         return ca.Function("lbe_step", [Xm, Vm, Em, dtm, Sm], [Xm + dtm * v_next, v_next])
+
+
+def _held_system(model, X, V, bodies, dt, masks, A, b, prescribed, mass, free):
+    """``(A_hat, S (b - A z), z)`` of the symbolic step with the contacts ``masks`` held on
+    the ``bodies`` (their geometry over the step, see :mod:`.contact_filter`); z is the
+    prescribed part of dv on every component."""
+    normals, targets = model.symbolic_contacts(X, V, bodies, dt, masks)
+    P = ca.diagcat(*[ca.mtimes(normals[:, k], normals[:, k].T) for k in range(model.n)])
+    keep = ca.SX.eye(3 * model.n) - P
+    held = ca.vec(normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1))
+    mask = ca.DM(free.astype(float))
+    z = mask * held + (1 - mask) * prescribed
+    A_hat = ca.mtimes([keep, A, keep]) + ca.mtimes(ca.diag(ca.DM(mass)), P)
+    return [A_hat, ca.mtimes(keep, b - ca.mtimes(A, z)), z]

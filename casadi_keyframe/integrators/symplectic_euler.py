@@ -54,7 +54,7 @@ class SymplecticEuler(Integrator):
         return State(tangent.x + dt * dv1, dv1)
 
     @staticmethod
-    def step_parameters(model, t: float, dt: float) -> np.ndarray:
+    def step_parameters(model, t: float, dt: float, record=None) -> np.ndarray:
         """Nothing in a flock depends on time beyond the stored forces: an empty S."""
         return np.zeros(0)
 

@@ -18,6 +18,8 @@ Capabilities:
   contractions, for implicit schemes (cloth);
 * :class:`BlockJacobians`: the same Jacobians as 3x3 blocks and a fixed step pattern, so a
   sparse Cholesky analyses a step matrix once;
+* :class:`ContactConstraints`: contacts held inside the implicit step (prescribed normal
+  velocities) and the derivatives of their normals and targets;
 * :class:`PhysicalReport`: whether frames stay physical (stretch, penetration);
 * :class:`Surface`: a rest mesh, for rendering and export.
 """
@@ -129,8 +131,26 @@ class ForceJacobians(abc.ABC):
         """The derivative of ``dt f + dt^2 K w + dt D q`` along ``(dx, dv)``."""
 
     @abc.abstractmethod
-    def symbolic_jacobians(self, X, V, S=None):
-        """``(K, D)`` as sparse CasADi expressions (the same K as :meth:`jacobians`)."""
+    def symbolic_jacobians(self, X, V, S=None, decisions=None):
+        """``(K, D)`` as sparse CasADi expressions (the same K as :meth:`jacobians`, with the
+        step's ``decisions``: :meth:`decision_parameters`)."""
+
+    def carried_interactions(self, last, x):
+        """What a step at x starts from (:meth:`Model.interactions`), given what the last
+        step decided (``last``, its record's, None at the first step): a cloth keeps the
+        springs it took taut while they stay stretched."""
+        return self.interactions(x)
+
+    def revised_interactions(self, found, x0, x1):
+        """``found`` (:meth:`Model.interactions` plus what a step decided) revised after a
+        step from x0 ended at x1, when the end shows the linearization chose wrong (a cloth:
+        springs to take taut); None if it stands (here, always)."""
+        return None
+
+    def decision_parameters(self, found=None) -> np.ndarray:
+        """What a step decided beyond the state, as the flat inputs of
+        :meth:`symbolic_jacobians` (none here)."""
+        return np.zeros(0)
 
 
 class BlockJacobians(ForceJacobians):
@@ -151,6 +171,50 @@ class BlockJacobians(ForceJacobians):
     @abc.abstractmethod
     def step_pattern(self):
         """The fixed pairs' :class:`~.blocks.BlockPattern` over the free components."""
+
+
+class ContactConstraints(abc.ABC):
+    """Contacts an implicit step holds by prescribing the contact particles' velocity along a
+    body's normal (:mod:`~.contact_constraint`): which particles touch a body at a state, the
+    derivative contractions of the normals and targets for the exact adjoint and tangent,
+    and the same in CasADi given which contacts are held."""
+
+    @property
+    @abc.abstractmethod
+    def constraint_families(self) -> tuple:
+        """The families whose contacts the step holds (none: the model holds no contact)."""
+
+    @abc.abstractmethod
+    def contacts(self, x, v, t: float, dt: float, previous=None):
+        """The :class:`~.contact_constraint.Contacts` a step from (x, v) at t holds
+        (``previous``: the last step's, for releasing contacts that pulled)."""
+
+    @abc.abstractmethod
+    def contact_vjp(self, x, v, t: float, dt: float, contacts, lam, q, nu):
+        """``(gx, gv)``: gradients of ``sum_k -lam_k . n_k (n_k . q_k) + nu_k . z_k``."""
+
+    @abc.abstractmethod
+    def contact_jvp(self, x, v, t: float, dt: float, contacts, q, dx, dv):
+        """The derivative of ``-n_k (n_k . q_k) + nbar_k (nbar_k . z_k)`` along ``(dx, dv)``."""
+
+    @abc.abstractmethod
+    def review_contacts(self, held, x, v, t: float, dt: float, x1):
+        """``(revised, touching)`` after a step that ended at x1: ``held`` plus the particles
+        it ended inside a body without holding them (None if there are none), and whether a
+        particle ended in a body's contact layer."""
+
+    @abc.abstractmethod
+    def contact_masks(self, contacts) -> np.ndarray:
+        """Which contacts are held, as the symbolic step's flat 0/1 parameters."""
+
+    @abc.abstractmethod
+    def contact_parameters(self, t: float, dt: float) -> np.ndarray:
+        """The held bodies' geometry for the step from t (the symbolic step's input)."""
+
+    @abc.abstractmethod
+    def symbolic_contacts(self, X, V, G, dt, masks):
+        """``(normals 3 x n, targets 1 x n)`` of the held contacts (zero elsewhere), the
+        bodies' geometry G from :meth:`contact_parameters`."""
 
 
 class PhysicalReport(abc.ABC):

@@ -11,6 +11,7 @@ sparse factorisation can analyse it once.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,10 +98,49 @@ class BlockPattern:
         self.gather = sp.csr_matrix((sign, (slot.ravel(), source)),
                                     shape=(keys.size, 9 * P + 9 * k.size))
         self.free = free
+        self.has_particle_blocks = particle_blocks
 
     @property
     def nnz(self) -> int:
         return self.indices.size
+
+    @functools.cached_property
+    def block_slots(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Every 3x3 block of the pattern between two free particles: the particles ``(I,
+        J)`` and the positions ``(B, 9)`` of its entries (row-major) in the CSC data."""
+        k = np.arange(self.n) if self.has_particle_blocks else np.zeros(0, np.intp)
+        keys = np.unique(np.concatenate([self.i * self.n + self.j, self.j * self.n + self.i,
+                                         k * self.n + k]))
+        I, J = np.divmod(keys, self.n)
+        whole = self.free.reshape(self.n, 3).all(axis=1)
+        I, J = I[whole[I] & whole[J]], J[whole[I] & whole[J]]
+        number = np.cumsum(self.free) - 1
+        a, b = np.divmod(np.arange(9), 3)
+        rows, cols = number[3 * I[:, None] + a], number[3 * J[:, None] + b]
+        col_of = np.repeat(np.arange(self.size), np.diff(self.indptr))
+        stored = col_of.astype(np.int64) * self.size + self.indices
+        slots = np.searchsorted(stored, cols.astype(np.int64) * self.size + rows)
+        return I, J, slots
+
+    def projected(self, values: np.ndarray, projector: np.ndarray, touched: np.ndarray,
+                  masses: np.ndarray) -> np.ndarray:
+        """The CSC data of ``S A S + M P`` for the matrix A of ``values``, with ``P`` the
+        ``(n, 3, 3)`` blocks of ``projector`` (nonzero on the ``touched`` particles only),
+        ``S = I - P`` and M the diagonal of ``masses``: a constrained step's matrix, with the
+        pattern and the positive definiteness of A."""
+        I, J, slots = self.block_slots
+        pick = touched[I] | touched[J]
+        if not pick.any():
+            return values
+        I, J, slots = I[pick], J[pick], slots[pick]
+        B = values[slots].reshape(-1, 3, 3)
+        PI, PJ = projector[I], projector[J]
+        B = B - PI @ B - B @ PJ + PI @ B @ PJ
+        diagonal = I == J
+        B[diagonal] += masses[I[diagonal], None, None] * PI[diagonal]
+        out = values.copy()
+        out[slots] = B.reshape(-1, 9)
+        return out
 
     def values(self, pairs: np.ndarray, particles: np.ndarray | None = None) -> np.ndarray:
         """CSC data of the matrix with ``(P, 9)`` pair blocks and ``(n, 9)`` particle blocks

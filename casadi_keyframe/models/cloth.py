@@ -2,8 +2,9 @@ r"""Mass-spring cloth in 3-D: a list of interaction families summed once per met
 
 A cloth's forces are the families of :mod:`.interaction`, in this order: its springs
 (:class:`~.springs.ChoiKoSprings`), gravity and air drag
-(:class:`~.gravity_drag.GravityAndDrag`), the penalty contact of each collider
-(:class:`~.penalty.BodyPenalty`), self-contact (:class:`~.self_contact.SelfContact`) and any
+(:class:`~.gravity_drag.GravityAndDrag`), the contact of each collider (the paper's penalty springs,
+:class:`~.penalty.BodyPenalty`, guarded by the step holding particles on the body's surface,
+:class:`~.contact_constraint.BodyConstraint`; or either alone), self-contact (:class:`~.self_contact.SelfContact`) and any
 further ``families`` given.  :class:`ClothModel` sums them in each method (forces, Jacobian
 blocks, the linearization's derivative contractions, their symbolic forms) and owns its
 constraints (:mod:`.constraints`: pinned and attached particles) and its reports (stretch,
@@ -25,8 +26,9 @@ import numpy as np
 from ..state import SimulationError
 from .base import BlockJacobians, Model, PhysicalReport, Surface
 from .blocks import BlockPattern, Blocks, pair_block_matrices
-from .colliders import Body, Contact
+from .colliders import Body, Contact, signed_distances
 from .constraints import Constraints
+from .contact_constraint import BodyConstraint, HeldContacts
 from .gravity_drag import GravityAndDrag
 from .interaction import OUTPUTS, Interaction, PairInteraction
 from .penalty import BodyPenalty
@@ -35,6 +37,12 @@ from .springs import ChoiKoSprings, Springs
 from .topology import grid_topology, lumped_masses, mesh_topology
 
 PLANES = ("xz", "xy")
+COLLISIONS = {  # how bodies are touched: each body's families
+    "guarded": lambda body, n, jit: (BodyPenalty(body, n, jit),
+                                     BodyConstraint(body, n, jit, layer=0.0)),
+    "constraint": lambda body, n, jit: (BodyConstraint(body, n, jit),),
+    "penalty": lambda body, n, jit: (BodyPenalty(body, n, jit),),
+}
 
 
 @dataclass(frozen=True)
@@ -77,13 +85,17 @@ def _frozen(*arrays):
         a.flags.writeable = False
 
 
-class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
+class ClothModel(Model, BlockJacobians, HeldContacts, PhysicalReport, Surface):
     """An immutable cloth of n particles with fixed springs; build with :meth:`grid` or
     :meth:`from_mesh`.  States are ``(n, 3)`` arrays; the flat 3n ordering is ``x.ravel()``.
 
-    ``colliders``: bodies touched by penalty contact; ``self_contact``: the
-    :class:`~.colliders.Contact` of cloth with itself (None: none); ``attachments``: particles
-    led along paths; ``families``: further interaction families, summed after the others.
+    ``colliders``: bodies the cloth touches (``collision``): by default the paper's stiff
+    springs in the contact layer with the step holding every particle on the body's surface,
+    so none passes through (``"guarded"``); the step holding particles on the layer's surface
+    with no spring (``"constraint"``); or the springs alone (``"penalty"``, the paper's);
+    ``self_contact``: the :class:`~.colliders.Contact` of cloth with itself (penalty; None:
+    none); ``attachments``: particles led along paths; ``families``: further interaction
+    families, summed after the others.
     """
 
     dim = 3
@@ -91,7 +103,7 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
     def __init__(self, rest_positions, faces, masses, springs: Springs,
                  params: ClothParams | None = None, pinned=(), jit: bool | None = None,
                  colliders=(), self_contact: Contact | None = None, attachments=(),
-                 families=()):
+                 families=(), collision: str = "guarded"):
         params = ClothParams() if params is None else params
         masses = np.asarray(masses, dtype=float)
         if masses.shape != (len(rest_positions),) or np.any(masses <= 0):
@@ -102,6 +114,9 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         for body in colliders:
             if not isinstance(body, Body):
                 raise ValueError(f"colliders must be Plane, Sphere or Capsule bodies, got {body!r}")
+        if collision not in COLLISIONS:
+            raise ValueError(f"collision must be one of {sorted(COLLISIONS)} (contact held by "
+                             f"the step, or the paper's penalty springs), got {collision!r}")
         families = tuple(families)
         for family in families:
             if not isinstance(family, Interaction):
@@ -116,6 +131,7 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         set_("jit", jit)
         set_("colliders", colliders)
         set_("self_contact", self_contact)
+        set_("collision", collision)
         set_("constraints", Constraints(n, pinned, attachments))
         set_("pinned", self.constraints.pinned)
         set_("attachments", self.constraints.attachments)
@@ -126,7 +142,7 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
                        (SelfContact(self_contact, np.stack([springs.i, springs.j], 1), n, jit),))
         set_("families", (spring_family, GravityAndDrag(self.masses, params.gravity,
                                                         params.air_drag),
-                          *(BodyPenalty(body, n, jit) for body in colliders),
+                          *(f for body in colliders for f in COLLISIONS[collision](body, n, jit)),
                           *self_family, *families))
         set_("_pattern", BlockPattern(springs.i, springs.j, n))
         set_("_step_pattern", None)
@@ -148,8 +164,8 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         * plane "xy" (lying flat):    ``(c width/(cols-1), r height/(rows-1), 0)``.
 
         ``mass`` is the total mass in kg, lumped by area (corners 1/4 of inner particles).
-        ``scene`` takes ``colliders``, ``self_contact``, ``attachments`` and ``families``
-        (see the class).
+        ``scene`` takes ``colliders``, ``collision``, ``self_contact``, ``attachments`` and
+        ``families`` (see the class).
         """
         if int(rows) != rows or int(cols) != cols or rows < 2 or cols < 2:
             raise ValueError(f"a cloth grid needs rows >= 2 and cols >= 2, got {rows} x {cols}")
@@ -215,10 +231,11 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         rest = np.sqrt(np.einsum("pk,pk->p", d, d) + params.eps ** 2)  # regularised: f(rest)=0
         springs = Springs(ij[:, 0].copy(), ij[:, 1].copy(), rest, kind)
         _frozen(springs.i, springs.j, springs.rest, springs.kind)
-        unknown = set(scene) - {"colliders", "self_contact", "attachments", "families"}
+        options = {"colliders", "self_contact", "attachments", "families", "collision"}
+        unknown = set(scene) - options
         if unknown:
             raise TypeError(f"unknown cloth option(s) {sorted(unknown)}; scene options are "
-                            "colliders, self_contact, attachments and families")
+                            f"{', '.join(sorted(options))}")
         return cls(vertices, faces, masses, springs, params, pinned, jit, **scene)
 
     @property
@@ -268,11 +285,11 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
                 "or bound the controls", step)
 
     def penetration(self, x: np.ndarray, t: float = 0.0) -> float:
-        """How deep (m) the deepest particle is inside a collider at time t (0 if none is)."""
+        """How deep (m) the deepest particle is inside a collider's surface at time t (0 if
+        none is): the library's one measure of penetration."""
         deepest = 0.0
-        for family in self.families:
-            if isinstance(family, BodyPenalty):
-                deepest = max(deepest, float(-family.distances(x, t).min()))
+        for body in self.colliders:
+            deepest = max(deepest, float(-signed_distances(body, x, t).min()))
         return deepest
 
     def physical_report(self, x: np.ndarray, dt: float) -> dict:
@@ -347,7 +364,7 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         for family, found in zip(self.families, self._found(x, interactions)):
             part = family.blocks(x, v, t, kinds, found)
             if part.pairs is not None:
-                group = found_pairs if found is not None else fixed
+                group = fixed if family.fixed_pairs else found_pairs
                 group.append((part.i, part.j, part.pairs))
             for acc, b in zip(particles, part.particles or ()):
                 if b is not None:
@@ -414,17 +431,46 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
         and S the :meth:`scene_parameters` (default: those at t = 0).  Pair families act over
         every pair they might (self-contact: all unjoined pairs): for small systems."""
         out = 0
-        for family, part in self._scene_parts(S):
+        for family, part in self.scene_parts(S):
             out += family.symbolic_forces(X, V, part)
         return out
 
-    def symbolic_jacobians(self, X, V, S=None):
+    def decision_parameters(self, found=None) -> np.ndarray:
+        """What a step decided for each family (``found``, from its record; None: nothing
+        beyond the state) as the flat inputs :meth:`symbolic_jacobians` takes."""
+        found = (None,) * len(self.families) if found is None else found
+        return np.concatenate([f.decisions(d) for f, d in zip(self.families, found)])
+
+    def carried_interactions(self, last, x):
+        found = self.interactions(x)
+        if last is None:
+            return found
+        return tuple(f.carried(d, x) if isinstance(f, ChoiKoSprings) else new
+                     for f, d, new in zip(self.families, last, found))
+
+    def revised_interactions(self, found, x0, x1):
+        """``found`` with what a step from x0 that ended at x1 shows it should have decided
+        (springs it should have taken taut); None if nothing changes."""
+        out, changed = list(found), False
+        for k, family in enumerate(self.families):
+            if isinstance(family, ChoiKoSprings):
+                new = family.revised(found[k], x0, x1)
+                if new is not None:
+                    out[k], changed = new, True
+        return tuple(out) if changed else None
+
+    def symbolic_jacobians(self, X, V, S=None, decisions=None):
         """:meth:`jacobians` as sparse CasADi expressions ``(K, D)``, assembled from the same
-        kernels and patterns (so K is the step's clamped stiffness, not ``df/dx``)."""
+        kernels and patterns (so K is the step's clamped stiffness, not ``df/dx``), given the
+        step's ``decisions`` (:meth:`decision_parameters`; None: nothing)."""
         zeros = ca.SX.zeros(9, self.n)
         particles, fixed, extra = [zeros, zeros], None, []
-        for family, part in self._scene_parts(S):
-            blocks = family.symbolic_blocks(X, V, part)
+        at = 0
+        for family, part in self.scene_parts(S):
+            size = family.decision_size()
+            mine = None if decisions is None or not size else decisions[at:at + size]
+            at += size
+            blocks = family.symbolic_blocks(X, V, part, mine)
             for k, b in enumerate(blocks.particles or ()):
                 if b is not None:
                     particles[k] = particles[k] + b
@@ -442,7 +488,7 @@ class ClothModel(Model, BlockJacobians, PhysicalReport, Surface):
             D += _symbolic_csc(pattern, ca.vec(blocks.pairs[1]))
         return K, D
 
-    def _scene_parts(self, S):
+    def scene_parts(self, S):
         """Each family with its slice of the scene parameters S (default: those at t = 0)."""
         S = ca.DM(self.scene_parameters(0.0)) if S is None else S
         at = 0

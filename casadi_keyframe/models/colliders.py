@@ -10,10 +10,13 @@ springs are :class:`~.penalty.BodyPenalty`.
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import casadi as ca
 import numpy as np
+
+from ..kernels import MappedKernel
 
 
 @dataclass(frozen=True)
@@ -167,3 +170,18 @@ class Capsule(Body):
 
     def endpoints(self, t: float):
         return _at(self.a, t)[0], _at(self.b, t)[0]
+
+
+@functools.lru_cache(maxsize=None)
+def _distance_kernel(body_type: type) -> MappedKernel:
+    x = ca.SX.sym("x", 3)
+    geo = {key: ca.SX.sym(key, size) for key, size in body_type.GEOMETRY.items()}
+    phi = body_type.surface(x, **geo)[0]
+    return MappedKernel(ca.Function(f"{body_type.kind}_distance", [x, *geo.values()], [phi]))
+
+
+def signed_distances(body: Body, x: np.ndarray, t: float) -> np.ndarray:
+    """Every point's signed distance to ``body``'s surface at time t (negative inside), for
+    ``x`` of shape ``(n, 3)``: the one measure of how deep a particle is in a body."""
+    columns = [np.broadcast_to(g, (len(x), np.size(g))) for g in body.geometry(t)]
+    return _distance_kernel(type(body))(np.asarray(x, float), *columns)[0].ravel()

@@ -48,5 +48,5 @@ class GravityAndDrag(Interaction):
         mass = ca.repmat(ca.DM(self.masses).T, 3, 1)
         return ca.DM(self.gravity.T) - self.air_drag * V * mass
 
-    def symbolic_blocks(self, X, V, S):
+    def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=(None, ca.DM(np.asarray(self.damping_blocks).T)))

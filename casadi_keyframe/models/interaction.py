@@ -66,6 +66,14 @@ class Interaction:
         """The family's time-dependent inputs at time t as one flat vector (the symbolic S)."""
         return np.zeros(0)
 
+    def decisions(self, found) -> np.ndarray:
+        """What a step decided for this family (``found``) as the flat inputs its symbolic
+        Jacobian blocks take (none here: see the springs' taut flags)."""
+        return np.zeros(0)
+
+    def decision_size(self) -> int:
+        return self.decisions(None).size
+
     def forces(self, x, v, t: float, found) -> np.ndarray | None:
         """Its force on every particle, ``(n, 3)`` (None: none acts now)."""
         raise NotImplementedError
@@ -91,9 +99,10 @@ class Interaction:
         """:meth:`forces` as a ``3 x n`` CasADi expression (S: :meth:`parameters`)."""
         raise NotImplementedError
 
-    def symbolic_blocks(self, X, V, S) -> FamilyBlocks:
+    def symbolic_blocks(self, X, V, S, decisions=None) -> FamilyBlocks:
         """``(K, D)`` blocks as CasADi columns: ``pairs`` ``9 x P``, ``particles`` ``9 x n``
-        (row-major blocks; every pair of the family, for small systems)."""
+        (row-major blocks; every pair of the family, for small systems), given what the step
+        decided (:meth:`decisions`; None: nothing)."""
         raise NotImplementedError
 
 
@@ -103,6 +112,8 @@ class PairInteraction(Interaction):
     :meth:`pair_parameters` (per-pair columns) and :meth:`all_pairs` (the symbolic route's
     pairs)."""
 
+    fixed_pairs = True  # the same pairs at every state (springs); False: found per state
+
     def __init__(self, kernels: dict, n: int, jit: bool | None):
         self.kernels, self.n = kernels, n
         self.mapped = {k: MappedKernel(kernels[k], jit=jit) for k in KERNELS}
@@ -111,29 +122,34 @@ class PairInteraction(Interaction):
         """The pairs ``(i, j)`` acting now (None if none)."""
         raise NotImplementedError
 
-    def pair_parameters(self, i: np.ndarray, j: np.ndarray) -> list:
-        """The kernels' inputs after ``d, dv`` for the pairs ``(i, j)``, ``(P, k)`` each."""
+    def pair_parameters(self, i: np.ndarray, j: np.ndarray, found=None) -> list:
+        """The kernels' inputs after ``d, dv`` for the pairs ``(i, j)``, ``(P, k)`` each
+        (``found``: what :meth:`~Interaction.find` or the step decided)."""
         raise NotImplementedError
+
+    def symbolic_pair_parameters(self, i: np.ndarray, j: np.ndarray, decisions=None) -> list:
+        """:meth:`pair_parameters` as CasADi rows ``k x P`` for the symbolic route."""
+        return [ca.DM(np.asarray(a).T) for a in self.pair_parameters(i, j)]
 
     def all_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
 
-    def _inputs(self, x, v, i, j):
+    def _inputs(self, x, v, i, j, found):
         return [pair_difference(x, i, j), pair_difference(v, i, j),
-                *self.pair_parameters(i, j)]
+                *self.pair_parameters(i, j, found)]
 
     def forces(self, x, v, t, found):
         ij = self.pairs(found)
         if ij is None:
             return None
-        (f,) = self.mapped["force"](*self._inputs(x, v, *ij))
+        (f,) = self.mapped["force"](*self._inputs(x, v, *ij, found))
         return scatter_pairs(f, *ij, self.n)
 
     def blocks(self, x, v, t, kinds, found):
         ij = self.pairs(found)
         if ij is None:
             return FamilyBlocks()
-        inputs = self._inputs(x, v, *ij)
+        inputs = self._inputs(x, v, *ij, found)
         return FamilyBlocks(*ij, tuple(b for k in kinds for b in self.mapped[k](*inputs)))
 
     def linearization_vjp(self, x, v, t, lam, w, q, dt, found):
@@ -141,7 +157,7 @@ class PairInteraction(Interaction):
         if ij is None:
             return None
         vectors = [pair_difference(a, *ij) for a in (-lam, w, q)]
-        gd, gdv = self.mapped["vjp"](*self._inputs(x, v, *ij), *vectors,
+        gd, gdv = self.mapped["vjp"](*self._inputs(x, v, *ij, found), *vectors,
                                      np.full((ij[0].size, 1), dt))
         return -scatter_pairs(gd, *ij, self.n), -scatter_pairs(gdv, *ij, self.n)
 
@@ -151,13 +167,13 @@ class PairInteraction(Interaction):
             return None
         vectors = [pair_difference(a, *ij) for a in (w, q)]
         deltas = [pair_difference(a, *ij) for a in (dx, dv)]
-        (dg,) = self.mapped["jvp"](*self._inputs(x, v, *ij), *vectors,
+        (dg,) = self.mapped["jvp"](*self._inputs(x, v, *ij, found), *vectors,
                                    np.full((ij[0].size, 1), dt), *deltas)
         return scatter_pairs(dg, *ij, self.n)
 
-    def _symbolic(self, kind, X, V):
+    def _symbolic(self, kind, X, V, decisions=None):
         i, j = self.all_pairs()
-        params = [ca.DM(np.asarray(a).T) for a in self.pair_parameters(i, j)]
+        params = self.symbolic_pair_parameters(i, j, decisions)
         out = self.kernels[kind].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i], *params)
         return i, j, (list(out) if isinstance(out, (list, tuple)) else [out])
 
@@ -165,8 +181,8 @@ class PairInteraction(Interaction):
         i, j, (f,) = self._symbolic("force", X, V)
         return ca.mtimes(f, pair_incidence(i, j, self.n))
 
-    def symbolic_blocks(self, X, V, S):
-        i, j, blocks = self._symbolic("jac", X, V)
+    def symbolic_blocks(self, X, V, S, decisions=None):
+        i, j, blocks = self._symbolic("jac", X, V, decisions)
         return FamilyBlocks(i, j, tuple(blocks))
 
 
@@ -213,5 +229,5 @@ class ParticleInteraction(Interaction):
     def symbolic_forces(self, X, V, S):
         return self._symbolic("force", X, V, S)[0]
 
-    def symbolic_blocks(self, X, V, S):
+    def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S)))

@@ -20,7 +20,7 @@ import functools
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel, interaction_kernels
+from ..kernels import interaction_kernels
 from .colliders import Body
 from .interaction import ParticleInteraction
 
@@ -45,17 +45,14 @@ def penalty_law(phi, normal, rel_v, gains, x):
 @functools.lru_cache(maxsize=None)
 def body_kernels(body_type: type) -> dict[str, ca.Function]:
     """The penalty kernels of a body class ``(x, v, *geometry, gains) -> ...`` (see
-    :func:`~casadi_keyframe.kernels.interaction_kernels`), and ``distance(...) -> phi``, the
-    signed distance to the body's surface (negative inside), with the same inputs."""
+    :func:`~casadi_keyframe.kernels.interaction_kernels`)."""
     x, v = ca.SX.sym("x", 3), ca.SX.sym("v", 3)
     geo = {key: ca.SX.sym(key, size) for key, size in body_type.GEOMETRY.items()}
     gains = ca.SX.sym("gains", 4)
     phi, normal, v_body = body_type.surface(x, **geo)
     name = f"{body_type.kind}_contact"
-    kernels = interaction_kernels(name, x, v, [*geo.values(), gains],
-                                  *penalty_law(phi, normal, v - v_body, gains, x))
-    kernels["distance"] = ca.Function(f"{name}_distance", [x, v, *geo.values(), gains], [phi])
-    return kernels
+    return interaction_kernels(name, x, v, [*geo.values(), gains],
+                               *penalty_law(phi, normal, v - v_body, gains, x))
 
 
 class BodyPenalty(ParticleInteraction):
@@ -69,7 +66,6 @@ class BodyPenalty(ParticleInteraction):
             raise ValueError(f"colliders must be Plane, Sphere or Capsule bodies, got {body!r}")
         super().__init__(body_kernels(type(body)), n, jit)
         self.body = body
-        self._distance = MappedKernel(self.kernels["distance"], jit=False)  # reports only
 
     def columns(self, t):
         """The geometry at time t and the contact gains, one row per particle."""
@@ -85,8 +81,3 @@ class BodyPenalty(ParticleInteraction):
             parts.append(S[at:at + size])
             at += size
         return parts + [ca.DM(self.body.contact.gains)]
-
-    def distances(self, x: np.ndarray, t: float) -> np.ndarray:
-        """Every particle's signed distance to the body's surface at time t, ``(n,)``."""
-        (phi,) = self._distance(x, np.zeros_like(x), *self.columns(t))
-        return phi.ravel()

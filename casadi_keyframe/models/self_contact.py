@@ -32,6 +32,7 @@ class SelfContact(PairInteraction):
 
     name = "self-contact"
     role = "contact"
+    fixed_pairs = False
 
     def __init__(self, contact: Contact, excluded: np.ndarray, n: int,
                  jit: bool | None = None):
@@ -52,7 +53,7 @@ class SelfContact(PairInteraction):
     def pairs(self, found):
         return None if found is None or found[0].size == 0 else found
 
-    def pair_parameters(self, i, j):
+    def pair_parameters(self, i, j, found=None):
         return [np.broadcast_to(self.contact.gains, (i.size, 4))]
 
     def all_pairs(self) -> tuple[np.ndarray, np.ndarray]:

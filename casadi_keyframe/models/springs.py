@@ -48,6 +48,9 @@ STRETCH, SHEAR, BEND = range(3)
 # branch): the law's kink there must not be decided by round-off, which differs between the
 # numeric and symbolic routes for states at rest up to it (a sheet at rest, or translating)
 REST_TOLERANCE = 1e-9
+# a spring a step ends this far past its rest length, having got this much longer within
+# the step (relative), was linearized too softly: the step is solved again with it taut
+TAUT_MARGIN = 0.05
 
 
 def _fit_sinc_inverse(degree: int = 10) -> np.ndarray:
@@ -74,7 +77,7 @@ def sinc_inverse(s: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(sinc_inverse_squared(np.asarray(s, dtype=float)), 0.0))
 
 
-def spring_law(d, dv, L, k_t, k_b, c, eps: float):
+def spring_law(d, dv, L, k_t, k_b, c, taut, eps: float):
     """``(f_i, K)`` of one spring as CasADi expressions (see the module docstring): the force
     on particle i and the stiffness ``K ~ df_i/dd`` the implicit step uses.
 
@@ -84,24 +87,34 @@ def spring_law(d, dv, L, k_t, k_b, c, eps: float):
     ``M - dt D - dt^2 K`` indefinite.  As Choi and Ko, K keeps it only under tension
     (``max(m, 0)``); ``m' >= 0`` on both branches, so K is negative semi-definite and the
     step matrix positive definite for every dt.
+
+    ``taut`` (0 or 1) is the step's decision to take the spring taut: then its K is
+    ``k_t I``, the tension stiffness in every direction.  Linearized at its start a spring
+    resists only along its length (and nothing while it is at or under its rest length: the
+    buckling slope is tens of times softer, the transverse term vanishes at rest), so a step
+    in which one end stops and the other does not, as when a cloth hits a body, stretches it
+    unchecked; the step finds the springs it overstretched (:data:`TAUT_MARGIN`) and solves
+    again with them taut.  The force is the law's either way.
     """
     r = ca.sqrt(ca.dot(d, d) + eps ** 2)
     u = d / r
     m = ca.if_else(r >= L * (1 - REST_TOLERANCE), k_t * (r - L),
                    -k_b * 4 * sinc_inverse_squared(r / L) / L ** 2)
     force = m * u + c * ca.dot(dv, u) * u
-    stiffness = (ca.mtimes(u, ca.jacobian(m, d))
-                 + ca.fmax(m, 0) * (ca.SX.eye(3) / r - ca.mtimes(d, d.T) / r ** 3))
+    transverse = ca.fmax(m, 0) * (ca.SX.eye(3) / r - ca.mtimes(d, d.T) / r ** 3)
+    stiffness = ca.if_else(taut > 0.5, k_t * ca.SX.eye(3),
+                           ca.mtimes(u, ca.jacobian(m, d)) + transverse)
     return force, stiffness
 
 
 def spring_kernels(eps: float) -> dict[str, ca.Function]:
-    """``force(d, dv, L, k_t, k_b, c) -> f_i``, ``jac(...) -> (vec K, vec D)`` (row-major) and
+    """``force(d, dv, L, k_t, k_b, c, taut) -> f_i``, ``jac(...) -> (vec K, vec D)``
+    (row-major) and
     the derivative kernels (see :func:`~casadi_keyframe.kernels.interaction_kernels`), K from
     :func:`spring_law`.  As Baraff and Witkin, the damping force's position derivative (not
     symmetric) is left out of K, so K is symmetric."""
     d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
-    scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c")]
+    scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c", "taut")]
     force, stiffness = spring_law(d, dv, *scalars, eps)
     return interaction_kernels("cloth_spring", d, dv, scalars, force, stiffness)
 
@@ -129,7 +142,9 @@ class ChoiKoSprings(PairInteraction):
     """The cloth's springs as a family: the Choi-Ko law over fixed pairs.
 
     ``stiffness`` is ``(stretch, shear, bend)`` of :class:`~.cloth.ClothParams`, ``damping``
-    the along-spring damping c, ``eps`` the length regularisation."""
+    the along-spring damping c, ``eps`` the length regularisation.  What a step decides for
+    them (its ``found``) is which compressed springs it takes taut (:func:`spring_law`): a
+    bool array over the springs, or None for none."""
 
     name = "springs"
     role = "internal"
@@ -147,12 +162,46 @@ class ChoiKoSprings(PairInteraction):
         for a in self.parameters_per_spring:
             a.flags.writeable = False
         self._ij = (springs.i, springs.j)
+        self._slack = np.zeros((size, 1))
 
     def pairs(self, found):
         return self._ij
 
-    def pair_parameters(self, i, j):
-        return list(self.parameters_per_spring)
+    def pair_parameters(self, i, j, found=None):
+        taut = self._slack if found is None else found.astype(float)[:, None]
+        return [*self.parameters_per_spring, taut]
+
+    def symbolic_pair_parameters(self, i, j, decisions=None):
+        rows = [ca.DM(np.asarray(a).T) for a in self.parameters_per_spring]
+        taut = ca.DM(self._slack.T) if decisions is None else ca.reshape(decisions, 1, i.size)
+        return rows + [taut]
+
+    def decisions(self, found):
+        return np.zeros(self.springs.i.size) if found is None else found.astype(float)
+
+    def revised(self, found, x0, x1):
+        """``found`` with the springs that end beyond ``1 + TAUT_MARGIN`` times their rest
+        length at ``x1`` having got longer by that much over the step from ``x0`` (smooth
+        motion changes a spring's length slowly; a step that missed a stop does not), and the
+        stretched springs that share a particle with one, taken taut; None if none changes."""
+        s = self.springs
+        end = s.stretch(x1)
+        late = (end > 1 + TAUT_MARGIN) & (end > s.stretch(x0) + TAUT_MARGIN)
+        if late.any():  # and the springs around them, which a taut one would stretch next
+            near = np.zeros(self.n, bool)
+            near[s.i[late]] = near[s.j[late]] = True
+            late |= (near[s.i] | near[s.j]) & (end > 1)
+        taut = np.zeros(s.i.size, bool) if found is None else found
+        new = late & ~taut
+        return (taut | new) if new.any() else None
+
+    def carried(self, taut, x):
+        """The springs a step at x keeps taut from the last (``taut``): those still
+        stretched past their rest length."""
+        if taut is None:
+            return None
+        kept = taut & (self.springs.stretch(x) > 1)
+        return kept if kept.any() else None
 
     def all_pairs(self):
         return self._ij

@@ -10,6 +10,7 @@ import time
 import numpy as np
 
 from ..adjoints import get_gradient
+from ..health import GrowthLog
 from ..interrupts import check
 from ..state import SimulationError, Trajectory
 from .goal import GoalReached, verdict
@@ -43,11 +44,13 @@ class Evaluator:
         self.nfev = 0
         self.failures = 0
         self.last_failure = ""
+        self.last_error = None
         self.last_u = None
         self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.seconds = 0.0
         self.interrupted = None
         self.start = None  # (objective, keyframe error) at the starting controls
+        self.health = GrowthLog()  # each gradient's backward growth (health.GradientError too)
 
     @property
     def njev(self) -> int:
@@ -63,9 +66,12 @@ class Evaluator:
             check()  # a signal caught by interrupts.catching stops the search here
             self._seen.clear()
             f, g = self.gradient(self._watched, u)
-        except SimulationError as err:
+            self.health.seen(self.gradient)
+        except SimulationError as err:  # health.GradientError too: a refused gradient
             # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
             # up: measured, one iteration and "RELATIVE REDUCTION OF F"); IPOPT rejects it too
+            self.health.failed(err)
+            self.last_error = err
             self.failures += 1
             self.last_failure = str(err)
             best = self.best_f if np.isfinite(self.best_f) else 0.0
@@ -110,10 +116,11 @@ class Evaluator:
         ``stage_dt``."""
         u, (f, _) = self.last_u, self.last
         control = self.problem.control_cost(u)[0]
+        growth = {} if self.health.last is None else {"gradient_growth": self.health.last}
         history.append(history_record(
             self.problem, u, objective=f, keyframe_error=f - control,
             iteration=len(history) + 1, stage=self.stage,
-            seconds=time.perf_counter() - start, nfev=self.nfev))
+            seconds=time.perf_counter() - start, nfev=self.nfev, **growth))
         if self.checkpoint is not None and self.best_u is not None:
             self.checkpoint.write(self.export(self.best_u), fun=float(self.best_f),
                                   nit=len(history), stage=self.stage,

@@ -55,7 +55,9 @@ class HistoryRecord(_HistoryFields, total=False):
       keyframes' tolerances (1: as large as the tolerance);
     * ``control_cost``, ``damping``, ``misses``: :func:`~.constrained.lower_effort`'s
       control cost, the damping it stepped with, and each keyframe row's ``(kind, rms
-      miss)``.
+      miss)``;
+    * ``gradient_growth``: the backward growth of the gradient at the point
+      (:mod:`casadi_keyframe.health`; routes that watch their backward pass).
     """
 
     round: int
@@ -63,6 +65,7 @@ class HistoryRecord(_HistoryFields, total=False):
     control_cost: float
     damping: float
     misses: list
+    gradient_growth: float
 
 
 class Timings(TypedDict):
@@ -122,7 +125,11 @@ class Stage(_StageFields, total=False):
     ``control_cost`` and ``misses`` (the problem's keyframe misses at its controls, as
     in ``breakdown``).  A multiple-shooting stage adds ``segments`` and ``defect`` (the
     largest rms defect left, in tolerances); its ``fun`` is the objective on the stitched
-    segments.
+    segments.  A search's stage adds its gradients' health
+    (:class:`~casadi_keyframe.health.GrowthLog`): ``gradient_growth``, the largest backward
+    growth of its evaluations (a route that watches its backward pass), and
+    ``gradient_refused``, the evaluations whose gradient was refused (counted in
+    ``failed_simulations`` too).
     """
 
     weight_scale: float
@@ -130,6 +137,8 @@ class Stage(_StageFields, total=False):
     defect: float
     control_cost: float
     misses: list
+    gradient_growth: float
+    gradient_refused: int
 
 
 @dataclass
@@ -202,13 +211,25 @@ class Result:
 
     def summary(self) -> dict:
         """JSON-ready summary (no arrays): the scalar fields, ``status_name``, ``timings``,
-        ``breakdown``, ``stages`` and the gradient's norm."""
+        ``breakdown``, ``stages``, the gradient's norm and its health over the search
+        (``gradient_health``: the largest backward growth and the refused evaluations)."""
         return {"fun": self.fun, "nit": self.nit, "nfev": self.nfev, "njev": self.njev,
                 "success": self.success, "status": self.status,
                 "status_name": STATUS[self.status], "message": self.message,
                 "method": self.method, "gradient": self.gradient, "timings": self.timings,
                 "breakdown": self.breakdown, "stages": self.stages,
-                "gradient_norm": float(np.linalg.norm(self.jac))}
+                "gradient_norm": float(np.linalg.norm(self.jac)),
+                "gradient_health": _health(self.stages)}
+
+
+def _health(stages) -> dict:
+    """The gradients' health over ``stages``: the largest backward growth (None if no stage
+    watched one), the bound it is held to and the evaluations refused."""
+    from ..health import GROWTH_BOUND
+
+    growth = [s["gradient_growth"] for s in stages if "gradient_growth" in s]
+    return {"largest_growth": max(growth) if growth else None, "bound": GROWTH_BOUND,
+            "refused": sum(s.get("gradient_refused", 0) for s in stages)}
 
 
 def _check_keys(what: str, record, kind) -> None:

@@ -21,6 +21,7 @@ import numpy as np
 from tqdm.auto import tqdm
 
 from ..adjoints import get_gradient
+from ..health import GradientError
 from ..interrupts import NAMES, handled
 from ..io import as_checkpoint
 from ..state import SimulationError
@@ -228,13 +229,15 @@ class _Search:
                 "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
                 "success": status == CONVERGED, "status": status, "message": message,
                 "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
-                "failed_simulations": ev.failures}
+                "failed_simulations": ev.failures, **ev.health.stage_fields()}
 
     def _search(self, problem, ev, u0, stage):
         k, count = stage
         where = "" if count == 1 else f" of stage {k} ({stage_name(problem)})"
         f0, _ = ev(u0)
         ev.start = (float(f0), float(f0 - problem.control_cost(u0)[0]))
+        if isinstance(ev.last_error, GradientError):
+            raise ev.last_error  # the route's own message says what to use instead
         if ev.failures:
             raise SimulationError(f"the simulation fails at the starting controls{where} "
                                   f"({ev.last_failure})"

@@ -26,6 +26,8 @@ from ..geometry import body_geometry, capsule_grid, circle, plane_patch
 from ..views import ClothView, view_of
 from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
                      snapshot_frames, write_gif)
+from .targets import (camera_direction, center_distance, colorbar, distance_colors,
+                      distance_norm, distances, format_mm, miss_text, target_camera)
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
 BACK = "#c9b58f"  # the side of a cloth turned away from the camera (a cape's inside)
@@ -74,12 +76,6 @@ def facing_away(polygons, eye) -> np.ndarray:
     """Whether each polygon's normal (by its winding) turns away from the camera at ``eye``."""
     p = np.asarray(polygons, dtype=float)
     return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) @ np.asarray(eye, float) < 0
-
-
-def camera_direction(camera) -> np.ndarray:
-    """The unit vector from the scene towards a camera at ``(elevation, azimuth)`` degrees."""
-    el, az = np.radians(camera)
-    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
 
 def grid_quads(grid) -> np.ndarray:
@@ -142,20 +138,23 @@ def targets(problem) -> list:
 
 
 class ClothPanel:
-    """One 3-D axes over fixed limits ``box`` seen from ``view``'s camera, with a
-    centre-of-mass ``path`` and the view's ring drawn once; :meth:`show` draws one frame's
-    cloth and colliders, :meth:`show_targets` the keyframe markers ``terms`` due next."""
+    """One 3-D axes over fixed limits ``box`` seen from ``camera`` (default: ``view``'s),
+    with a centre-of-mass ``path`` and the view's ring drawn once; :meth:`show` draws one
+    frame's cloth and colliders, :meth:`show_targets` the keyframe markers of ``terms`` at
+    a frame (or, faded and labelled, those due next)."""
 
-    def __init__(self, ax, model, box: Box, view: ClothView, *, path=None, terms=()):
+    def __init__(self, ax, model, box: Box, view: ClothView, *, path=None, terms=(),
+                 camera=None):
         self.ax, self.model, self.box, self.ring = ax, model, box, view.ring
         self.terms = list(terms)
         self.dynamic = []
+        self.camera = tuple(view.camera if camera is None else camera)
         ax.set(xlim=(box.lo[0], box.hi[0]), ylim=(box.lo[1], box.hi[1]),
                zlim=(box.lo[2], box.hi[2]))
         ax.set_box_aspect(box.hi - box.lo)
-        ax.view_init(*view.camera)
+        ax.view_init(*self.camera)
         ax.computed_zorder = False  # planes, then the depth-sorted surfaces, then marks
-        self.eye = camera_direction(view.camera)
+        self.eye = camera_direction(self.camera)
         ax.tick_params(labelsize=6, pad=0)
         if path is not None:
             ax.plot(*np.asarray(path).T, color=COM, lw=0.8, alpha=0.8)
@@ -168,14 +167,16 @@ class ClothPanel:
         """The model's pinned and attached particles, drawn as dots."""
         return self.model.prescribed_particles()
 
-    def show(self, model, x, t: float, color=CLOTH):
+    def show(self, model, x, t: float, color=CLOTH, *, vertex_rgb=None):
         """Replace the frame's artists with ``model``'s cloth at positions ``x`` shaded
-        ``color``, its pinned and attached particles, and its colliders at time ``t``."""
+        ``color`` (or, given ``vertex_rgb`` ``(n, 3)``, each face the mean of its vertices'
+        colours: the distance to a target), its pinned and attached particles, and its
+        colliders at time ``t``."""
         for artist in self.dynamic:
             artist.remove()
         self.dynamic, self.model = [], model
         self._bodies = [body_geometry(body, t) for body in model.colliders]
-        self._cloth(np.asarray(x), color)
+        self._cloth(np.asarray(x), color, vertex_rgb)
         self._colliders(t)
 
     def set_title(self, text: str, full: bool = True):
@@ -185,14 +186,19 @@ class ClothPanel:
         self.ax.add_collection3d(collection)
         self.dynamic.append(collection)
 
-    def _cloth(self, x, color):
+    def _cloth(self, x, color, vertex_rgb=None):
         """The cloth's triangles and the round colliders' quads in one collection, so that
         matplotlib's per-polygon depth sort hides what is behind across them (the body
-        hides the cape behind it); the cloth's two sides are shaded apart."""
+        hides the cape behind it); the cloth's two sides are shaded apart, or, coloured by
+        ``vertex_rgb``, lit gently so the colour still reads as its value."""
         faces, marked = self.model.faces, self.marked
         polys = list(x[faces])
         self.facing_away = facing_away(x[faces], self.eye)
-        colors = [face_colors(x, faces, color, back=back_color(color), eye=self.eye)]
+        if vertex_rgb is None:
+            colors = [face_colors(x, faces, color, back=back_color(color), eye=self.eye)]
+        else:
+            lit = 0.75 + 0.25 * shade(x[faces], "white")[:, :1]
+            colors = [np.c_[lit * np.asarray(vertex_rgb)[faces].mean(1), np.ones(len(faces))]]
         for kind, a, b, *r in self._bodies:
             if kind == "round":
                 quads = grid_quads(capsule_grid(a, b, r[0], 8))
@@ -219,62 +225,111 @@ class ClothPanel:
         targets are crosses)."""
         return marker.kind == "shape"
 
-    def show_targets(self, n: int):
-        """Add the targets of the terms at the current or next keyframe (faded before it)."""
-        if not self.terms:
-            return
-        ahead = [t.frame for t in self.terms if t.frame >= n]
-        frame = min(ahead) if ahead else max(t.frame for t in self.terms)
-        alpha = 1.0 if frame == n else 0.35
-        for marker in (t for t in self.terms if t.frame == frame):
-            target = marker.points
+    def show_targets(self, n: int, *, ahead: bool = True):
+        """Add the targets of the terms at frame ``n``; with ``ahead``, at a frame between
+        keyframes those of the next one, faded and labelled "target at frame N"."""
+        here = [t for t in self.terms if t.frame == n]
+        if not here and ahead:
+            later = [t.frame for t in self.terms if t.frame > n]
+            if later:
+                here = [t for t in self.terms if t.frame == min(later)]
+                self.dynamic.append(self.ax.text2D(
+                    0.02, 0.96, f"target at frame {here[0].frame}", color=TARGET,
+                    fontsize=8, transform=self.ax.transAxes, va="top"))
+        alpha = 1.0 if here and here[0].frame == n else 0.35
+        for marker in here:
             if self.is_shape(marker):
-                shape = target
                 # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
                 lw = min(0.4, 120 / len(self.model.faces))
-                self._add(Poly3DCollection(shape[self.model.faces], facecolors="none", lw=lw,
-                                           edgecolors=matplotlib.colors.to_rgba(TARGET, alpha),
-                                           zorder=2))
+                self._add(Poly3DCollection(marker.points[self.model.faces], facecolors="none",
+                                           lw=lw, zorder=2, edgecolors=matplotlib.colors.to_rgba(
+                                               TARGET, 0.6 * alpha)))
             else:
-                self.dynamic.append(self.ax.scatter(*target.T, marker="x", s=40, c=TARGET, zorder=2,
-                                                    alpha=alpha, depthshade=False))
+                self.dynamic.append(self.ax.scatter(*marker.points.T, marker="x", s=40,
+                                                    c=TARGET, zorder=3, alpha=alpha,
+                                                    depthshade=False))
 
 
 class TrajectoryPanel(ClothPanel):
-    """A cloth problem's ``trajectory`` in one 3-D axes; ``draw(n)`` shows frame ``n``."""
+    """A cloth problem's ``trajectory`` in one 3-D axes; ``draw(n)`` shows frame ``n``, at a
+    keyframe frame coloured by each particle's distance to its target on the scale
+    ``norm`` (:func:`.targets.distance_norm`; default: over this trajectory's keyframes)."""
 
-    def __init__(self, ax, problem, trajectory, *, name=None, box=None):
+    def __init__(self, ax, problem, trajectory, *, name=None, box=None, camera=None,
+                 norm=None):
         super().__init__(ax, problem.model, Box.of(problem, trajectory) if box is None else box,
                          view_of(problem, ClothView),
                          path=mass_centers(problem.model.masses, trajectory.x),
-                         terms=targets(problem))
+                         terms=targets(problem), camera=camera)
         self.trajectory = trajectory
         self.name = problem.name if name is None else name
+        self.norm = distance_norm(keyframe_millimetres(problem, trajectory)) if norm is None \
+            else norm
 
-    def draw(self, n: int, full_title: bool = True):
-        """Replace the frame-dependent artists with those of frame ``n``."""
-        self.show(self.model, self.trajectory.x[n], n * self.trajectory.dt)
-        self.show_targets(n)
-        self.set_title(frame_title(self.name, n, self.trajectory, full_title), full_title)
+    def draw(self, n: int, full_title: bool = True, *, ahead: bool = True):
+        """Replace the frame-dependent artists with those of frame ``n`` (targets due later
+        drawn faded and labelled only with ``ahead``)."""
+        x = self.trajectory.x[n]
+        here = [m for m in self.terms if m.frame == n]
+        shape = next((m for m in here if self.is_shape(m)), None)
+        rgb = None if shape is None else distance_colors(1e3 * distances(shape, x), self.norm)
+        self.show(self.model, x, n * self.trajectory.dt, vertex_rgb=rgb)
+        for m in here:
+            if m.kind == "particles":  # the targeted particles, coloured by their distance
+                self.dynamic.append(self.ax.scatter(
+                    *x[m.particles].T, s=22, zorder=3, depthshade=False, edgecolors="black",
+                    linewidths=0.4, c=distance_colors(1e3 * distances(m, x), self.norm)))
+        self.show_targets(n, ahead=ahead)
+        title = frame_title(self.name, n, self.trajectory, full_title)
+        missed = [1e3 * d for d in (distances(m, x) for m in here) if d is not None]
+        centre = [m for m in here if m.kind == "center"]
+        said = ([f"{miss_text(np.concatenate(missed))} off"] if missed else []) + [
+            f"centre of mass {format_mm(1e3 * center_distance(m, x, self.model.masses))} off"
+            for m in centre]
+        if said:
+            title += "\nkeyframe: " + "; ".join(said)
+        self.set_title(title, full_title)
 
 
-def legend(fig, panel: ClothPanel, extra=()):
-    """A figure legend listing only what ``panel`` draws (and the ``extra`` handles)."""
+def keyframe_millimetres(problem, *trajectories) -> np.ndarray:
+    """Every targeted particle's distance to its target in mm, at every keyframe of every
+    trajectory (what one colour scale must hold)."""
+    out = [1e3 * d for traj in trajectories for m in targets(problem)
+           if (d := distances(m, traj.x[m.frame])) is not None]
+    return np.concatenate(out) if out else np.zeros(0)
+
+
+def keyframe_camera(problem, frames, *trajectories) -> tuple[float, float]:
+    """The camera nearest the problem's own that sees the extent of the targets of the
+    keyframes among ``frames`` and of the cloth of each of ``trajectories`` at those
+    keyframes (:func:`.targets.target_camera`): a flat target is not seen edge-on, nor a
+    cloth hanging far from it."""
+    here = [m for m in targets(problem) if m.frame in set(frames)]
+    points = [m.points for m in here] + [t.x[m.frame] for m in here if m.kind == "shape"
+                                         for t in trajectories]
+    return target_camera(points, view_of(problem, ClothView).camera)
+
+
+def legend(fig, panel: ClothPanel, extra=(), *, bottom: float = 0.0):
+    """A figure legend listing only what ``panel`` draws (and the ``extra`` handles), its
+    lower edge at ``bottom`` (figure fraction)."""
     line = plt.Line2D
     h = [Patch(fc=CLOTH, label="cloth (front)"), Patch(fc=BACK, label="cloth (back)"), *extra,
          line([], [], color=COM, lw=0.8, label="centre of mass")]
     if panel.marked.size:
         h.append(line([], [], ls="", marker="o", ms=3, color=MARK, label="pinned / attached"))
     if any(panel.is_shape(t) for t in panel.terms):
-        h.append(line([], [], color=TARGET, lw=0.8, label="keyframe shape"))
+        h.append(line([], [], color=TARGET, lw=0.8, label="keyframe shape (at its frame)"))
     if not all(panel.is_shape(t) for t in panel.terms):
-        h.append(line([], [], ls="", marker="x", color=TARGET, label="keyframe target"))
+        h.append(line([], [], ls="", marker="x", color=TARGET,
+                      label="keyframe target (at its frame)"))
     if panel.model.colliders:
         h.append(Patch(fc=(0.5, 0.5, 0.5, 0.3), ec=BODY, label="colliders"))
     if panel.ring:
         h.append(line([], [], color=RING, lw=3, label="ring"))
     ncol = min(len(h), max(3, int(fig.get_figwidth() / 1.6)))
-    fig.legend(handles=h, loc="lower center", ncol=ncol, fontsize=7, frameon=False)
+    fig.legend(handles=h, loc="lower center", ncol=ncol, fontsize=7, frameon=False,
+               bbox_to_anchor=(0.5, bottom))
 
 
 def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
@@ -282,15 +337,20 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     """Write an animated 3-D GIF of a cloth ``trajectory``; returns the path.
 
     About ``max_frames + 1`` frames, always with every keyframe and the last frame;
-    ``title`` overrides the problem name in the title.
-    """
+    ``title`` overrides the problem name in the title.  One camera for the whole animation,
+    the one nearest the problem's that sees every target's extent; between keyframes the
+    next target is drawn faded and labelled with its frame; at a keyframe the cloth is
+    coloured by its distance to the target (the colour bar in mm)."""
     path = Path(path)
-    fig = plt.figure(figsize=(8.0, 7.2))
+    fig = plt.figure(figsize=(8.0, 7.6))
     try:
         panel = TrajectoryPanel(fig.add_subplot(projection="3d"), problem, trajectory,
-                                name=title)
-        legend(fig, panel)
-        fig.subplots_adjust(left=0, right=1, bottom=0.08, top=0.95)
+                                name=title,
+                                camera=keyframe_camera(problem, keyframes(problem), trajectory))
+        legend(fig, panel, bottom=0.09)
+        fig.subplots_adjust(left=0, right=1, bottom=0.14, top=0.94)
+        if keyframe_millimetres(problem, trajectory).size:
+            colorbar(fig, panel.norm, rect=(0.3, 0.06, 0.4, 0.014))
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
         write_gif(fig, panel.draw, frames, path, fps)
     finally:
@@ -300,19 +360,23 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
 
 def snapshot(problem, trajectory, path, frames=None) -> Path:
     """Write a PNG of 3-D small multiples: by default the first frame, each keyframe and
-    the last, at most 8 panels (thinned evenly, keeping the first and last)."""
+    the last, at most 8 panels (thinned evenly, keeping the first and last).  Each keyframe
+    panel has the camera that sees its target's extent and the cloth coloured by its
+    distance to the target; targets appear only at their own frame."""
     path = Path(path)
     frames = snapshot_frames(problem, trajectory, frames, most=8)
     cols = {4: 2, 5: 3, 6: 3}.get(len(frames), min(len(frames), 4))
     rows = -(-len(frames) // cols)
-    fig = plt.figure(figsize=(3.4 * cols, 3.2 * rows + 0.6))
+    fig = plt.figure(figsize=(3.4 * cols, 3.3 * rows + 1.0))
     try:
         box = Box.of(problem, trajectory)
+        norm = distance_norm(keyframe_millimetres(problem, trajectory))
         for i, n in enumerate(frames):
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
-            panel = TrajectoryPanel(ax, problem, trajectory, box=box)
-            panel.draw(n, full_title=False)
-        save_grid(fig, path, problem.name, panel)
+            panel = TrajectoryPanel(ax, problem, trajectory, box=box, norm=norm,
+                                    camera=keyframe_camera(problem, [n], trajectory))
+            panel.draw(n, full_title=False, ahead=False)
+        save_grid(fig, path, problem.name, panel, norm=_shown_norm(problem, frames, norm))
     finally:
         plt.close(fig)
     return path
@@ -321,32 +385,47 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
 def side_by_side(problem, rows: dict, path, frames=None) -> Path:
     """Write a PNG with one row of 3-D panels per trajectory of ``rows`` (``{label:
     trajectory}``, e.g. the optimizer's start and its result) at the same frames (default:
-    the first, each keyframe and the last, at most 6), all in one box."""
+    the first, each keyframe and the last, at most 6), all in one box; each column seen
+    from the camera that shows its keyframe's target, the cloth coloured by its distance
+    to the target on one scale for all rows."""
     path = Path(path)
     first = next(iter(rows.values()))
     frames = snapshot_frames(problem, first, frames, most=6)
-    fig = plt.figure(figsize=(3.0 * len(frames), 3.0 * len(rows) + 0.6))
+    fig = plt.figure(figsize=(3.0 * len(frames), 3.1 * len(rows) + 1.0))
     try:
         box = Box.of(problem, *rows.values())
+        norm = distance_norm(keyframe_millimetres(problem, *rows.values()))
         for r, (label, trajectory) in enumerate(rows.items()):
             for c, n in enumerate(frames):
                 ax = fig.add_subplot(len(rows), len(frames), r * len(frames) + c + 1,
                                      projection="3d")
-                panel = TrajectoryPanel(ax, problem, trajectory, box=box)
-                panel.draw(n, full_title=False)
+                panel = TrajectoryPanel(ax, problem, trajectory, box=box, norm=norm,
+                                        camera=keyframe_camera(problem, [n], *rows.values()))
+                panel.draw(n, full_title=False, ahead=False)
                 ax.set_title(f"{label}: " + ax.get_title() if c == 0 else ax.get_title(),
                              fontsize=8)
-        save_grid(fig, path, problem.name, panel)
+        save_grid(fig, path, problem.name, panel, norm=_shown_norm(problem, frames, norm))
     finally:
         plt.close(fig)
     return path
 
 
-def save_grid(fig, path, title: str, panel: ClothPanel, extra=()) -> None:
+def _shown_norm(problem, frames, norm):
+    """``norm`` if a panel at ``frames`` is coloured by distance (a keyframe with particle
+    targets), else None: no colour bar for a picture without one."""
+    return norm if any(m.frame in frames and m.kind in ("shape", "particles")
+                       for m in targets(problem)) else None
+
+
+def save_grid(fig, path, title: str, panel: ClothPanel, extra=(), *, norm=None) -> None:
     """Save a grid of 3-D panels as a PNG: ``title`` on top, the legend of ``panel`` (and
-    ``extra`` handles) below, narrow margins."""
+    ``extra`` handles) below, and with ``norm`` the colour bar of the distance to the
+    targets under it; narrow margins."""
     fig.suptitle(title, fontsize=11)
-    legend(fig, panel, extra)
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=0.08, top=1 - 0.55 / fig.get_figheight(),
-                        wspace=0.05, hspace=0.1)
+    inch = 1 / fig.get_figheight()
+    legend(fig, panel, extra, bottom=(0.62 if norm is not None else 0.05) * inch)
+    if norm is not None:
+        colorbar(fig, norm, rect=(0.3, 0.36 * inch, 0.4, 0.09 * inch))
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=(1.0 if norm is not None else 0.45) * inch,
+                        top=1 - 0.75 * inch, wspace=0.05, hspace=0.3)
     save_figure(fig, path, dpi=110)

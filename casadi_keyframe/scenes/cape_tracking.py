@@ -110,7 +110,7 @@ def tracking_forces(prob, path, end=None, *, frequency: float = 8.0,
             land = landing_path(x, v, *stops[land_to], land_to - n, dt)
         if land_from <= n < land_to:
             forces[n] = integrator.force_for(model, x, v, (land[n - land_from + 1] - x) / dt,
-                                             n, dt)
+                                             n, dt, work)
         else:
             forces[n] = m * (a_ref[n] + kp[n] * (path[n] - x) + kd[n] * (v_ref[n] - v) - g
                              + model.params.air_drag * v_ref[n])

@@ -22,7 +22,7 @@ from ..models import Attachment, ClothModel, ClothParams
 from ..models.colliders import Contact, Plane
 from ..simulate import simulate
 from .animations import Animation, Walk, fall, walk
-from .skeleton import Character, capsule_clearance
+from .skeleton import Character
 
 CAPE_PARAMS = ClothParams(stretch=500.0, shear=50.0, bend=2e-5, damping=0.5, air_drag=2.0)
 """Fabric at dt = 1/60: the default sheet's stiffnesses (about 1 % strain hanging) with
@@ -71,16 +71,16 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
                width: float = 0.6, length: float = 1.0, mass: float = 0.4,
                attach_width: float = 0.44, params: ClothParams | None = None,
                dt: float = 1 / 60, lead: float | None = None, contacts: dict | None = None,
-               jit: bool | None = None) -> ClothModel:
+               collision: str = "guarded", jit: bool | None = None) -> ClothModel:
     """The cape as a :class:`ClothModel` on ``character`` moving through ``animation``.
 
     Rest shape: a ``width`` x ``length`` sheet in the xz plane, top row (row 0) along x at
     z = 0; the top row's particles within ``attach_width / 2`` of its middle follow the
-    shoulder line.  The body's capsules are looked up ``lead`` s ahead (default ``dt``): the
-    linearized step takes its colliders at the start of the step, but a particle lands
-    where the body is at its end; looking ahead keeps a particle on a moving limb level with
-    it instead of a step behind (six falls, deepest penetration 0.2-1.9 cm, mean 1.1, with
-    the lead; 0.8-3.6 cm, mean 2.0, without).  ``contacts``: see :func:`cape_contacts`.
+    shoulder line.  The body's capsules are where the body is (``lead`` s ahead, if given:
+    under the paper's penalty springs, which see the body at a step's start, looking a step
+    ahead kept a particle on a moving limb level with it; the default guard checks where the
+    body is at the step's end).  ``contacts``: see :func:`cape_contacts`; ``collision``: how
+    the body and the ground are touched (:class:`ClothModel`).
     """
     if int(rows) != rows or int(cols) != cols or rows < 2 or cols < 2:
         raise ValueError(f"a cape needs rows >= 2 and cols >= 2, got {rows} x {cols}")
@@ -95,13 +95,14 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
     if contacts is None:
         spacing = min(width / (cols - 1), length / (rows - 1))
         contacts = cape_contacts(mass / (rows * cols), spacing, dt)
-    bodies = character.capsules(animation, contacts["body"], lead=dt if lead is None else lead)
+    bodies = character.capsules(animation, contacts["body"], lead=lead or 0.0)
     path = character.shoulder_points(animation, x_top[attached])
     return ClothModel.grid(int(rows), int(cols), width=width, height=length, mass=mass,
                            params=params or CAPE_PARAMS, plane="xz", origin=(-width / 2, 0, 0),
                            colliders=[*bodies, Plane(contact=contacts["ground"])],
                            self_contact=contacts["self"],
-                           attachments=[Attachment(attached, path)], jit=jit)
+                           attachments=[Attachment(attached, path)], collision=collision,
+                           jit=jit)
 
 
 def hanging_state(model: ClothModel, character: Character, animation: Animation,
@@ -172,13 +173,11 @@ def cached_clip(kind: str, rows: int, cols: int, seconds: float, dt: float):
     return simulate_clip(kind, rows, cols, seconds=seconds, dt=dt)
 
 
-def clip_report(model: ClothModel, traj, character: Character, animation: Animation) -> dict:
-    """Figures of a clip: the largest spring stretch, the deepest penetration of a particle
-    into the body (m, measured against the true pose at each frame) and below the ground."""
-    depth = 0.0
-    for n, t in enumerate(traj.times):
-        pose = animation.pose(t)
-        gap = capsule_clearance(traj.x[n], character.segments(pose), character.radii)
-        depth = max(depth, -gap.min())
-    return {"max_stretch": max(model.max_stretch(x) for x in traj.x),
-            "penetration": depth, "below_ground": max(0.0, -traj.x[:, :, 2].min())}
+def clip_report(model: ClothModel, traj) -> dict:
+    """Figures of a clip: the largest spring stretch, the deepest particle inside the body
+    or the ground (m: the library's one measure, :meth:`ClothModel.physical_report`) and how
+    far a particle is below z = 0."""
+    physical = model.physical_report(traj.x, traj.dt)
+    return {"max_stretch": physical["max_stretch"],
+            "penetration": physical.get("max_penetration", 0.0),
+            "below_ground": max(0.0, -float(traj.x[:, :, 2].min()))}

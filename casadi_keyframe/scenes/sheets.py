@@ -14,12 +14,14 @@ from ..problem import ControlProblem
 
 
 def hanging_sheet(rows: int = 5, stretch: float = 500.0, ground: bool = True,
-                  colliders=()) -> ClothModel:
+                  colliders=(), collision: str = "guarded") -> ClothModel:
     """A 1 m, 1 kg sheet of rows x rows particles pinned at its top corners, its lower edge
-    resting on the ground if ``ground``, with any further ``colliders``."""
+    resting on the ground if ``ground``, with any further ``colliders`` (touched as
+    ``collision`` says: held by the step, or the paper's penalty springs)."""
     colliders = [*([Plane((0, 0, -1.007))] if ground else []), *colliders]
     return ClothModel.grid(rows, rows, pinned=[0, rows - 1], colliders=colliders,
-                           params=ClothParams(stretch=stretch, shear=stretch / 10))
+                           params=ClothParams(stretch=stretch, shear=stretch / 10),
+                           collision=collision)
 
 
 def swing_problem(model: ClothModel, steps: int, dt: float, integrator, *,
@@ -38,14 +40,14 @@ def swing_problem(model: ClothModel, steps: int, dt: float, integrator, *,
 
 
 def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float = 500.0,
-                    rows: int = 5, solver: str = "direct",
-                    controls=None) -> ControlProblem:
+                    rows: int = 5, solver: str = "direct", controls=None,
+                    collision: str = "guarded") -> ControlProblem:
     """The gradient-accuracy case: :func:`hanging_sheet`, resting on the ground, swung
     forward (:func:`swing_problem`) over ``horizon`` s."""
     steps = frame_at(horizon, dt, "contact_problem: the horizon")
     if steps < 2:
         raise ValueError(f"contact_problem: dt = {dt} must divide the horizon {horizon} s into "
                          ">= 2 steps")
-    return swing_problem(hanging_sheet(rows, stretch), steps, dt,
+    return swing_problem(hanging_sheet(rows, stretch, collision=collision), steps, dt,
                          LinearizedBackwardEuler(solver), controls=controls,
                          name="contact_sheet")

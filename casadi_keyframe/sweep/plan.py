@@ -17,6 +17,8 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..files import FileDamaged, writable_folder
+from ..interrupts import NAMES, catching, handled
 from ..io import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
 from ..optimize.outcome import INTERRUPTED
@@ -41,7 +43,8 @@ exit codes:
   1    at least one point failed (no result after --tries attempts, an error, or the
        search failed): the table's reason column says why; the other points are written
   2    bad input (problem, grid, overrides, options, scheduler address, --out)
-  130  interrupted by Ctrl-C: the finished points are on disk, continue with --resume
+  130  interrupted by Ctrl-C before every point finished: the finished points are on
+       disk, continue with --resume (a signal after every point finished changes nothing)
   143  stopped by SIGTERM; as 130"""
 
 
@@ -153,8 +156,9 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
              tries: int = 3, resume: bool = False, progress: bool = True,
              timeout: float = 10.0) -> SweepResult:
     """Run the plan's points not already complete, then write the table, the plot and
-    ``sweep.json``; the :class:`SweepResult`."""
-    folder = plan.out / POINTS
+    ``sweep.json``; the :class:`SweepResult`.  ``plan.out`` that cannot be written is
+    refused (ValueError naming ``out=``) before any point starts."""
+    folder = writable_folder(plan.out, "out=") / POINTS
     folder.mkdir(parents=True, exist_ok=True)
     for spec in plan.specs:
         spec["folder"] = str((folder / spec["name"]).resolve())
@@ -165,21 +169,36 @@ def run_plan(plan: Plan, *, workers: int | None = None, scheduler: str | None = 
         print(f"sweep: {stale} finished point(s) were solved with other settings: solving "
               "them again")
     if todo:
-        try:
-            with connect(workers=workers, scheduler=scheduler, tries=tries,
-                         timeout=timeout) as client:
-                check_workers(client, [folder.resolve(), *_files(todo)])
-                shown = Progress(len(todo), skipped=len(plan.specs) - len(todo),
-                                 enabled=progress)
-                _, signum = run_specs(client, todo, progress=shown)
-                shown.close()
-        except KeyboardInterrupt:  # Ctrl-C while the cluster starts or stops
-            signum = signal.SIGINT
+        signum = _solve_points(todo, folder, skipped=len(plan.specs) - len(todo),
+                               progress=progress, workers=workers, scheduler=scheduler,
+                               tries=tries, timeout=timeout)
     elif progress:
         print(f"sweep: all {len(plan.specs)} points are complete already")
     where = scheduler or ("local, one worker per core" if workers is None else
                           f"local, {workers} worker{'s' * (workers != 1)}")
     return _finish(plan, signum, time.monotonic() - started, where)
+
+
+def _solve_points(todo, folder, *, skipped, progress, workers, scheduler, tries, timeout):
+    """Solve the points ``todo`` on the cluster; the signal that stopped the sweep, or None.
+
+    SIGINT and SIGTERM are caught throughout (:func:`..interrupts.catching`): one while the
+    cluster starts, runs or closes stops the sweep, and the cluster is closed whole even
+    when a second one comes (it is raised after the close)."""
+    signum = None
+    with catching():
+        try:
+            with connect(workers=workers, scheduler=scheduler, tries=tries,
+                         timeout=timeout) as client:
+                check_workers(client, [folder.resolve(), *_files(todo)])
+                shown = Progress(len(todo), skipped=skipped, enabled=progress)
+                _, signum = run_specs(client, todo, progress=shown,
+                                      tries=None if scheduler else tries)
+                shown.close()
+        except KeyboardInterrupt as err:  # while the cluster starts or closes
+            signum = signum or getattr(err, "signum", signal.SIGINT)
+        handled()  # acted on: the table and the plot are still written
+    return signum
 
 
 def _files(specs) -> set:
@@ -198,8 +217,14 @@ def spec_id(spec: dict) -> str:
 def _todo(specs, resume: bool):
     """The specs to run and how many finished points are re-run for other settings; without
     ``resume`` a folder that already holds points is refused."""
-    rows = [read_row(spec["folder"]) for spec in specs]
-    if not resume and any(rows):
+    rows, damaged = [], []
+    for spec in specs:
+        try:
+            rows.append(read_row(spec["folder"]))
+        except FileDamaged as err:  # a point cut short as its row was written elsewhere
+            rows.append(None)
+            damaged.append(err)
+    if not resume and (any(rows) or damaged):
         raise ValueError(f"{Path(specs[0]['folder']).parent.parent} already holds a sweep's "
                          "points: give --resume to continue it (finished points are skipped) "
                          "or choose another --out")
@@ -207,6 +232,8 @@ def _todo(specs, resume: bool):
                 for r, s in zip(rows, specs)]
     stale = sum(r is not None and r.get("status") != ERROR and r.get("spec_id") != s["id"]
                 for r, s in zip(rows, specs))
+    for err in damaged:
+        print(f"sweep: {err}")
     return [s for s, ok in zip(specs, complete) if not ok], stale
 
 
@@ -216,7 +243,7 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
 
     rows, missing = [], []
     for spec in plan.specs:
-        row = read_row(spec["folder"])
+        row = _row_or_none(spec["folder"])
         if row is None or row.get("spec_id") != spec["id"]:
             missing.append(spec["name"])
         else:
@@ -229,14 +256,26 @@ def _finish(plan: Plan, signum, seconds: float, where: str) -> SweepResult:
     files += [picture] if picture else []
     failed = [r["point"] for r in rows if is_failed(r)]
     best = best_per_group(rows, plan.figure, plan.group_by)
-    code = (exit_code(INTERRUPTED, signum) if signum else 1 if failed or missing else 0)
+    # a signal after every point finished loses nothing: the sweep is complete
+    code = (exit_code(INTERRUPTED, signum) if signum and missing
+            else 1 if failed or missing else 0)
     summary = {**plan.about, "figure": plan.figure, "group_by": plan.group_by,
                "points": len(plan.specs), "complete": len(rows) - len(failed),
                "failed": failed, "missing": missing, "best": best, "cluster": where,
-               "seconds": seconds, "exit_code": code, "files": [str(f) for f in files]}
+               "seconds": seconds, "exit_code": code, "files": [str(f) for f in files],
+               "signal_after_complete": NAMES.get(signum, signum) if signum and not missing
+               else None}
     write_json(plan.out / SUMMARY, summary)
     return SweepResult(rows, best, files + [plan.out / SUMMARY], failed, missing, code,
                        summary)
+
+
+def _row_or_none(folder) -> dict | None:
+    """A point's row, or None when it has none or a damaged one (the point is missing)."""
+    try:
+        return read_row(folder)
+    except FileDamaged:
+        return None
 
 
 def report(result: SweepResult, out) -> None:
@@ -246,6 +285,9 @@ def report(result: SweepResult, out) -> None:
     print(f"sweep of {s.get('problem', s.get('study'))}: {s['complete']} of {s['points']} "
           f"points complete, {len(s['failed'])} failed, {len(s['missing'])} not run "
           f"({format_seconds(s['seconds'])}, {s['cluster']})")
+    if s.get("signal_after_complete"):
+        print(f"  {s['signal_after_complete']} came after every point had finished: the sweep "
+              "is complete")
     for path in result.files:
         print(f"  wrote {path}")
     for b in result.best[:20]:

@@ -33,6 +33,10 @@ class Progress:
                        + describe(row))
             self.status(running, slots)
 
+    def note(self, text: str) -> None:
+        """A line shown even without the progress display (a worker that died)."""
+        self._line(text)
+
     def status(self, running: int, slots: int) -> None:
         """Rewrite the status line (on a terminal only)."""
         if self.live:

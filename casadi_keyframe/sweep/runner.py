@@ -20,10 +20,12 @@ import signal
 import threading
 from pathlib import Path
 
-from ..interrupts import Interrupted, catching, check
+from ..interrupts import Interrupted, catching, check, deferred
 from ..io import write_json
+from . import worker_setup
 from .progress import Progress
 from .tasks import ERROR, ROW, run_task
+from .watch import WorkerWatch
 
 POLL_SECONDS = 0.5
 INSTALL_HINT = ("the sweep runs on Dask distributed, which is not installed: "
@@ -44,7 +46,9 @@ def connect(*, workers: int | None = None, scheduler: str | None = None, tries: 
     """A Dask client: of the running cluster at ``scheduler``, or of a new local cluster of
     ``workers`` processes (default one per core), one thread each, listening on loopback
     only, where a point may be started ``tries`` times before it is reported failed.  The
-    local workers ignore SIGINT, so Ctrl-C reaches only this process, which stops them."""
+    local workers ignore SIGINT, so Ctrl-C stops only this process, which stops them; the
+    cluster is closed whole even if a second Ctrl-C comes (inside
+    :func:`~casadi_keyframe.interrupts.catching`)."""
     distributed = _distributed()
     if tries < 1:
         raise ValueError(f"--tries must be at least 1, got {tries}")
@@ -57,17 +61,24 @@ def connect(*, workers: int | None = None, scheduler: str | None = None, tries: 
         return
     import dask
 
-    # the worker processes inherit the ignored SIGINT
-    with _ignoring_sigint(), dask.config.set(
-            {"distributed.scheduler.allowed-failures": tries - 1}):
-        cluster = distributed.LocalCluster(
-            n_workers=workers or os.cpu_count() or 1, threads_per_worker=1, processes=True,
-            host="127.0.0.1", dashboard_address=None, silence_logs=logging.ERROR)
+    cluster = client = None
     try:
-        with distributed.Client(cluster) as client:
-            yield client
+        # the worker processes started now inherit the ignored SIGINT; those Dask starts
+        # again after a death ignore it from their preload on (.worker_setup)
+        with _ignoring_sigint(), dask.config.set(
+                {"distributed.scheduler.allowed-failures": tries - 1}):
+            cluster = distributed.LocalCluster(
+                n_workers=workers or os.cpu_count() or 1, threads_per_worker=1,
+                processes=True, host="127.0.0.1", dashboard_address=None,
+                silence_logs=logging.ERROR, preload=[worker_setup.__name__])
+        client = distributed.Client(cluster)
+        yield client
     finally:
-        cluster.close()
+        with deferred():  # a second Ctrl-C would leave the cluster half closed
+            if client is not None:
+                client.close()
+            if cluster is not None:
+                cluster.close()
 
 
 @contextlib.contextmanager
@@ -130,10 +141,12 @@ def _unseen(paths: list) -> list:
     return [p for p in paths if not os.path.exists(p)]
 
 
-def run_specs(client, specs: list[dict], *, progress: Progress):
+def run_specs(client, specs: list[dict], *, progress: Progress, tries: int | None = None):
     """Run every point spec on the cluster; ``(rows, signum)``: the rows of the points that
     finished (failed ones included, with their reason) and the signal that stopped the
-    sweep early, or None.
+    sweep early, or None.  A worker that dies is named with the points it was running
+    (:class:`.watch.WorkerWatch`; ``tries`` the starts a point gets, None if the cluster
+    decides).
 
     Points are handed to the scheduler only as worker threads free up (not all at once: a
     small group of tasks is not queued by Dask but spread over the workers at once, so a
@@ -141,10 +154,12 @@ def run_specs(client, specs: list[dict], *, progress: Progress):
     points that only wait)."""
     distributed = _distributed()
     waiting, futures, rows, signum = list(specs), {}, [], None
+    watch = WorkerWatch(progress.note, tries)
     with catching():
         try:
             while waiting or futures:
                 check()
+                watch.poll(client, {f.key: spec["label"] for f, spec in futures.items()})
                 slots = worker_threads(client)
                 while waiting and len(futures) < slots:
                     spec = waiting.pop(0)

@@ -10,10 +10,11 @@ folder like a solve's point, so a large grid can use a cluster and ``--resume``.
 from __future__ import annotations
 
 import importlib
+import json
 from pathlib import Path
 
 from ..loading import OverrideError, check_overrides
-from .grid import points
+from .grid import Point, folder_name, points
 from .plan import Plan, SweepResult, check_grid, check_group_by, run_plan, study_module
 
 # name: (the function computing one row, the ranges of its keywords, the figures to rank by)
@@ -26,7 +27,26 @@ STUDIES = {
                             {"dt": "(0, inf)", "stretch": "(0, inf)", "rows": "[2, inf)",
                              "seed": "[0, inf)"},
                             ("gap_x", "gap_v")),
+    "swap-validity": ("casadi_keyframe.swap_validity:swap_validity_point",
+                      {"contact": ("none", "ground", "sphere", "capsule", "self"),
+                       "collision": ("guarded", "penalty", "constraint"),
+                       "stiffness": "(0, inf)", "dt": "(0, inf)", "amplitude": "[0, inf)",
+                       "horizon": "(0, inf)", "speed": "[0, inf)", "damping": "[0, inf)",
+                       "rows": "[2, inf)", "maxiter": "[1, inf)", "seed": "[0, inf)",
+                       "measure": ("horizon", "step")},
+                      ("relative_error", "growth_swapped", "cosine")),
 }
+
+
+def _study(study: str):
+    """``(target, module, figures)`` of a study: its function's name, a module whose
+    ``build`` is that function (checked like a problem file), the figures it ranks by."""
+    if study not in STUDIES:
+        raise ValueError(f"unknown study {study!r}; choose one of {', '.join(STUDIES)}")
+    target, ranges, figures = STUDIES[study]
+    path, _, name = target.partition(":")
+    return target, study_module(study, getattr(importlib.import_module(path), name),
+                                ranges), figures
 
 
 def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
@@ -34,11 +54,7 @@ def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
     """Run the study ``study`` (a key of :data:`STUDIES`) at every combination of
     ``grid``'s values on top of ``overrides``; ``runner`` as for :func:`.plan.sweep`
     (``workers``, ``scheduler``, ``tries``, ``resume``, ``progress``)."""
-    if study not in STUDIES:
-        raise ValueError(f"unknown study {study!r}; choose one of {', '.join(STUDIES)}")
-    target, ranges, figures = STUDIES[study]
-    path, _, name = target.partition(":")
-    module = study_module(study, getattr(importlib.import_module(path), name), ranges)
+    target, module, figures = _study(study)
     overrides = dict(overrides or {})
     try:
         grid = check_grid(module, grid, overrides)
@@ -55,3 +71,25 @@ def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
     group_by = check_group_by(group_by or [], list(grid))
     about = {"study": study, "grid": grid, "overrides": overrides}
     return run_plan(Plan(specs, Path(out), list(grid), figure, group_by, about), **runner)
+
+
+def study_points(study: str, values: list, *, out, **runner) -> SweepResult:
+    """Run the study ``study`` at each of ``values`` (dicts of its keywords, each point's
+    own: a map made of slices that no one grid spans, such as
+    :func:`~casadi_keyframe.swap_validity.map_points`); a point given twice runs once, and
+    ``runner`` as for :func:`study_sweep`."""
+    target, module, figures = _study(study)
+    specs = {}
+    try:
+        for v in values:
+            name = folder_name(v)
+            specs.setdefault(name, {"kind": "study", "function": target, "values": dict(v),
+                                    "start": 0, "name": name, "label": Point(v).label,
+                                    "overrides": check_overrides(module, dict(v))})
+    except OverrideError as err:
+        raise ValueError(str(err)) from None
+    keys = [k for k in dict.fromkeys(k for v in values for k in v)
+            if len({json.dumps(v.get(k), default=str) for v in values}) > 1]
+    about = {"study": study, "points": len(specs)}
+    return run_plan(Plan(list(specs.values()), Path(out), keys, figures[0], [], about),
+                    **runner)

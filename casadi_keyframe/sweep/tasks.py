@@ -15,7 +15,6 @@ from __future__ import annotations
 import contextlib
 import importlib
 import io
-import json
 import os
 import resource
 import socket
@@ -25,7 +24,9 @@ import time
 import traceback
 from pathlib import Path
 
+from ..files import FileDamaged, read_json
 from ..io import SUMMARY, write_json
+from ..loading import ProblemFileError
 from ..optimize.outcome import FAILED, STATUS
 
 ROW, LOG = "row.json", "log.txt"
@@ -50,7 +51,9 @@ def run_task(spec: dict) -> dict:
             row = _KINDS[spec["kind"]](spec, folder)
         except Exception as err:  # noqa: BLE001 - a point's failure is a row, not a crash
             traceback.print_exc(file=log)
-            row = {"status": ERROR, "reason": f"{type(err).__name__}: {_one_line(err)}"}
+            named = isinstance(err, ProblemFileError)  # its message names the exception
+            row = {"status": ERROR, "reason": _one_line(err) if named else
+                   f"{type(err).__name__}: {_one_line(err)}"}
     row = {"point": spec["name"], **spec["values"], "start": spec.get("start", 0), **row,
            "seconds": time.perf_counter() - start,
            "cpu_seconds": time.process_time() - cpu, "worker": worker,
@@ -60,11 +63,16 @@ def run_task(spec: dict) -> dict:
 
 
 def read_row(folder) -> dict | None:
-    """The ``row.json`` of a point folder, or None if there is none (or it is unreadable)."""
-    try:
-        return json.loads((Path(folder) / ROW).read_text())
-    except (OSError, ValueError):
+    """The ``row.json`` of a point folder, or None if there is none; a damaged one (cut
+    short, not JSON, not a row) is a :class:`~casadi_keyframe.files.FileDamaged`."""
+    path = Path(folder) / ROW
+    if not path.is_file():
         return None
+    fix = "the point is solved again"
+    row = read_json(path, fix=fix)
+    if not isinstance(row, dict) or not isinstance(row.get("point"), str):
+        raise FileDamaged(path, "is not a sweep point's row (no 'point' name)", fix)
+    return row
 
 
 def _solve(spec: dict, folder: Path) -> dict:
@@ -79,7 +87,7 @@ def _solve(spec: dict, folder: Path) -> dict:
     run.u0 = start_controls(run.problem, spec.get("start", 0), seed=spec.get("seed", 0),
                             scale=spec.get("perturb", 0.5))
     code = run_solve(run)
-    return {"exit_code": code, **summary_row(json.loads((folder / SUMMARY).read_text()))}
+    return {"exit_code": code, **summary_row(read_json(folder / SUMMARY))}
 
 
 def summary_row(summary: dict) -> dict:

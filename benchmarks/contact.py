@@ -1,0 +1,114 @@
+"""Contact that holds, measured: free drops of a sheet onto the ground (flat and tilted 30
+degrees), a sphere and a capsule, per contact model, impact speed and size.
+
+For each case it prints the deepest particle inside the body over all frames (mm), the
+largest spring stretch, how many linear solves the steps took (a step is solved again when
+it must hold more or take springs taut), and the CPU seconds per forward step and per
+gradient step (the exact adjoint of a keyframe objective at zero controls: the forward pass
+with records plus the backward pass, divided by the steps), then the costs of each contact
+model against the paper's penalty springs ("today's") where both ran, and the issue's
+checks.  One process, one BLAS thread, ``time.process_time``; the cases run in turn, each
+model's runs of a case next to each other.
+
+    .venv/bin/python benchmarks/contact.py [--sizes 25 50] [--speeds 4 8 12]
+        [--models penalty guarded constraint] [--duration 0.5] [--repeat 1]
+"""
+import os
+
+for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_name, "1")
+
+import argparse  # noqa: E402
+import statistics  # noqa: E402
+import time  # noqa: E402
+
+
+from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
+from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
+from casadi_keyframe.scenes.drops import drop_model, drop_start  # noqa: E402
+from casadi_keyframe.state import SimulationError  # noqa: E402
+
+IMPACTS = [("ground", 0), ("ground", 30), ("sphere", 0), ("capsule", 0)]
+
+
+def drop_problem(rows, body, speed, tilt, collision, dt, duration):
+    model = drop_model(rows, body, collision)
+    x0, v0 = drop_start(model, speed, tilt)
+    steps = int(round(duration / dt))
+    objective = StateKeyframe(steps, x=x0 - [0, 0, 0.2], position_weight=1.0 / model.n)
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(), x0=x0, v0=v0,
+                          steps=steps, dt=dt, controls=StepForces(),
+                          objective=objective + Smoothness(1e-6), name="drop")
+
+
+def measure(prob, repeat: int) -> dict:
+    """Physical figures and the median CPU seconds per forward and per gradient step."""
+    u = prob.initial_controls()
+    try:
+        traj = prob.simulate(u)  # also compiles the kernels
+    except SimulationError as err:
+        return {"failed": str(err).split(";")[0]}
+    report = prob.model.physical_report(traj.x, traj.dt)
+    forward, gradient = [], []
+    for _ in range(repeat):
+        t = time.process_time()
+        prob.simulate(u, records=False)
+        forward.append(time.process_time() - t)
+        t = time.process_time()
+        prob.objective_and_gradient(u, "adjoint")
+        gradient.append(time.process_time() - t)
+    return {"depth_mm": 1e3 * report["max_penetration"], "stretch": report["max_stretch"],
+            "solves": sum(r.solves for r in traj.records), "steps": prob.steps,
+            "forward": statistics.median(forward) / prob.steps,
+            "gradient": statistics.median(gradient) / prob.steps}
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[25, 50])
+    ap.add_argument("--speeds", type=float, nargs="+", default=[4.0, 8.0, 12.0])
+    ap.add_argument("--models", nargs="+", default=["penalty", "guarded", "constraint"])
+    ap.add_argument("--duration", type=float, default=0.5)
+    ap.add_argument("--dt", type=float, default=1 / 60)
+    ap.add_argument("--repeat", type=int, default=1)
+    args = ap.parse_args()
+    print(f"Free drops, {args.duration:g} s at dt = {args.dt:.4g} s; CPU ms per step (one BLAS "
+          f"thread, process_time, median of {args.repeat}); depth: deepest particle inside the "
+          "body; solves: linear solves over the steps")
+    print(f"{'case':28s} {'model':10s} {'depth mm':>8s} {'stretch':>7s} {'solves':>7s} "
+          f"{'fwd ms':>7s} {'grad ms':>7s}")
+    rows, checks = [], []
+    for k in args.sizes:
+        for body, tilt in IMPACTS:
+            for speed in args.speeds:
+                case = f"{k}x{k} {body}{' tilted' if tilt else ''} {speed:g} m/s"
+                results = {}
+                for model in args.models:
+                    prob = drop_problem(k, body, speed, tilt, model, args.dt, args.duration)
+                    r = results[model] = measure(prob, args.repeat)
+                    if "failed" in r:
+                        print(f"{case:28s} {model:10s} failed: {r['failed']}", flush=True)
+                        continue
+                    print(f"{case:28s} {model:10s} {r['depth_mm']:8.1f} {r['stretch']:7.2f} "
+                          f"{r['solves']:4d}/{r['steps']:<2d} {1e3 * r['forward']:7.1f} "
+                          f"{1e3 * r['gradient']:7.1f}", flush=True)
+                    if model != "penalty":
+                        checks.append((case, model, r))
+                rows.append((k, case, results))
+    print("\ncost against the paper's penalty springs (where both ran): forward, gradient")
+    for k, case, results in rows:
+        base = results.get("penalty", {})
+        for model, r in results.items():
+            if model == "penalty" or "failed" in r or "failed" in base or not base:
+                continue
+            print(f"  {case:28s} {model:10s} {r['forward'] / base['forward']:5.2f}x "
+                  f"{r['gradient'] / base['gradient']:5.2f}x")
+    held = [(c, m, r) for c, m, r in checks if "failed" not in r]
+    bad = [(c, m) for c, m, r in held if r["depth_mm"] > 5 or r["stretch"] > 1.3]
+    print(f"\nno particle deeper than 5 mm, no spring past 1.3x: "
+          f"{len(held) - len(bad)} of {len(checks)} drops with a new contact model"
+          + ("" if not bad else "; missed: " + "; ".join(f"{c} ({m})" for c, m in bad)))
+
+
+if __name__ == "__main__":
+    main()

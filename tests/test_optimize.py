@@ -275,6 +275,31 @@ def test_a_line_search_failure_is_converged_only_when_the_goal_is_met(monkeypatc
     assert len(starts) == 1 and r.status == FAILED
 
 
+def test_a_line_search_failure_off_the_goal_exits_1_and_still_writes_its_best_point(
+        monkeypatch, tmp_path, capsys):
+    """The command line's side of the same path: status 2 is exit 1, the message names the
+    keyframes missed, and result.npz holds the best point."""
+    import casadi_keyframe.optimize.lbfgsb as lbfgsb
+    from casadi_keyframe.cli import main
+    from scipy.optimize import OptimizeResult
+
+    def minimize(fun, x0, **kw):
+        fun(x0)
+        return OptimizeResult(message="ABNORMAL: ", nit=0, nfev=1)
+
+    monkeypatch.setattr(lbfgsb, "minimize", minimize)
+    code = main(["solve", "flock_path", "--set", "agents=6", "--set", "steps=20", "--quiet",
+                 "--no-animation", "--no-viewer", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    said = out.splitlines()[1]
+    assert said.startswith("flock_path: line search failed") and "converged" not in said
+    assert "still missed: CenterOfMass@2: position miss 3.17 (tolerance 0.15)" in said
+    assert said.endswith("CenterOfMass@20: position miss 32.1 (tolerance 0.15)")
+    run = read_run(tmp_path / "result.npz")
+    assert run["u"].size == load_problem("flock_path", agents=6, steps=20).size
+
+
 def test_a_search_stops_once_the_goal_is_met_and_a_miss_is_never_a_success(race):
     r = solve(race, maxiter=300, quiet=True)
     assert r.status == CONVERGED and r.message.startswith("converged: the goal is met at "

@@ -129,8 +129,13 @@ def test_the_merit_and_its_gradient_match_casadi_and_central_differences(K):
         assert g @ d == pytest.approx(slope, rel=1e-5)
 
 
-def test_one_segment_is_single_shooting_and_consistent_nodes_have_no_defect():
-    prob = sheet_problem(collision="penalty")  # contact without memory between steps
+@pytest.mark.parametrize("collision", ["guarded", "penalty"])
+def test_one_segment_is_single_shooting_and_consistent_nodes_have_no_defect(collision):
+    """Guarded contact carries decisions from step to step (a contact that pulled is let go
+    at the next): each segment starts from what the previous one's last step carried, in
+    this process and in workers (which sweep from the last sweep's carries and sweep again
+    any segment whose carry was wrong)."""
+    prob = sheet_problem(collision=collision)
     rng = np.random.default_rng(0)
     u = 0.05 * rng.standard_normal(prob.size)
     ref = prob.simulate(u)
@@ -144,6 +149,16 @@ def test_one_segment_is_single_shooting_and_consistent_nodes_have_no_defect():
                                  Serial(prob, three.spans), mult)
     assert f3 == pytest.approx(f1, rel=1e-12) and three.defect_size(info["defects"]) < 1e-9
     np.testing.assert_allclose(info["trajectory"].x, ref.x, atol=1e-12)
+    pool = LocalPool(prob, three.spans, 2)
+    try:
+        three.carried = [None] * three.K  # a first sweep: every later carry guessed wrong
+        fp, _, info = three.evaluate(three.pack(u, three.nodes_of(ref)), pool, mult)
+    finally:
+        pool.close()
+    assert fp == pytest.approx(f3, rel=1e-12)
+    np.testing.assert_allclose(info["trajectory"].x, ref.x, atol=1e-12)
+    if collision == "guarded":
+        assert three.rerun > 0  # the hem on the ground: contacts carried across the nodes
 
 
 def test_segments_in_worker_processes_give_the_same_numbers():

@@ -38,7 +38,7 @@ class SegmentActor:
 
         try:
             if command == "forward":
-                return "ok", {k: self.runner.forward(k, s, e) for k, (s, e) in items}
+                return "ok", {k: self.runner.forward(k, s, e, c) for k, (s, e, c) in items}
             if command == "rows":
                 return "ok", {k: self.runner.rows(k, e) if e else [] for k, e in items}
             return "ok", {k: self.runner.backward(k, gx, gv) for k, (gx, gv) in items}
@@ -73,20 +73,27 @@ class DaskPool:
         self.count = len(spans)
 
     def _ask(self, command, per_segment) -> list:
+        """``command`` for each segment of ``per_segment`` (a list over all segments, or a
+        dict of some): their answers, a list or a dict alike."""
         from ..state import SimulationError
 
-        futures = [actor.run(command, [(k, per_segment[k]) for k in mine])
-                   for actor, mine in zip(self.actors, self.owned)]
+        some = isinstance(per_segment, dict)
+        items = per_segment if some else dict(enumerate(per_segment))
+        futures = [actor.run(command, [(k, items[k]) for k in mine if k in items])
+                   for actor, mine in zip(self.actors, self.owned)
+                   if any(k in items for k in mine)]
         out = {}
         for future in futures:
             kind, payload = future.result()
             if kind != "ok":
                 raise SimulationError(*payload)
             out.update(payload)
-        return [out[k] for k in range(self.count)]
+        return out if some else [out[k] for k in range(self.count)]
 
-    def forward(self, starts, externals) -> list:
-        return self._ask("forward", list(zip(starts, externals)))
+    def forward(self, items: dict) -> dict:
+        """The segments ``items`` names, in parallel, each from the carry it is given."""
+        out = self._ask("forward", dict(items))
+        return {k: (x, v, items[k][2], carry) for k, (x, v, carry) in out.items()}
 
     def backward(self, cotangents) -> list:
         return self._ask("backward", list(cotangents))

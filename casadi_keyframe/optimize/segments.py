@@ -7,6 +7,12 @@ with the step numbers shifted to where it starts (:class:`Shifted`), so forces, 
 and attachments see the right time; its forward pass keeps the step records (and the
 factorisations the integrator keeps in them) for its backward pass, which reuses them, so
 one evaluation costs one forward and one backward sweep per segment.
+
+A step may carry decisions to the next beyond the state (held contacts that pulled are
+released, springs taken taut stay taut: the integrator's ``carry``).  A segment starts
+from what the step before its first one carried (``carried``), so segments that join
+without a defect are the single run exactly; :func:`same_carry` says whether two carries
+decide alike.
 """
 from __future__ import annotations
 
@@ -33,12 +39,14 @@ class Shifted:
     """An integrator whose step ``n`` is the wrapped one's step ``first + n``: a segment
     that starts at frame ``first`` simulated by the public loops, which count from 0."""
 
-    def __init__(self, integrator, first: int):
-        self.integrator, self.first = integrator, int(first)
+    def __init__(self, integrator, first: int, carried=None):
+        self.integrator, self.first, self.carried = integrator, int(first), carried
         self.name = integrator.name
 
     def init(self, model):
-        return self.integrator.init(model)
+        work = self.integrator.init(model)
+        self.integrator.resume(work, self.carried)
+        return work
 
     def release(self, trajectory) -> None:
         self.integrator.release(trajectory)
@@ -67,22 +75,25 @@ class SegmentRunner:
         self.spans = dict(spans)
         self.kept = {}  # segment -> its last forward trajectory (with records)
 
-    def forward(self, k: int, start: State, external, tangent=None):
-        """Segment ``k`` from ``start`` under ``external`` (``(steps, n, dim)``): its frames
-        ``(x, v)``, ``(steps + 1, n, dim)`` each; with ``tangent=(dx0, dv0, d_external)``
-        also the tangent's end state ``(dx, dv)``.  Raises SimulationError if it fails."""
+    def forward(self, k: int, start: State, external, carried=None, tangent=None):
+        """Segment ``k`` from ``start`` under ``external`` (``(steps, n, dim)``), its first
+        step following one that ``carried`` (None: none): ``(x, v, carry)``, its frames
+        ``(steps + 1, n, dim)`` each and what its last step carries on; with
+        ``tangent=(dx0, dv0, d_external)`` also the tangent's end state ``(dx, dv)``.
+        Raises SimulationError if it fails."""
         first, last = self.spans[k]
         if external.shape[0] != last - first:
             raise ValueError(f"segment {k} has {last - first} steps, got forces for "
                              f"{external.shape[0]}")
         self.drop(k)
-        out = simulate(Shifted(self.integrator, first), self.model, start.x, start.v,
+        out = simulate(Shifted(self.integrator, first, carried), self.model, start.x, start.v,
                        external, self.dt, tangent=tangent)
         traj = out if tangent is None else out[0]
         self.kept[k] = traj
+        carry = self.integrator.carry(self.model, traj.records[-1]) if traj.records else None
         if tangent is None:
-            return traj.x, traj.v
-        return traj.x, traj.v, (out[1][-1], out[2][-1])
+            return traj.x, traj.v, carry
+        return traj.x, traj.v, carry, (out[1][-1], out[2][-1])
 
     def backward(self, k: int, gx, gv):
         """The frame cotangents ``gx, gv`` (``(steps + 1, n, dim)``: each frame's objective
@@ -116,3 +127,15 @@ class SegmentRunner:
     def close(self) -> None:
         for k in list(self.kept):
             self.drop(k)
+
+
+def same_carry(a, b) -> bool:
+    """Whether two carries (:meth:`~casadi_keyframe.integrators.base.Integrator.carry`:
+    tuples, arrays and None) are the same decisions."""
+    if a is None or b is None:
+        return a is b
+    if isinstance(a, tuple) and isinstance(b, tuple):
+        return len(a) == len(b) and all(same_carry(x, y) for x, y in zip(a, b))
+    if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
+        return a.shape == b.shape and bool(np.array_equal(a, b))
+    return a == b

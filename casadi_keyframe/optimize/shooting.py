@@ -8,7 +8,9 @@ s_{K-1}`` (their free components; pinned and attached ones follow their prescrib
 and are taken from a reference run).  Segment k simulates from ``s_k`` (``s_0``: the
 problem's start, with the controls' velocity change) over its steps; the frames it owns
 (its start up to the next node, the last one also the final frame) make the stitched
-trajectory the objective is evaluated on.  The defect ``d_k = end_k - s_{k+1}`` must
+trajectory the objective is evaluated on.  Each segment starts from what the step before it
+carried beyond the state (contacts released, springs taut: :mod:`.segments`) in the
+evaluation's own stitched run, so consistent nodes give the single run exactly.  The defect ``d_k = end_k - s_{k+1}`` must
 vanish; scaled by the keyframes' tolerances (``c_k = d_k / sigma``, positions and
 velocities apart) it enters as ``0.5 w |c_k + lambda_k / w|^2`` through the
 :class:`~.multipliers.Multipliers` the keyframe rounds use too.
@@ -25,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..state import State, Trajectory
-from .segments import boundaries
+from .segments import boundaries, same_carry
 
 
 class Shooting:
@@ -48,6 +50,8 @@ class Shooting:
                           for a, _ in self.spans[1:]]
         self.m = problem.size
         self.size = self.m + 2 * self.nf * (self.K - 1)
+        self.carried = [None] * self.K  # what each segment started from at the last sweep
+        self.rerun = 0  # segments swept again because their guessed carry was wrong
 
     # -- the variables ---------------------------------------------------------------------
     def pack(self, u, nodes) -> np.ndarray:
@@ -114,7 +118,7 @@ class Shooting:
         p, (sx, sv) = self.problem, self.sigma
         u, nodes = self.unpack(np.asarray(z, float))
         starts, ext = self.starts_and_forces(u, nodes)
-        frames = runner.forward(starts, ext)
+        frames = self.sweep(runner, starts, ext)
         traj = self.stitch(frames)
         value, gx, gv = p.state_cost(traj)
         control, g_control = p.control_cost(u)
@@ -143,6 +147,21 @@ class Shooting:
         info = {"objective": value + control, "keyframe_error": value, "defects": c,
                 "trajectory": traj}
         return merit, np.concatenate(grad), info
+
+    def sweep(self, runner, starts, ext) -> list:
+        """Each segment's frames ``(x, v)`` from ``starts`` under ``ext``, each starting
+        from what the previous segment's last step carried: the segments run at once from
+        the carries of the last sweep, then, in order, any whose carry was wrong runs again
+        from the right one (a runner in this process chains them and needs none)."""
+        out = runner.forward({k: (s, e, self.carried[k] if k else None)
+                              for k, (s, e) in enumerate(zip(starts, ext))})
+        for k in range(1, self.K):
+            carry = out[k - 1][3]
+            if not same_carry(out[k][2], carry):
+                self.rerun += 1
+                out.update(runner.forward({k: (starts[k], ext[k], carry)}))
+        self.carried = [out[k][2] for k in range(self.K)]
+        return [out[k][:2] for k in range(self.K)]
 
     def defect_vector(self, c) -> np.ndarray:
         """The scaled defects ``[c_x(0), c_v(0), c_x(1), ...]`` as one vector."""

@@ -2,9 +2,12 @@
 (:class:`Serial`), local worker processes (:class:`LocalPool`, the default with more than
 one worker) or the workers of a Dask cluster (:class:`~.dask_segments.DaskPool`).
 
-A runner's ``forward(starts, externals)`` returns each segment's frames and keeps its
-records where it ran; ``backward(cotangents)`` pulls the cotangents back through those
-records and returns each segment's ``(d/d external, d/d start)``.  A worker owns fixed
+A runner's ``forward(items)`` runs the segments ``items`` names (segment -> ``(start,
+external, carried)``, ``carried`` what the step before its first one carried) and returns
+segment -> ``(x, v, used, carry)``: its frames, the carry it started from and the one its
+last step leaves; it keeps the records where it ran.  ``backward(cotangents)`` pulls the
+cotangents back through those records and returns each segment's ``(d/d external, d/d
+start)``.  A worker owns fixed
 segments, so a segment's backward sweep runs where its forward sweep kept its
 factorisations.  A failed simulation in any segment raises
 :class:`~casadi_keyframe.state.SimulationError` here, naming the segment.
@@ -29,9 +32,17 @@ class Serial:
         self.runner = SegmentRunner(problem.model, problem.integrator, problem.dt,
                                     dict(enumerate(spans)))
 
-    def forward(self, starts, externals) -> list:
-        return [_named(k, self.runner.forward, k, s, e)
-                for k, (s, e) in enumerate(zip(starts, externals))]
+    def forward(self, items: dict) -> dict:
+        """The segments in order, each after the previous one run here starting from what
+        that one carried (so they join as one run does)."""
+        out = {}
+        for k in sorted(items):
+            start, external, carried = items[k]
+            if k - 1 in out:
+                carried = out[k - 1][3]
+            x, v, carry = _named(k, self.runner.forward, k, start, external, carried)
+            out[k] = (x, v, carried, carry)
+        return out
 
     def backward(self, cotangents) -> list:
         return [_named(k, self.runner.backward, k, gx, gv)
@@ -79,10 +90,18 @@ class LocalPool:
             self.processes.append(proc)
 
     def _ask(self, command, per_segment) -> list:
+        """``command`` for each segment of ``per_segment`` (a list over all segments, or a
+        dict of some): their answers, a list or a dict alike."""
+        some = isinstance(per_segment, dict)
+        items = per_segment if some else dict(enumerate(per_segment))
+        asked = []
         for w, pipe in enumerate(self.pipes):
-            pipe.send((command, [(k, per_segment[k]) for k in self.owned[w]]))
+            mine = [(k, items[k]) for k in self.owned[w] if k in items]
+            if mine:
+                pipe.send((command, mine))
+                asked.append(pipe)
         out, failure = {}, None
-        for pipe in self.pipes:
+        for pipe in asked:
             kind, payload = pipe.recv()
             if kind == "ok":
                 out.update(payload)
@@ -93,10 +112,12 @@ class LocalPool:
             if kind == "simulation":
                 raise SimulationError(*payload)
             raise RuntimeError(f"a shooting worker failed:\n{payload}")
-        return [out[k] for k in range(len(per_segment))]
+        return out if some else [out[k] for k in range(len(per_segment))]
 
-    def forward(self, starts, externals) -> list:
-        return self._ask("forward", list(zip(starts, externals)))
+    def forward(self, items: dict) -> dict:
+        """The segments ``items`` names, in parallel, each from the carry it is given."""
+        out = self._ask("forward", dict(items))
+        return {k: (x, v, items[k][2], carry) for k, (x, v, carry) in out.items()}
 
     def backward(self, cotangents) -> list:
         return self._ask("backward", list(cotangents))
@@ -133,7 +154,7 @@ def _serve(pipe, problem, spans) -> None:
             break
         try:
             if command == "forward":
-                out = {k: runner.forward(k, s, e) for k, (s, e) in items}
+                out = {k: runner.forward(k, s, e, c) for k, (s, e, c) in items}
             elif command == "rows":
                 out = {k: runner.rows(k, ends) if ends else [] for k, ends in items}
             else:

@@ -153,3 +153,22 @@ def test_the_rounds_stop_at_an_interrupt_or_the_time_limit_and_say_so():
     timed = solve_augmented(swing(), rounds=50, time_limit=0.3, **OPTIONS)
     assert timed.status == LIMIT and "time limit reached (0.3 s)" in timed.message
     assert len(timed.stages) < 50
+
+
+def test_the_lancelot_rule_moves_a_multiplier_only_where_its_miss_shrank():
+    """always=False (multiple shooting's defects and held keyframes): where the miss fell to
+    a quarter of its last size the multiplier moves by w c and the weight stays; elsewhere
+    the weight grows and the multiplier stays; the first update moves every multiplier."""
+    from casadi_keyframe.optimize.multipliers import Multipliers
+
+    mult = Multipliers({"a": 2.0, "b": 2.0}, growth=10.0, always=False)
+    mult.update({"a": np.array([1.0]), "b": np.array([1.0])})
+    assert mult.lam["a"] == mult.lam["b"] == pytest.approx(2.0)
+    assert mult.weights == {"a": 2.0, "b": 2.0}
+    mult.update({"a": np.array([0.2]), "b": np.array([0.5])})  # a shrank to 1/5, b to 1/2
+    assert mult.lam["a"] == pytest.approx(2.4) and mult.weights["a"] == 2.0
+    assert mult.lam["b"] == pytest.approx(2.0) and mult.weights["b"] == 20.0
+    schedule = Multipliers({"a": 2.0}, growth=10.0)  # always: the keyframe rounds' schedule
+    schedule.update({"a": np.array([1.0])})
+    schedule.update({"a": np.array([0.9])})
+    assert schedule.lam["a"] == pytest.approx(2.0 + 20.0 * 0.9) and schedule.weights["a"] == 200

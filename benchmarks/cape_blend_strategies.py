@@ -18,7 +18,7 @@ Strategies (``--only``; the issue's table is the default set):
 * ``single+homotopy``, ``ms6+homotopy``: first with the body's contact ``--softness``
   times softer and thicker (``contact`` override), then the model's own;
 * ``ms6+passive``, ``ms6+target``: ``ms6`` with its nodes on the passive run or the target;
-* ``ms3+path``, ``ms6+path``, ``ms12+path`` (``+2workers``, ``+homotopy``): nodes on the
+* ``ms3+path``, ``ms6+path``, ``ms12+path`` (``+2workers``, ``+homotopy``, ``+nlp``): nodes on the
   problem's reference path (``cape_blend.path``: the cape held in the torso's frame
   crossfaded into the walk clip's), as its ``SOLVE`` does from rest;
 * ``tracking``: the problem's default start, the PD tracking guess, for reference.
@@ -62,6 +62,7 @@ STRATEGIES = {
     "ms6+path": {"shooting": {"segments": 6, "init": "path"}},
     "ms12+path": {"shooting": {"segments": 12, "init": "path"}},
     "ms6+path+2workers": {"shooting": {"segments": 6, "init": "path", "workers": 2}},
+    "ms6+path+nlp": {"shooting": {"segments": 6, "init": "path", "formulation": "ipopt"}},
     "ms6+path+homotopy": {"shooting": {"segments": 6, "init": "path"}, "homotopy": True},
     "tracking": {"guess": "tracking"},
 }
@@ -149,7 +150,8 @@ def main(argv=None):
         return load_problem("cape_blend", rows=args.rows, cols=args.cols, window=args.window,
                             **kw)
 
-    print(f"cape_blend {args.rows} x {args.cols} from rest, window {args.window} s, "
+    size = "" if (args.rows, args.cols) == (26, 16) else " (reduced: the problem's is 26 x 16)"
+    print(f"cape_blend {args.rows} x {args.cols}{size} from rest, window {args.window} s, "
           f"{args.maxiter} iterations per stage"
           + (f", {args.time_limit:g} s at most" if args.time_limit else ""))
     print(HEAD)

@@ -6,9 +6,10 @@ shared with the keyframe rounds): rounds of the search method (L-BFGS-B by defau
 merit function, the multipliers moved by the defects left and the weights grown where a
 defect did not shrink, until the defects are within the keyframes' tolerances and the
 controls, simulated from the start as one trajectory, meet the goal.  The StateKeyframes
-are held the same way (``hold``): their multipliers move their aim by the miss left each
-round (their weights stay the problem's), since the penalty's own optimum misses by the
-control cost's pull over the weight, which can exceed the tolerance.  Its controls then
+are held the same way (``hold``): their multipliers move their aim by the miss left where
+it shrank to a quarter since the last round (their weights stay the problem's), since the
+penalty's own optimum misses by the control cost's pull over the weight, which can exceed
+the tolerance.  Its controls then
 start the stage's ordinary (single-shooting) search, which stops at once if the goal is
 already met and otherwise closes what the defects left.
 """
@@ -229,7 +230,10 @@ def _rounds(problem, opts, search, ev, z, stage, goal, export):
     shooting, run = ev.shooting, get_method(search.method).run
     variables = _Variables(shooting)
     budget = search.maxiter
-    hard = (KeyframeMultipliers(problem, opts.growth, always=False) if opts.hold and any(
+    # the keyframes' weights stay the problem's: grown by the LANCELOT rule where the miss on
+    # the stitched run could not shrink (the defects held it), they reached 1e7 times the
+    # problem's on the 26 x 16 cape and the polish could not search the problem they left
+    hard = (KeyframeMultipliers(problem, 1.0, always=False) if opts.hold and any(
         isinstance(t, StateKeyframe) for t in problem.objective_terms.state_terms) else None)
     for r in range(opts.rounds):
         ev.reset()

@@ -27,8 +27,8 @@ Strategies (``--only``; the issue's table is the default set):
         [--time-limit 1800] [--softness 3] [--only single ms6 ...] [--toss 50]
 
 ``--toss N`` also compares single and multiple shooting (K = 3) on ``cloth_toss`` at N x N.
-Each strategy gets ``--maxiter`` iterations per stage.  ``--json FILE`` appends each row (the
-notebook's cape section shows ``notebooks/cape_blend_strategies.jsonl``).
+Each strategy gets ``--maxiter`` iterations per stage.  ``--json FILE`` appends each row as
+a JSON line.  ``--time-limit`` is wall time: on a shared machine CPU is the figure to compare.
 """
 import argparse
 import json

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from .adjoints import ROUTES as GRADIENT_ROUTES
+from .cli_options import add_shooting_options, parse_levels, parse_shooting
 from .export import FORMATS as EXPORT_FORMATS
 from .export.alembic import BlenderError
 from .files import writable_folder
@@ -77,6 +78,11 @@ def _split_top(text: str) -> list[str]:
             continue
         current += char
     return [p.strip() for p in parts + [current] if p.strip()]
+
+
+def _items(texts) -> list[dict]:
+    """``["init=blend,workers=2", ...]`` (repeatable KEY=VALUE,... options) as dicts."""
+    return [parse_overrides(_split_top(t)) for t in texts or []]
 
 
 def parse_value(text: str):
@@ -197,11 +203,15 @@ def cmd_solve(args) -> int:
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
     out = writable_folder(args.out, "--out") if args.out is not None else None
+    shooting = parse_shooting(args.segments, _items(args.shooting), args.scheduler)
+    homotopy = parse_levels(module, _items(args.homotopy))
     spec = solve_run(module, args.problem, overrides, out, method=args.method,
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,
-                     resolutions=parse_resolutions(module, args.resolution),
-                     time_limit=args.time_limit, resume=args.resume, quiet=args.quiet,
+                     resolutions=parse_resolutions(module, args.resolution), homotopy=homotopy,
+                     shooting=shooting, time_limit=args.time_limit, stop=args.stop,
+                     resume=args.resume,
+                     quiet=args.quiet,
                      animation=not args.no_animation, exports=tuple(args.export or ()),
                      viewer=not args.no_viewer)
     writable_folder(spec.out, "--out")
@@ -401,6 +411,12 @@ def _solve_parser(sub) -> None:
                         "target by the miss left (hard keyframes; --maxiter per round)")
     s.add_argument("--weight-growth", type=float, metavar="G",
                    help="multiply the keyframe weights by G per round (a penalty schedule)")
+    add_shooting_options(s, at_least(int, 1))
+    s.add_argument("--stop", choices=("goal", "method"),
+                   help="when the search is done: 'goal' once every keyframe is within its "
+                        "tolerance (the default where the problem declares tolerances), "
+                        "'method' at the method's own test; either way it converged (exit 0) "
+                        "only with every keyframe within its tolerance"),
     _output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
                    help="stop the search after this wall time (over all stages and rounds); "

@@ -40,7 +40,8 @@ class MeshKeyframe(StateKeyframe):
     """
 
     def __init__(self, frame: int, target, *, weight: float = 1.0, vertex_weights=None,
-                 align: bool = False, v=None, velocity_weight: float | None = None):
+                 align: bool = False, v=None, velocity_weight: float | None = None,
+                 tolerance=None):
         self.mesh = _mesh_of(target)
         positions = self.mesh.vertices if self.mesh is not None else np.asarray(target, float)
         if positions.ndim != 2 or positions.shape[1] != 3:
@@ -50,7 +51,7 @@ class MeshKeyframe(StateKeyframe):
             raise ValueError(f"MeshKeyframe@{frame}: align=True compares shapes only; give no "
                              f"velocity target v (or align=False)")
         super().__init__(frame, x=positions, v=v, position_weight=weight,
-                         velocity_weight=velocity_weight)
+                         velocity_weight=velocity_weight, tolerance=tolerance)
         self.align = bool(align)
         self.vertex_weights = None
         if vertex_weights is not None:
@@ -124,11 +125,11 @@ class MeshKeyframe(StateKeyframe):
                              f"rotation is an SVD); use the 'adjoint' or 'fd' gradient route")
         return super().symbolic(X, V)
 
-    def moved(self, dx=0.0, dv=0.0, weight_scale: float = 1.0):
+    def aiming(self, dx=0.0, dv=0.0, weight_scale: float = 1.0, velocity_scale=None):
         if self.align:
             raise ValueError(f"{self.label}: an aligned target cannot be moved by a miss (its "
                              f"frame turns with the cloth); use align=False for hard keyframes")
-        return super().moved(dx, dv, weight_scale)
+        return super().aiming(dx, dv, weight_scale, velocity_scale)
 
     def miss(self, traj):
         """rms and max distance to the target (after the best rigid motion with ``align``)

@@ -17,6 +17,7 @@ import casadi as ca
 import numpy as np
 
 from .shapes import Shape
+from .tolerances import center_tolerance, keyframe_tolerance, shortfall_phrase, tolerance_pair
 from .views import Marker
 
 
@@ -103,15 +104,20 @@ class StateTerm(_Addable):
         out = copy.copy(self.unbound)
         out._unbound = self.unbound
         out._check(model)
+        out._compile(model)
+        return out
+
+    def _compile(self, model) -> None:
+        """Compile the bound term's value and state derivatives for ``model``."""
+        self._model = model
         X = ca.SX.sym("X", model.dim, model.n)
         V = ca.SX.sym("V", model.dim, model.n)
-        P = ca.SX.sym("P", out._params(model).size)
-        val = out._expr(X, V, P, model)
-        out._p = out._params(model)
-        name = "term_" + "".join(c if c.isalnum() else "_" for c in out.label)
-        out._fn = ca.Function(name, [X, V, P], [val, ca.gradient(val, X), ca.gradient(val, V)])
-        out._sym = ca.Function(name + "_value", [X, V, P], [val])
-        return out
+        self._p = self._params(model)
+        P = ca.SX.sym("P", self._p.size)
+        val = self._expr(X, V, P, model)
+        name = "term_" + "".join(c if c.isalnum() else "_" for c in self.label)
+        self._fn = ca.Function(name, [X, V, P], [val, ca.gradient(val, X), ca.gradient(val, V)])
+        self._sym = ca.Function(name + "_value", [X, V, P], [val])
 
     def marker(self) -> Marker | None:
         """What this (bound) term shows at its frame, or None if it has nothing to show."""
@@ -146,6 +152,15 @@ class StateTerm(_Addable):
     def miss(self, traj) -> dict:
         """How far the trajectory is from this keyframe, in the units a user thinks in."""
         raise NotImplementedError
+
+    def shortfall(self, traj) -> str | None:
+        """What this (bound) keyframe misses beyond its tolerance in ``traj``, as a phrase
+        naming the term, each miss and its tolerance; None when every tolerance holds (or
+        the term declares none).  A search's goal is met when no term falls short."""
+        return None
+
+    has_tolerance = False  # whether shortfall can fail: the term is part of the goal
+    within = None  # (position, velocity) tolerance of a bound state or centre keyframe
 
     @property
     def particles(self) -> np.ndarray:
@@ -192,13 +207,20 @@ class StateKeyframe(StateTerm):
     """Positions and/or velocities of all particles (or ``agents``) at ``frame``.
 
     value = 0.5 * (position_weight ||x - x*||^2 + velocity_weight ||v - v*||^2)
+
+    ``tolerance``: when the keyframe counts as met, the rms position miss and the rms
+    velocity miss over its particles: one number (positions), or a pair ``(position,
+    velocity)``; None takes the default, ``inf`` checks nothing.  By default positions are
+    met within 1 % of the target's extent (its bounding box's longest side; 0.01 length
+    units for a single point) and velocities within the position tolerance per 0.1 s.
     """
 
     def __init__(self, frame: int, *, x=None, v=None, position_weight: float = 1.0,
-                 velocity_weight: float | None = None, agents=None):
+                 velocity_weight: float | None = None, agents=None, tolerance=None):
         if x is None and v is None:
             raise ValueError("a keyframe needs a position target x, a velocity target v, or both")
         self.frame, self.x, self.v, self.agents = frame, x, v, agents
+        self.tolerance = tolerance_pair(tolerance, f"{type(self).__name__}@{frame}")
         self.position_weight = float(position_weight) if x is not None else 0.0
         self.velocity_weight = (float(velocity_weight) if velocity_weight is not None
                                 else (1.0 if v is not None else 0.0))
@@ -215,6 +237,21 @@ class StateKeyframe(StateTerm):
         shape = (self._idx.size, model.dim)
         self._x = _target(self.x, shape, self.label, "position")
         self._v = _target(self.v, shape, self.label, "velocity")
+        self._tol = keyframe_tolerance(self.tolerance, self._x, self._v)
+
+    @property
+    def within(self) -> tuple:
+        return self._tol
+
+    @property
+    def has_tolerance(self) -> bool:
+        return any(t is not None and np.isfinite(t) for t in self._tol)
+
+    def shortfall(self, traj) -> str | None:
+        """The rms position and velocity misses beyond their tolerances, or None."""
+        checks = [("rms_position_error", "rms position miss", self._tol[0]),
+                  ("rms_velocity_error", "rms velocity miss", self._tol[1])]
+        return shortfall_phrase(self.label, self.miss(traj), checks)
 
     def marker(self):
         """Every particle's target ("shape") or some particles' ("particles")."""
@@ -228,8 +265,8 @@ class StateKeyframe(StateTerm):
 
     def _params(self, model):
         zeros = np.zeros((self._idx.size, model.dim))
-        xs = self._x if self._x is not None else zeros
-        vs = self._v if self._v is not None else zeros
+        xs = self._x + self.aim[0] if self._x is not None else zeros
+        vs = self._v + self.aim[1] if self._v is not None else zeros
         return np.concatenate([xs.ravel(), vs.ravel()])
 
     def _expr(self, X, V, P, model):
@@ -240,16 +277,20 @@ class StateKeyframe(StateTerm):
         return 0.5 * (self.position_weight * ca.sumsqr(X[:, idx] - xs)
                       + self.velocity_weight * ca.sumsqr(V[:, idx] - vs))
 
-    def moved(self, dx=0.0, dv=0.0, weight_scale: float = 1.0) -> "StateKeyframe":
-        """An unbound copy (after ``bind``) aiming at targets moved by ``dx``, ``dv`` (per
-        constrained particle) with both weights times ``weight_scale``: an augmented
-        Lagrangian's shifted keyframe."""
+    aim = (0.0, 0.0)  # where the penalty aims, relative to the targets (see aiming)
+
+    def aiming(self, dx=0.0, dv=0.0, weight_scale: float = 1.0,
+               velocity_scale: float | None = None) -> "StateKeyframe":
+        """An unbound copy (after ``bind``) whose penalty aims at the targets moved by
+        ``dx``, ``dv`` (per particle) with both weights times ``weight_scale`` (the velocity
+        weight times ``velocity_scale`` if given), while its
+        targets, :meth:`miss` and :meth:`shortfall` stay the true ones: an augmented
+        Lagrangian's keyframe (the multipliers move the aim; the goal stays put)."""
         out = self.at_frame(self.frame)
         out.agents = self._idx
-        out.x = None if self._x is None else self._x + dx
-        out.v = None if self._v is None else self._v + dv
+        out.aim = (np.asarray(dx, dtype=float), np.asarray(dv, dtype=float))
         out.position_weight = self.position_weight * weight_scale
-        out.velocity_weight = self.velocity_weight * weight_scale
+        out.velocity_weight = self.velocity_weight * (velocity_scale or weight_scale)
         return out
 
     def miss(self, traj):
@@ -275,13 +316,20 @@ class ParticleKeyframe(StateKeyframe):
 
 
 class CenterOfMassKeyframe(StateTerm):
-    """Mass-weighted centre of mass (and/or its velocity) of ``agents`` at ``frame``."""
+    """Mass-weighted centre of mass (and/or its velocity) of ``agents`` at ``frame``.
+
+    ``tolerance``: the centre's distance and its velocity's miss that count as met, one
+    number (position) or a pair ``(position, velocity)``; by default 0.01 length units and
+    that per 0.1 s; ``inf`` checks nothing.
+    """
 
     def __init__(self, frame: int, *, x=None, v=None, position_weight: float = 1.0,
-                 velocity_weight: float | None = None, agents=None):
+                 velocity_weight: float | None = None, agents=None, tolerance=None):
         if x is None and v is None:
             raise ValueError("a centre-of-mass keyframe needs x, v or both")
         self.frame, self.x, self.v, self.agents = frame, x, v, agents
+        self.tolerance = center_tolerance(tolerance_pair(tolerance, f"CenterOfMass@{frame}"),
+                                          x is not None, v is not None)
         self.position_weight = float(position_weight) if x is not None else 0.0
         self.velocity_weight = (float(velocity_weight) if velocity_weight is not None
                                 else (1.0 if v is not None else 0.0))
@@ -314,6 +362,20 @@ class CenterOfMassKeyframe(StateTerm):
     def center(self, traj, frame=None):
         return self._w @ traj.x[self.frame if frame is None else frame][self._idx]
 
+    @property
+    def within(self) -> tuple:
+        return self.tolerance
+
+    @property
+    def has_tolerance(self) -> bool:
+        return any(t is not None and np.isfinite(t) for t in self.tolerance)
+
+    def shortfall(self, traj) -> str | None:
+        """The centre's position and velocity misses beyond their tolerances, or None."""
+        checks = [("position_error", "position miss", self.tolerance[0]),
+                  ("velocity_error", "velocity miss", self.tolerance[1])]
+        return shortfall_phrase(self.label, self.miss(traj), checks)
+
     def miss(self, traj):
         out = {"term": self.label}
         if self._x is not None:
@@ -329,14 +391,20 @@ class RegionTarget(StateTerm):
 
     value = 0.5 * weight * sum_i max(0, sd(x_i) + margin)^2: the squared distance outside
     the shape shrunk by ``margin``, summed over the agents outside it (the paper's box term).
+    ``fill``: the fraction of the agents inside the shape that counts as met (default 1.0,
+    every one; 0 checks nothing).
     """
 
     def __init__(self, frame: int, shape: Shape, *, weight: float = 1.0, margin: float = 0.0,
-                 agents=None):
+                 agents=None, fill: float = 1.0):
         if not isinstance(shape, Shape):
             raise TypeError("RegionTarget needs a Shape (Box, Disc, Polygon, square, cross)")
         if weight < 0 or margin < 0:
             raise ValueError("RegionTarget weight and margin must be non-negative")
+        if isinstance(fill, bool) or not (isinstance(fill, (int, float)) and 0 <= fill <= 1):
+            raise ValueError(f"RegionTarget: fill is the fraction of the agents inside the "
+                             f"shape that counts as met, in [0, 1], got {fill!r}")
+        self.fill = float(fill)
         self.frame, self.shape, self.weight, self.margin, self.agents = (
             frame, shape, float(weight), float(margin), agents)
 
@@ -353,6 +421,17 @@ class RegionTarget(StateTerm):
 
     def marker(self):
         return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx)
+
+    @property
+    def has_tolerance(self) -> bool:
+        return self.fill > 0
+
+    def shortfall(self, traj) -> str | None:
+        """The fraction of the agents inside the shape, when below ``fill``; else None."""
+        inside = self.miss(traj)["fraction_inside"]
+        if self.fill <= 0 or inside >= self.fill:
+            return None
+        return f"{self.label}: {inside:.1%} of the agents inside (goal {self.fill:.0%})"
 
     def miss(self, traj):
         sd = self.shape.signed_distance(traj.x[self.frame][self._idx])

@@ -24,9 +24,10 @@ from .state import SimulationError
 
 EXIT_CODES = """\
 exit codes:
-  0    converged (IPOPT: also to its acceptable level); result and pictures written
-  1    the search failed (line search, IPOPT error, restoration failure...): the best
-       point is still written; or the simulation fails at the start (nothing written)
+  0    converged: every keyframe within its tolerance; result and pictures written
+  1    the search failed: the method stopped short of the goal (line search, no further
+       decrease, IPOPT error...), the keyframes missed named, the best point still
+       written; or the simulation fails at the start (nothing written)
   2    bad input (problem, overrides, options, --resume source)
   3    stopped at --maxiter or --time-limit before converging; result written: raise the
        limit or continue with --resume OUT
@@ -59,7 +60,10 @@ class SolveRun:
     continuation: list | None = None
     resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
     rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
+    shooting: dict | None = None  # multiple shooting's options (solve's shooting=)
+    homotopy: list | None = None  # build overrides of the homotopy's levels (solve's homotopy=)
     time_limit: float | None = None
+    stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
     resume: str | None = None
     quiet: bool = False
     animation: bool = True
@@ -71,18 +75,24 @@ class SolveRun:
 
 def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=None,
               gradient=None, maxiter=None, rounds=None, weight_growth=None,
-              resolutions=None, **options) -> SolveRun:
+              resolutions=None, shooting=None, **options) -> SolveRun:
     """The :class:`SolveRun` of a loaded problem file built with ``overrides`` (checked
     first), writing to ``out`` (default ``results/PROBLEM``): the search options not given
     (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
     each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
     The file's default ``resolutions`` keep only the meshes coarser than the problem built
     (none when it is built coarse itself), and give way to rounds asked for; rounds and
-    resolutions both given are refused (ValueError)."""
+    resolutions both given are refused (ValueError).  ``shooting`` (options of multiple
+    shooting, ``{"segments": 0}`` for none) goes over the file's."""
     from .loading import build_problem, default_resolutions, resolve, solve_defaults
 
     prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module)
+    defaults = solve_defaults(module, overrides)
+    shooting = {**defaults.get("shooting", {}), **(shooting or {})} or None
+    if options.get("homotopy") is None and defaults.get("homotopy"):
+        options["homotopy"] = [dict(h) for h in defaults["homotopy"]]
+    if shooting and shooting.get("segments", 1) <= 1:
+        shooting = None
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
              if v is not None}
     if given and resolutions:
@@ -98,7 +108,7 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
         overrides=overrides, method=method or defaults["method"],
         gradient=gradient or defaults["gradient"],
         maxiter=defaults["maxiter"] if maxiter is None else maxiter,
-        resolutions=[dict(r) for r in resolutions], rounds=rounds,
+        resolutions=[dict(r) for r in resolutions], rounds=rounds, shooting=shooting,
         **options)
 
 
@@ -144,9 +154,11 @@ def _solve(spec: SolveRun, caught, done) -> int:
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
             "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient}
     done.started = True
-    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=bool(resumed))
+    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed)
     signum = caught.signum if result.status == INTERRUPTED else None
-    extra = {"problem_file": spec.problem_file, **({"resumed_from": resumed} if resumed else {})}
+    extra = {"problem_file": spec.problem_file,
+             **({"resumed_from": {k: v for k, v in resumed.items() if k != "meta"}}
+                if resumed else {})}
     summary = save_result(result, out, problem_name=prob.name, overrides=spec.overrides,
                           **extra)
     done.written = True
@@ -190,17 +202,20 @@ def run_export(source, formats, *, out=None) -> int:
     return 0
 
 
-def _search(spec: SolveRun, u0, checkpoint, resumed: bool = False):
+def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
     """The search ``spec`` asks for from ``u0``; a resumed one goes straight to the problem's
-    own mesh (its controls were found there)."""
+    own mesh (its controls were found there), and rounds go on from the round and the
+    multipliers its checkpoint carries."""
     from .optimize import solve
 
     options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
                    quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
-                   time_limit=spec.time_limit, u0=u0)
+                   time_limit=spec.time_limit, u0=u0, stop=spec.stop, shooting=spec.shooting,
+                   homotopy=spec.homotopy)
     if spec.rounds:
         from .optimize.augmented_lagrangian import solve_augmented
-        return solve_augmented(spec.problem, **spec.rounds, **options)
+        return solve_augmented(spec.problem, **spec.rounds, **options,
+                               resume=resumed.get("meta") if resumed else None)
     resolutions = None if resumed or not spec.resolutions else spec.resolutions
     return solve(spec.problem, resolutions=resolutions, **options)
 
@@ -222,7 +237,8 @@ def resume_controls(spec: SolveRun):
         raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
                          f"{prob.size}")
     check_trajectory(run, prob)  # a stored trajectory that does not fit: an altered file
-    return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun")}
+    return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun"),
+                      "meta": meta}
 
 
 def report(result, summary, out) -> None:

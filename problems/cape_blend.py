@@ -11,33 +11,55 @@ before it topples over the head; ``t_b = 0.6`` s keeps the blended legs shallowe
 weights are divided by the particle count and the mean particle mass, so they mean the same
 at every resolution.  From zero forces (``guess="passive"``, the paper's start) gradient
 searches stall far off or tear the cape, so the default start is a tracking guess
-(:mod:`casadi_keyframe.scenes.cape_tracking`) that lands on the walk's state.  Measurements
-behind these choices: ``docs/problem_notes.md``.
+(:mod:`casadi_keyframe.scenes.cape_tracking`) that lands on the walk's state; from zero
+forces ``SOLVE`` asks for multiple shooting.  ``contact`` > 1 makes the body's contact that
+many times softer and thicker (a homotopy level).  Measurements behind these choices:
+``docs/problem_notes.md``.
 """
 from __future__ import annotations
+
+from dataclasses import replace
 
 from casadi_keyframe.checks import frame_at
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
 from casadi_keyframe.scenes.animations import fall, transition
 from casadi_keyframe.scenes.cape_tracking import (blend_steps, check_attached, reference_path,
                                                   tracking_guess)
-from casadi_keyframe.scenes.capes import cached_clip, cape_model
+from casadi_keyframe.scenes.capes import cached_clip, cape_contacts, cape_model
 from casadi_keyframe.scenes.cloths import cloth_problem
 from casadi_keyframe.scenes.skeleton import Character
 from casadi_keyframe.views import BlendView, Clip
 
-SOLVE = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint"}
 GUESSES = ("tracking", "passive")
+
+
+def SOLVE(guess: str = "tracking", **_) -> dict:
+    """From the tracking guess a search that stops at the goal; from zero forces multiple
+    shooting, its nodes on the blend's reference path (:func:`path`), since one gradient
+    through the whole blend stalls far off."""
+    solve = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint"}
+    return solve if guess != "passive" else {**solve, "shooting": {"segments": 6,
+                                                                   "init": path}}
+
+
+def path(prob):
+    """The blend's reference path (:func:`reference_path`: the cape held in the torso's
+    frame crossfaded into the walk clip's) for ``prob`` built by this file: where multiple
+    shooting's nodes start."""
+    view = prob.view
+    motion, dt = view.animation, prob.dt
+    walk = (view.walk.trajectory, motion.second, frame_at(view.t_b, dt, "cape_blend: t_b"))
+    return reference_path(view.character, motion, prob.x0, walk, prob.steps, dt)
 RANGES = {"rows": "[2, inf)", "cols": "[3, inf)", "steps": "[2, inf)", "dt": "(0, inf)",
           "t_a": "[0, inf)", "t_b": "[0, inf)", "window": "(0, inf)",
           "position_weight": "[0, inf)", "velocity_weight": "[0, inf)", "alpha": "[0, inf)",
-          "temporal": "[0, inf)", "guess": GUESSES}
+          "temporal": "[0, inf)", "guess": GUESSES, "contact": "[1, inf)"}
 
 
 def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 1 / 60,
           t_a: float = 0.8, t_b: float = 0.6, window: float | None = None,
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
-          temporal: float = 1e-7, guess: str = "tracking"):
+          temporal: float = 1e-7, guess: str = "tracking", contact: float = 1.0):
     steps = blend_steps(steps, window, dt)
     fall_start = frame_at(t_a, dt, "cape_blend: t_a")
     walk_start = frame_at(t_b, dt, "cape_blend: t_b")
@@ -51,7 +73,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     fall_model, fall_traj, fall_motion = cached_clip("fall", rows, cols, t_a + window, dt)
     walk_model, walk_traj, walk_motion = cached_clip("walk", rows, cols, t_b + window, dt)
     motion = transition(fall_motion, walk_motion, t_a, t_b, window)
-    model = cape_model(character, motion.shifted(-t_a), rows=rows, cols=cols, dt=dt)
+    model = cape_model(character, motion.shifted(-t_a), rows=rows, cols=cols, dt=dt,
+                       contacts=_contacts(rows, cols, dt, contact))
     x0, v0 = fall_traj.x[fall_start], fall_traj.v[fall_start]
     target_x = walk_traj.x[walk_start + steps] + motion.offset
     target_v = walk_traj.v[walk_start + steps]
@@ -60,7 +83,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     m = model.masses.mean()
     objective = (StateKeyframe(steps, x=target_x, v=target_v,
                                position_weight=position_weight / model.n,
-                               velocity_weight=velocity_weight / model.n)
+                               velocity_weight=velocity_weight / model.n,
+                               tolerance=(0.006, 0.05))
                  + Smoothness(alpha / m, temporal=temporal / m))
     view = BlendView(camera=(15, 35), character=character, animation=motion, t_a=t_a, t_b=t_b,
                      fall=Clip(fall_model, fall_traj), walk=Clip(walk_model, walk_traj))
@@ -71,3 +95,14 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     path = reference_path(character, motion, x0, (walk_traj, walk_motion, walk_start), steps,
                           dt)
     return prob.with_guess(tracking_guess(prob, path, (target_x, target_v)))
+
+
+def _contacts(rows, cols, dt, softness):
+    """The cape's own contact laws (:func:`cape_contacts`), the body's ``softness`` times
+    softer, thicker and more gradual (1: the model's own)."""
+    contacts = cape_contacts(0.4 / (rows * cols), min(0.6 / (cols - 1), 1.0 / (rows - 1)), dt)
+    body = contacts["body"]
+    contacts["body"] = replace(body, stiffness=body.stiffness / softness,
+                               damping=body.damping / softness,
+                               thickness=body.thickness * softness, width=body.width * softness)
+    return contacts

@@ -35,7 +35,8 @@ def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,
                             collision=collision)
     target = bend_into_arch(model.rest_positions, axis=0, up=2)
     objective = (StateKeyframe(steps, x=target, v=np.zeros_like(target),
-                               position_weight=weight / model.n, velocity_weight=weight / model.n)
+                               position_weight=weight / model.n, velocity_weight=weight / model.n,
+                               tolerance=(0.01, 0.1))
                  + Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
     controls = StepForces()
     controls.bind(model.n, 3, steps)

@@ -21,7 +21,7 @@ SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint",
          "resolutions": [{"rows": 6, "cols": 6}]}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
           "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
-          "strain_limit": "[1, inf)", "strain_weight": "[0, inf)"}
+          "strain_limit": "[1, inf)", "strain_weight": "[0, inf)", "tolerance": "(0, inf)"}
 
 
 def shapes(rest: np.ndarray, size: float) -> list[np.ndarray]:
@@ -38,11 +38,12 @@ def shapes(rest: np.ndarray, size: float) -> list[np.ndarray]:
 
 def build(rows: int = 12, cols: int = 12, steps: int = 120, dt: float = 1 / 60,
           size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4,
-          strain_limit: float = 1.2, strain_weight: float = 1e3):
+          strain_limit: float = 1.2, strain_weight: float = 1e3, tolerance: float = 0.02):
     model = ClothModel.grid(rows, cols, width=size, height=size, mass=0.3,
                             pinned=[0, cols - 1])
     frames = np.linspace(steps / 3, steps, 3).round().astype(int)
-    objective = sum((StateKeyframe(int(f), x=x, position_weight=weight / model.n)
+    objective = sum((StateKeyframe(int(f), x=x, position_weight=weight / model.n,
+                                   tolerance=tolerance)
                      for f, x in zip(frames, shapes(model.rest_positions, size))),
                     Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
     return cloth_problem(model=model, steps=steps, dt=dt, objective=objective,

@@ -64,8 +64,10 @@ def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
     corners = np.array([0, cols - 1, (rows - 1) * cols, rows * cols - 1])
     flipped = rotate_about(rest[corners], center, (0.0, 1.0, 0.0), np.pi)
     flipped += ballistic(flip_frame) - center
-    objective = (CenterOfMassKeyframe(ring_frame, x=ring, position_weight=ring_weight)
-                 + ParticleKeyframe(flip_frame, corners, x=flipped, position_weight=corner_weight)
+    objective = (CenterOfMassKeyframe(ring_frame, x=ring, position_weight=ring_weight,
+                                      tolerance=0.03)
+                 + ParticleKeyframe(flip_frame, corners, x=flipped, position_weight=corner_weight,
+                                    tolerance=0.15)
                  + Smoothness(alpha / model.n)
                  + StrainLimit(strain_limit, strain_weight))
     view = ClothView(camera=(15, -80), ring=Ring(center=ring, radius=ring_radius,

@@ -17,13 +17,13 @@ SOLVE = {"method": "lbfgsb", "maxiter": 200}
 RANGES = {"agents": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "seed": "[0, inf)",
           "dim": "[2, 3]", "length": "(0, inf)", "keyframes": "[1, inf)", "lead": "(0, inf)",
           "weight": "[0, inf)", "runner_weight": "[0, inf)", "alpha": "[0, inf)",
-          "wander": "[0, inf)", "cutoff": ("smooth", "hard")}
+          "wander": "[0, inf)", "cutoff": ("smooth", "hard"), "tolerance": "(0, inf)"}
 
 
 def build(agents: int = 30, steps: int = 160, dt: float = 0.05, seed: int = 0, dim: int = 2,
           length: float = 30.0, keyframes: int = 8, lead: float = 1.5, weight: float = 10.0,
           runner_weight: float = 10.0, alpha: float = 1e-3, wander: float = 0.3,
-          cutoff: str = "smooth"):
+          cutoff: str = "smooth", tolerance: float = 0.1):
     rng = np.random.default_rng(seed)
     pack_radius = 0.6 * np.sqrt(agents) + 0.5  # room for the pack at its natural spacing
     horizon = steps * dt
@@ -44,9 +44,11 @@ def build(agents: int = 30, steps: int = 160, dt: float = 0.05, seed: int = 0, d
     finish[0] += pack_radius + lead
     others = [i for i in range(agents) if i != runner]
     objective = sum((CenterOfMassKeyframe(int(f), x=course(f), position_weight=weight,
-                                          agents=others) for f in frames), Smoothness(alpha))
+                                          agents=others, tolerance=tolerance) for f in frames),
+                    Smoothness(alpha))
     objective = (objective + ParticleKeyframe(steps, [runner], x=[finish],
-                                              position_weight=runner_weight)
+                                              position_weight=runner_weight,
+                                              tolerance=tolerance)
                  + RegionTarget(steps, pack, weight=weight, agents=others))
     return flock_problem(agents=agents, steps=steps, dt=dt, seed=seed, dim=dim,
                          objective=objective, x0=x0, v0=v0, params=FlockParams(cutoff=cutoff),

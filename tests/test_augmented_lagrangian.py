@@ -9,7 +9,7 @@ from casadi_keyframe.optimize import solve
 from casadi_keyframe.scenes.sheets import hanging_sheet
 from casadi_keyframe.simulate import simulate
 
-OPTIONS = {"maxiter": 60, "quiet": True}
+OPTIONS = {"maxiter": 60, "quiet": True, "stop": "method"}  # every round, to compare
 
 
 def settled(model, seconds=5.0, dt=1 / 30):
@@ -79,7 +79,7 @@ def test_each_keyframe_gets_its_own_multiplier():
     first = prob.objective_terms.state_terms[0]
     halfway = StateKeyframe(5, x=prob.x0[first.particles] + [0.0, 0.05, 0.0],
                             position_weight=20.0, agents=first.particles)
-    prob = prob.with_objective(halfway + first.moved() + Smoothness(2e-2))
+    prob = prob.with_objective(halfway + first.at_frame(first.frame) + Smoothness(2e-2))
     result = solve_augmented(prob, rounds=3, **OPTIONS)
     misses = np.array([[m["rms_position_error"] for m in s["misses"]] for s in result.stages])
     assert misses.shape == (3, 2)
@@ -87,17 +87,43 @@ def test_each_keyframe_gets_its_own_multiplier():
     assert result.fun == pytest.approx(prob.objective(result.x), rel=1e-9)
 
 
-def test_shifted_keyframe_aims_past_the_target():
+def test_an_aiming_keyframe_aims_past_its_target_and_is_judged_by_it():
     prob = swing()
     term = prob.objective_terms.state_terms[0]
-    moved = term.moved(dx=0.1, dv=-1.0, weight_scale=3.0)
-    again = prob.with_objective(moved + Smoothness(2e-2))
+    aiming = term.aiming(dx=0.1, dv=-1.0, weight_scale=3.0)
+    again = prob.with_objective(aiming + Smoothness(2e-2))
     bound = again.objective_terms.state_terms[0]
-    np.testing.assert_allclose(bound.position_target, term.position_target + 0.1)
+    np.testing.assert_array_equal(bound.position_target, term.position_target)  # goal stays
     assert bound.velocity_target is None and term.velocity_target is None
     np.testing.assert_array_equal(bound.particles, term.particles)
     assert bound.position_weight == 3 * term.position_weight
-    assert term.position_target is not bound.position_target  # the original is untouched
+    traj = prob.simulate()
+    x = traj.x[term.frame][term.particles]
+    aim = term.position_target + 0.1
+    assert bound.value(traj) == pytest.approx(0.5 * bound.position_weight * np.sum((x - aim) ** 2))
+    assert bound.miss(traj) == term.miss(traj)
+    assert bound.shortfall(traj) == term.shortfall(traj) is not None
+
+
+def test_the_rounds_stop_once_the_goal_is_met_and_a_resumed_run_keeps_its_multipliers(tmp_path):
+    from casadi_keyframe.io import Checkpoint, read_run
+
+    prob = swing()
+    tight = StateKeyframe(10, x=prob.objective_terms.state_terms[0].position_target,
+                          agents=prob.objective_terms.state_terms[0].particles,
+                          position_weight=20.0, tolerance=1e-3)
+    prob = prob.with_objective(tight + Smoothness(2e-2))
+    ckpt = Checkpoint(tmp_path / "checkpoint.npz", problem="swing")
+    result = solve_augmented(prob, rounds=6, maxiter=60, quiet=True, checkpoint=ckpt)
+    assert result.success and 1 < len(result.stages) < 6  # stopped when within 1 mm
+    assert rms_miss(result) <= 1e-3 < result.stages[0]["misses"][0]["rms_position_error"]
+    meta = read_run(tmp_path)["meta"]
+    assert meta["rounds_round"] == len(result.stages) - 1
+    again = solve_augmented(prob, rounds=6, maxiter=60, quiet=True, resume=meta,
+                            u0=read_run(tmp_path)["u"])
+    assert again.stages[0]["stage"] == meta["rounds_round"]  # the round it stopped in
+    assert again.stages[0]["weight_scale"] == 1.0 and again.success
+    assert rms_miss(again) <= 1e-3  # its multipliers kept: a fresh round 0 would miss
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -121,10 +147,28 @@ def test_the_rounds_stop_at_an_interrupt_or_the_time_limit_and_say_so():
 
     from casadi_keyframe.optimize import INTERRUPTED, LIMIT
 
-    stopped = solve_augmented(swing(), rounds=3, gradient=InterruptAfter(30), maxiter=60,
-                              quiet=True)
+    stopped = solve_augmented(swing(), rounds=3, gradient=InterruptAfter(30), **OPTIONS)
     assert stopped.status == INTERRUPTED and not stopped.success
     assert len(stopped.stages) < 3 and stopped.stages[-1]["status"] == INTERRUPTED
-    timed = solve_augmented(swing(), rounds=50, maxiter=60, quiet=True, time_limit=0.3)
+    timed = solve_augmented(swing(), rounds=50, time_limit=0.3, **OPTIONS)
     assert timed.status == LIMIT and "time limit reached (0.3 s)" in timed.message
     assert len(timed.stages) < 50
+
+
+def test_the_lancelot_rule_moves_a_multiplier_only_where_its_miss_shrank():
+    """always=False (multiple shooting's defects and held keyframes): where the miss fell to
+    a quarter of its last size the multiplier moves by w c and the weight stays; elsewhere
+    the weight grows and the multiplier stays; the first update moves every multiplier."""
+    from casadi_keyframe.optimize.multipliers import Multipliers
+
+    mult = Multipliers({"a": 2.0, "b": 2.0}, growth=10.0, always=False)
+    mult.update({"a": np.array([1.0]), "b": np.array([1.0])})
+    assert mult.lam["a"] == mult.lam["b"] == pytest.approx(2.0)
+    assert mult.weights == {"a": 2.0, "b": 2.0}
+    mult.update({"a": np.array([0.2]), "b": np.array([0.5])})  # a shrank to 1/5, b to 1/2
+    assert mult.lam["a"] == pytest.approx(2.4) and mult.weights["a"] == 2.0
+    assert mult.lam["b"] == pytest.approx(2.0) and mult.weights["b"] == 20.0
+    schedule = Multipliers({"a": 2.0}, growth=10.0)  # always: the keyframe rounds' schedule
+    schedule.update({"a": np.array([1.0])})
+    schedule.update({"a": np.array([0.9])})
+    assert schedule.lam["a"] == pytest.approx(2.0 + 20.0 * 0.9) and schedule.weights["a"] == 200

@@ -197,8 +197,8 @@ def test_cloth_continuation_reaches_the_direct_objective_in_fewer_fine_iteration
     # 0.0161: the claim is for this path, not a rule (see notebooks/optimizer_convergence).
     prob.integrator = LinearizedBackwardEuler("cg")
     maxiter = 40
-    direct = solve(prob, maxiter=maxiter, quiet=True)
-    cont = solve(prob, maxiter=maxiter, quiet=True, continuation=[1 / 15, 1 / 30])
+    direct = solve(prob, maxiter=maxiter, quiet=True, stop="method")
+    cont = solve(prob, maxiter=maxiter, quiet=True, continuation=[1 / 15, 1 / 30], stop="method")
     assert [s["steps"] for s in cont.stages] == [12, 24, 48]
     assert cont.fun <= direct.fun * (1 + 1e-3)
     fine = [h["objective"] for h in cont.history if h["stage"] == 2]

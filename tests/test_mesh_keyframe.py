@@ -109,7 +109,7 @@ def test_aligned_target_is_refused_by_the_casadi_route_and_hard_keyframes():
     with pytest.raises(ValueError, match="align=True has no CasADi expression"):
         prob.objective_and_gradient(np.zeros(prob.size), "casadi")
     with pytest.raises(ValueError, match="aligned target cannot be moved"):
-        prob.objective_terms.state_terms[0].moved(0.1)
+        prob.objective_terms.state_terms[0].aiming(0.1)
 
 
 def test_another_mesh_is_refused_with_what_differs(tmp_path):

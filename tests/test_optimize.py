@@ -21,8 +21,8 @@ def race():
 
 
 def test_lbfgsb_and_ipopt_reach_the_same_objective(race):
-    a = solve(race, "lbfgsb", maxiter=150, quiet=True)
-    b = solve(race, "ipopt", maxiter=150, quiet=True)
+    a = solve(race, "lbfgsb", maxiter=150, quiet=True, stop="method")
+    b = solve(race, "ipopt", maxiter=150, quiet=True, stop="method")
     passive = race.objective(race.initial_controls())
     assert a.fun < 1e-2 * passive and b.fun < 1e-2 * passive
     assert b.fun == pytest.approx(a.fun, rel=0.05)
@@ -234,14 +234,15 @@ def test_the_checkpoint_is_enough_to_resume_and_written_whole(race, tmp_path):
     assert again.fun <= r.fun
 
 
-def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(monkeypatch):
-    """After progress, L-BFGS-B restarts once from its best point with no curvature memory:
-    if not even that steepest-descent step lowers phi, the search has converged (to a kink
-    or the round-off floor); a failure at the very first step stays a failure."""
+def test_a_line_search_failure_is_converged_only_when_the_goal_is_met(monkeypatch):
+    """After progress, L-BFGS-B restarts once from its best point with no curvature memory;
+    if not even that steepest-descent step lowers phi, the search stops (at a kink or the
+    round-off floor).  That is "converged" only with every keyframe within its tolerance;
+    otherwise it failed (status 2) and says which keyframes it misses and by how much.  A
+    failure at the very first step stays a failure too."""
     import casadi_keyframe.optimize.lbfgsb as lbfgsb
     from scipy.optimize import OptimizeResult
 
-    prob = load_problem("flock_path", agents=6, steps=20)
     starts = []
 
     def scripted(nits):
@@ -254,10 +255,61 @@ def test_a_line_search_that_fails_after_progress_restarts_from_the_best_point(mo
         return minimize
 
     monkeypatch.setattr(lbfgsb, "minimize", scripted([3, 0]))
+    prob = load_problem("flock_path", agents=6, steps=20)  # keyframes within 0.15 by default
     r = solve(prob, maxiter=50, quiet=True)
     assert len(starts) == 2 and np.array_equal(starts[1], r.x)  # restarted at the best
-    assert r.status == CONVERGED and "no step along the steepest descent" in r.message
+    assert r.status == FAILED and not r.success
+    assert "no step along the steepest descent" in r.message
+    far = [m for m in r.breakdown["misses"] if m["position_error"] > 0.15]
+    assert far and all(f"{m['term']}: position miss {m['position_error']:.3g} (tolerance 0.15)"
+                       in r.message for m in far)
+    starts.clear()
+    loose = load_problem("flock_path", agents=6, steps=20, tolerance=100.0)
+    r = solve(loose, maxiter=50, quiet=True, stop="method")  # met, but run the method
+    assert len(starts) == 2 and r.status == CONVERGED and r.success
+    assert r.message.startswith("converged: every keyframe within its tolerance; then line "
+                                "search failed: no step along the steepest descent")
     starts.clear()
     monkeypatch.setattr(lbfgsb, "minimize", scripted([0, 0]))
     r = solve(prob, maxiter=50, quiet=True)
     assert len(starts) == 1 and r.status == FAILED
+
+
+def test_a_line_search_failure_off_the_goal_exits_1_and_still_writes_its_best_point(
+        monkeypatch, tmp_path, capsys):
+    """The command line's side of the same path: status 2 is exit 1, the message names the
+    keyframes missed, and result.npz holds the best point."""
+    import casadi_keyframe.optimize.lbfgsb as lbfgsb
+    from casadi_keyframe.cli import main
+    from scipy.optimize import OptimizeResult
+
+    def minimize(fun, x0, **kw):
+        fun(x0)
+        return OptimizeResult(message="ABNORMAL: ", nit=0, nfev=1)
+
+    monkeypatch.setattr(lbfgsb, "minimize", minimize)
+    code = main(["solve", "flock_path", "--set", "agents=6", "--set", "steps=20", "--quiet",
+                 "--no-animation", "--no-viewer", "--out", str(tmp_path)])
+    out = capsys.readouterr().out
+    assert code == 1, out
+    said = out.splitlines()[1]
+    assert said.startswith("flock_path: line search failed") and "converged" not in said
+    assert "still missed: CenterOfMass@2: position miss 3.17 (tolerance 0.15)" in said
+    assert said.endswith("CenterOfMass@20: position miss 32.1 (tolerance 0.15)")
+    run = read_run(tmp_path / "result.npz")
+    assert run["u"].size == load_problem("flock_path", agents=6, steps=20).size
+
+
+def test_a_search_stops_once_the_goal_is_met_and_a_miss_is_never_a_success(race):
+    r = solve(race, maxiter=300, quiet=True)
+    assert r.status == CONVERGED and r.message.startswith("converged: the goal is met at "
+                                                          "iteration")
+    assert r.nit < 300 and all(m.get("position_error", 0) <= 0.1 for m in r.breakdown["misses"])
+    full = solve(race, maxiter=300, quiet=True, stop="method")
+    assert full.nit > r.nit  # the method's own test comes later
+    tight = load_problem("flock_race", agents=8, steps=40, tolerance=1e-6)
+    for method in ("lbfgsb", "ipopt"):
+        missed = solve(tight, method, maxiter=300, quiet=True)
+        assert missed.status != CONVERGED and "still missed" in missed.message
+    with pytest.raises(ValueError, match="stop must be 'goal'"):
+        solve(race, stop="always")

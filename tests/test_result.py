@@ -17,8 +17,8 @@ from casadi_keyframe.render.convergence import convergence
 @pytest.fixture(scope="module")
 def results():
     prob = swing()
-    plain = solve(prob, maxiter=8, quiet=True)
-    rounds = solve_augmented(prob, rounds=3, maxiter=30, quiet=True)
+    plain = solve(prob, maxiter=8, quiet=True, stop="method")
+    rounds = solve_augmented(prob, rounds=3, maxiter=30, quiet=True, stop="method")
     # its landing with wasted effort: kicks whose second difference leaves the landing be
     u = rounds.x.reshape(prob.steps, -1, 3).copy()
     kick = 0.2 * np.random.default_rng(0).standard_normal(u.shape[1:])

@@ -13,7 +13,7 @@ from casadi_keyframe.cli import main
 from casadi_keyframe.io import atomic_path, read_run
 from casadi_keyframe.run import exit_code
 
-SMALL = ["flock_path", "--set", "agents=6", "--set", "steps=20"]
+SMALL = ["flock_path", "--set", "agents=6", "--set", "steps=20", "--set", "tolerance=2"]
 
 
 def temporaries(folder):
@@ -59,7 +59,7 @@ def test_a_signal_writes_the_best_result_and_render_and_resume_use_it(method, si
     summary = json.loads((out / "summary.json").read_text())
     assert summary["status"] == 3 and "interrupted" in summary["message"]
     saved = read_run(out / "result.npz")
-    assert saved["meta"]["overrides"] == {"agents": 6, "steps": 20}
+    assert saved["meta"]["overrides"] == {"agents": 6, "steps": 20, "tolerance": 2}
     assert saved["u"].size == 240 and np.isfinite(saved["arrays"]["x"]).all()
 
     assert main(["render", str(out), "--no-animation"]) == 0
@@ -114,7 +114,7 @@ def test_a_failed_search_exits_1_with_its_cause_and_keeps_the_best(tmp_path, cap
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--quiet", "--no-animation"]) == 1
     text = capsys.readouterr().out
     assert "line search failed" in text and "gradient may be inaccurate" in text
-    assert "gradcheck flock_path --set agents=6 --set steps=20" in text
+    assert "gradcheck flock_path --set agents=6 --set steps=20 --set tolerance=2" in text
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert summary["status"] == 2 and not summary["success"]
     assert (tmp_path / "result.npz").is_file() and (tmp_path / "keyframes.png").is_file()

@@ -1,8 +1,11 @@
 """The paper's figures at their full default sizes reach their keyframes (``make test-slow``).
 
 Each test solves a problem file as ``casadi-keyframe solve`` does (the file's ``SOLVE``
-defaults) and holds it to what its docstring and the reduced tests promise.  The run prints a
-table (figure, size, iterations, seconds, misses) at the end, for the issue notes.
+defaults, which may depend on the overrides) and holds it to what its docstring and the
+reduced tests promise: the search converged, i.e. every keyframe is within the tolerance the
+problem declares (a search never reports status 0 otherwise), plus what the tolerances do not
+say.  The run prints a table (figure, size, iterations, seconds, misses) at the end, for the
+issue notes.
 """
 import time
 
@@ -12,7 +15,7 @@ import pytest
 from casadi_keyframe import solve
 from casadi_keyframe.loading import (build_problem, default_resolutions, load_module,
                                      solve_defaults)
-from casadi_keyframe.optimize import CONVERGED, LIMIT
+from casadi_keyframe.optimize import CONVERGED, FAILED, LIMIT
 from casadi_keyframe.scenes.capes import clip_report
 from casadi_keyframe.scenes.maths import turn_angle
 
@@ -21,19 +24,21 @@ pytestmark = pytest.mark.slow
 TABLE = []  # rows printed by conftest's terminal summary
 
 
-def solve_figure(name, **overrides):
-    """The problem at its default size solved with its file's SOLVE defaults, recorded."""
+def solve_figure(name, time_limit=None, goal=True, **overrides):
+    """The problem at its default size solved with its file's SOLVE defaults, recorded;
+    with ``goal`` the search must have converged (every keyframe within its tolerance)."""
     module = load_module(name)
     prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module)
+    defaults = solve_defaults(module, overrides)
     start = time.process_time()
     result = solve(prob, method=defaults["method"], maxiter=defaults["maxiter"], quiet=True,
-                   resolutions=default_resolutions(module, prob) or None)
+                   resolutions=default_resolutions(module, prob) or None,
+                   shooting=defaults.get("shooting"), time_limit=time_limit)
     seconds = time.process_time() - start
     TABLE.append({"figure": name, "size": prob.size, "iterations": result.nit,
                   "cpu_seconds": round(seconds, 1), "message": result.message,
                   "misses": result.breakdown["misses"]})
-    assert result.status in (CONVERGED, LIMIT), result.message  # no failed search
+    assert result.status == CONVERGED or not goal, result.message
     return prob, result
 
 
@@ -44,8 +49,7 @@ def misses(result, key):
 def test_flock_path_follows_the_path():
     prob, result = solve_figure("flock_path")
     errors = misses(result, "position_error")
-    assert len(errors) == 8
-    assert max(errors) < 0.5 and np.median(errors) < 0.1  # the path is 40 units long
+    assert len(errors) == 8 and max(errors) <= 0.15  # its tolerance; the path is 45 long
 
 
 def test_flock_race_runner_finishes_in_front():
@@ -117,3 +121,28 @@ def test_cape_blend_keeps_its_landing_for_less_effort():
     assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 5e-2
     report = clip_report(prob.model, result.trajectory)
     assert report["max_stretch"] < 1.3 and report["penetration"] < 0.015, report
+
+
+def test_cape_blend_from_rest_by_multiple_shooting_says_how_close_it_lands():
+    """Fig. 6 from zero forces, the paper's start (issue 24): the problem's SOLVE (multiple
+    shooting on the reference path, then the single-shooting polish), 26 x 16, at most 30
+    minutes.  The issue's target is the keyframe's tolerance, 6 mm and 5 cm/s rms (1 % of
+    the cape's width), with no spring past 1.3 and no particle deeper than 1.5 cm.  The
+    search does not reach it yet (README, the cape): this holds what it reaches, with a
+    margin, and that it says so: converged exactly when the tolerance is met, otherwise a
+    failed or limited search naming the keyframe and both misses."""
+    prob, result = solve_figure("cape_blend", time_limit=1800, goal=False, guess="passive")
+    (miss,) = result.breakdown["misses"]
+    rms_x, rms_v = miss["rms_position_error"], miss["rms_velocity_error"]
+    met = rms_x <= 6e-3 and rms_v <= 5e-2
+    assert (result.status == CONVERGED) == met, result.message
+    if not met:
+        assert result.status in (FAILED, LIMIT)
+        assert "still missed: StateKeyframe@60: " in result.message
+        assert (rms_x <= 6e-3) != (f"rms position miss {rms_x:.3g} (tolerance 0.006)"
+                                   in result.message)
+        assert (rms_v <= 5e-2) != (f"rms velocity miss {rms_v:.3g} (tolerance 0.05)"
+                                   in result.message)
+    assert rms_x <= 0.02 and rms_v <= 0.2, miss  # what it reaches (README), with a margin
+    report = clip_report(prob.model, result.trajectory)
+    assert report["max_stretch"] <= 1.3 and report["penetration"] <= 0.015, report

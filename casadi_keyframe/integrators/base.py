@@ -73,6 +73,17 @@ class Integrator:
         self.check_model(model)
         return Workspace()
 
+    def carry(self, model, record):
+        """What the step after ``record``'s takes from it beyond its end state (None:
+        nothing): plain tuples, arrays and None, equal exactly when the next step decides
+        the same.  A pass that starts mid-run (a multiple-shooting segment) is given it by
+        :meth:`resume`."""
+        return None
+
+    def resume(self, work, carried) -> None:
+        """Let the pass of ``work`` start as if its first step followed one that left
+        ``carried`` (:meth:`carry`; None: the start of a run)."""
+
     def decides_per_step(self, model) -> bool:
         """Whether the scheme decides something per step from the state that its symbolic
         step takes as a parameter (:meth:`step_parameters`' ``record``)."""

@@ -83,6 +83,7 @@ import scipy.sparse as sp
 from ..linear import SolveError, SolveInfo, System, linear_solver
 from ..models.base import BlockJacobians, ContactConstraints, ForceJacobians
 from ..models.blocks import GrowingPattern, SparseJacobian
+from ..models.contact_constraint import Contacts
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 
@@ -178,6 +179,24 @@ class LinearizedBackwardEuler(Integrator):
         pattern = (GrowingPattern(model.step_pattern) if isinstance(model, BlockJacobians)
                    else None)
         return StepWorkspace(self.plan(model), pattern)
+
+    def carry(self, model, record):
+        """The contacts the step held that pulled and the particles it released (the next
+        step releases them), and the springs it took taut."""
+        held = record.contacts
+        contacts = None if held is None else (held.particles[held.impulse < 0],
+                                              held.released)
+        return contacts, model.carried_decisions(record.interactions)
+
+    def resume(self, work, carried) -> None:
+        if carried is None:
+            return
+        contacts, work.last_found = carried
+        if contacts is not None:
+            pulled, released = contacts
+            k = pulled.size
+            work.previous = Contacts(pulled, np.zeros(k, int), np.zeros((k, 3)), np.zeros(k),
+                                     impulse=-np.ones(k), released=released)
 
     def plan(self, model):
         """The linear solver's plan for ``model``, made at the first pass and kept while the

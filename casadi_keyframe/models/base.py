@@ -135,6 +135,11 @@ class ForceJacobians(abc.ABC):
         """``(K, D)`` as sparse CasADi expressions (the same K as :meth:`jacobians`, with the
         step's ``decisions``: :meth:`decision_parameters`)."""
 
+    def carried_decisions(self, found):
+        """The part of a step's decisions ``found`` that :meth:`carried_interactions` takes
+        to the next step (None: nothing; what it recomputes from x is left out)."""
+        return None
+
     def carried_interactions(self, last, x):
         """What a step at x starts from (:meth:`Model.interactions`), given what the last
         step decided (``last``, its record's, None at the first step): a cloth keeps the

@@ -441,6 +441,13 @@ class ClothModel(Model, BlockJacobians, HeldContacts, PhysicalReport, Surface):
         found = (None,) * len(self.families) if found is None else found
         return np.concatenate([f.decisions(d) for f, d in zip(self.families, found)])
 
+    def carried_decisions(self, found):
+        """The springs a step took taut (its other decisions come again from x)."""
+        if found is None:
+            return None
+        return tuple(d if isinstance(f, ChoiKoSprings) else None
+                     for f, d in zip(self.families, found))
+
     def carried_interactions(self, last, x):
         found = self.interactions(x)
         if last is None:

@@ -3,6 +3,7 @@ best point, counting failed simulations, writing the history and the checkpoint)
 :class:`MetricView`, the same evaluator in a smooth metric's variables."""
 from __future__ import annotations
 
+import copy
 import signal
 import time
 
@@ -11,7 +12,8 @@ import numpy as np
 from ..adjoints import get_gradient
 from ..health import GrowthLog
 from ..interrupts import check
-from ..state import SimulationError
+from ..state import SimulationError, Trajectory
+from .goal import GoalReached, verdict
 from .result import history_record
 
 
@@ -21,12 +23,24 @@ class Evaluator:
     Search methods ask for f and its gradient at the same point in separate calls (IPOPT)
     or together (L-BFGS-B): the last point's pair is kept, so each point is simulated once.
     ``stage`` is the stage it serves; ``export`` maps its controls to the final problem's
-    grid for the checkpoint (an :class:`~casadi_keyframe.io.Checkpoint` or None)."""
+    grid for the checkpoint (an :class:`~casadi_keyframe.io.Checkpoint` or None).
 
-    def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None):
+    The goal (:mod:`.goal`) is judged by the keyframe terms of ``goal`` (default: the
+    problem itself; an augmented-Lagrangian round passes the true problem, whose targets do
+    not move).  With ``stop="goal"`` each iteration checks it at the best point and raises
+    :class:`~.goal.GoalReached` once it is met.  The trajectory of the best point is kept
+    from the gradient's own simulation (:func:`watched`), so the check costs no simulation.
+    """
+
+    def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None,
+                 goal=None, stop: str = "method"):
         self.problem, self.gradient = problem, get_gradient(gradient)
         self.checkpoint, self.stage = checkpoint, stage
         self.export = export or (lambda u: u)
+        self.goal, self.stop = goal or problem, stop
+        self._seen = {}
+        self._watched = watched(problem, self._seen)
+        self.best_traj, self._judged = None, None
         self.nfev = 0
         self.failures = 0
         self.last_failure = ""
@@ -50,7 +64,8 @@ class Evaluator:
         t = time.perf_counter()
         try:
             check()  # a signal caught by interrupts.catching stops the search here
-            f, g = self.gradient(self.problem, u)
+            self._seen.clear()
+            f, g = self.gradient(self._watched, u)
             self.health.seen(self.gradient)
         except SimulationError as err:  # health.GradientError too: a refused gradient
             # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
@@ -69,7 +84,30 @@ class Evaluator:
         self.last_u, self.last = u, (f, g)
         if f < self.best_f:
             self.best_u, self.best_f, self.best_g = u, f, g
+            seen = self._seen.get("u")
+            self.best_traj = (self._seen["trajectory"] if seen is not None
+                              and np.array_equal(seen, u) else None)
         return f, g
+
+    def best_trajectory(self):
+        """The trajectory at the best point (kept, or simulated now without records)."""
+        if self.best_traj is None:
+            self.best_traj = self.problem.simulate(self.best_u, records=False)
+        return self.best_traj
+
+    def verdict(self):
+        """The goal's :class:`~.goal.Verdict` at the best point."""
+        return verdict(self.goal, self.best_trajectory())
+
+    def check_goal(self, iteration: int) -> None:
+        """With ``stop="goal"``: raise :class:`~.goal.GoalReached` if the best point meets
+        the goal (judged once per best point)."""
+        if self.stop != "goal" or self.best_u is None or self._judged is self.best_u:
+            return
+        self._judged = self.best_u
+        found = self.verdict()
+        if found.checked and found.met:
+            raise GoalReached(found, iteration)
 
     def record(self, history, start, bar):
         """Append one iteration (at the last evaluated point) to ``history``; the checkpoint
@@ -90,6 +128,7 @@ class Evaluator:
         bar.update(1)
         bar.set_postfix(f=f"{f:.4g}")
         check()
+        self.check_goal(len(history))
 
 
 class MetricView:
@@ -111,6 +150,24 @@ class MetricView:
     @property
     def interrupted(self):
         return self.ev.interrupted
+
+
+def watched(problem, seen: dict):
+    """A shallow copy of ``problem`` whose ``simulate`` also leaves its last controls and
+    trajectory (positions and velocities, no records) in ``seen``: the gradient routes
+    simulate through it, so the evaluator learns the trajectory of each point it asks for
+    without a simulation of its own."""
+    out = copy.copy(problem)
+    simulate = type(problem).simulate
+
+    def keeping(u=None, *, records: bool = True):
+        traj = simulate(out, u, records=records)
+        seen["u"] = None if u is None else np.array(u, dtype=float).ravel()
+        seen["trajectory"] = Trajectory(traj.x, traj.v, traj.dt)
+        return traj
+
+    out.simulate = keeping
+    return out
 
 
 def evaluate_final(problem, strategy, u):

@@ -23,6 +23,7 @@ import casadi as ca
 import numpy as np
 
 from ..interrupts import Interrupted, catching
+from .goal import GoalReached
 from .outcome import ipopt_outcome
 
 
@@ -128,6 +129,7 @@ class _Iteration(ca.Callback):
     def __init__(self, n, on_iteration):
         ca.Callback.__init__(self)
         self.n, self.on_iteration, self.interrupted, self.count = n, on_iteration, None, 0
+        self.reached = None  # the GoalReached that stopped it
         self.construct("iteration", {})
 
     def get_n_in(self):
@@ -154,6 +156,9 @@ class _Iteration(ca.Callback):
                 self.on_iteration()
         except KeyboardInterrupt as err:
             self.interrupted = getattr(err, "signum", signal.SIGINT)
+            return [1]
+        except GoalReached as reached:  # IPOPT stops on 1; the search hears of it below
+            self.reached = reached
             return [1]
         return [0]
 
@@ -184,5 +189,7 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     signum = caught.signum or ev.interrupted or it.interrupted
     if signum:
         raise Interrupted(signum)
+    if it.reached is not None:
+        raise it.reached
     return ipopt_outcome(solver.stats().get("return_status", "unknown"),
                          maxiter=ipopt["max_iter"])

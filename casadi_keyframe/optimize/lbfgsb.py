@@ -15,7 +15,7 @@ import time
 import numpy as np
 from scipy.optimize import minimize, show_options
 
-from .outcome import CONVERGED, FAILED, LIMIT, lbfgsb_outcome
+from .outcome import FAILED, LIMIT, lbfgsb_outcome
 
 
 @functools.cache
@@ -71,10 +71,10 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     except _TimeUp:
         return LIMIT, "time limit reached before converging"
     if _line_search_failed(again) and again.nit == 0:
-        return CONVERGED, ("converged: no step along the steepest descent lowers the "
-                           "objective (the line search failed, and again from the best point "
-                           "with fresh curvature memory): a kink of the objective or its "
-                           f"round-off floor [L-BFGS-B: {again.message}]")
+        return FAILED, ("line search failed: no step along the steepest descent lowers the "
+                        "objective (it failed, and again from the best point with fresh "
+                        "curvature memory): a kink of the objective or its round-off floor "
+                        f"[L-BFGS-B: {again.message}]")
     return lbfgsb_outcome(again.message, maxiter=maxiter, maxfun=opts["maxfun"])
 
 

@@ -67,3 +67,26 @@ def ipopt_outcome(return_status: str, *, maxiter: int) -> tuple[int, str]:
         return LIMIT, f"time limit reached before converging{tag}"
     why = _IPOPT_FAILURES.get(return_status, "IPOPT failed")
     return FAILED, f"search failed: {why}{tag}"
+
+
+HARD = ("hold the keyframes hard (rounds, --rounds), raise their weights, or start closer "
+        "(a guess, multiple shooting: --segments)")
+
+
+def judge(status: int, message: str, verdict) -> tuple[int, str]:
+    """How a search really ended, given how its method stopped (``status``, ``message``)
+    and the goal's :class:`~.goal.Verdict` at its best point: "converged" only with every
+    keyframe within its tolerance; a method that stopped short of the goal failed, and the
+    message names each keyframe still missed.  Without a goal (no tolerance declared), and
+    for an interrupt, the method's word stands."""
+    if status == INTERRUPTED or not verdict.checked:
+        return status, message
+    if verdict.met:
+        if status == FAILED:
+            return CONVERGED, f"converged: every keyframe within its tolerance; then {message}"
+        return status, f"{message}; every keyframe within its tolerance"
+    missed = verdict.describe()
+    if status == CONVERGED:
+        return FAILED, (f"search failed: the method stopped short of the goal ({message}); "
+                        f"{missed}; {HARD}")
+    return status, f"{message}; {missed}"

@@ -51,7 +51,10 @@ class HistoryRecord(_HistoryFields, total=False):
 
     Producers may add:
 
-    * ``round``: the augmented-Lagrangian round (:func:`~.augmented_lagrangian.solve_augmented`);
+    * ``round``: the augmented-Lagrangian round (:func:`~.augmented_lagrangian.solve_augmented`,
+      and multiple shooting's rounds);
+    * ``defect``: multiple shooting's largest rms defect between segments, in units of the
+      keyframes' tolerances (1: as large as the tolerance);
     * ``control_cost``, ``damping``, ``misses``: :func:`~.constrained.lower_effort`'s
       control cost, the damping it stepped with, and each keyframe row's ``(kind, rms
       miss)``;
@@ -60,6 +63,7 @@ class HistoryRecord(_HistoryFields, total=False):
     """
 
     round: int
+    defect: float
     control_cost: float
     damping: float
     misses: list
@@ -121,7 +125,9 @@ class Stage(_StageFields, total=False):
 
     An augmented-Lagrangian round adds ``weight_scale`` (its keyframe weights' factor),
     ``control_cost`` and ``misses`` (the problem's keyframe misses at its controls, as
-    in ``breakdown``).  A search's stage adds its gradients' health
+    in ``breakdown``).  A multiple-shooting stage adds ``segments`` and ``defect`` (the
+    largest rms defect left, in tolerances); its ``fun`` is the objective on the stitched
+    segments.  A search's stage adds its gradients' health
     (:class:`~casadi_keyframe.health.GrowthLog`): ``gradient_growth``, the largest backward
     growth of its evaluations (a route that watches its backward pass), and
     ``gradient_refused``, the evaluations whose gradient was refused (counted in
@@ -129,6 +135,8 @@ class Stage(_StageFields, total=False):
     """
 
     weight_scale: float
+    segments: int
+    defect: float
     control_cost: float
     misses: list
     gradient_growth: float

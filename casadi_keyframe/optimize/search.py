@@ -12,8 +12,11 @@ from __future__ import annotations
 
 import math
 import numbers
+from dataclasses import replace
 import signal
 import time
+
+import numpy as np
 
 from tqdm.auto import tqdm
 
@@ -23,9 +26,11 @@ from ..interrupts import NAMES, handled
 from ..io import as_checkpoint
 from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
+from .goal import GoalReached, check_stop
 from .methods import check_options, get_method
 from .metrics import search_metric
-from .outcome import CONVERGED, INTERRUPTED, LIMIT
+from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
+from .shooting_search import run_shooting, shooting_options
 from .result import Result, assemble
 from .stages import carry, stage_name, stage_problems
 
@@ -34,7 +39,8 @@ from .stages import carry, stage_name, stage_problems
 def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
           options: dict | None = None, continuation=None, resolutions=None,
-          time_limit: float | None = None) -> Result:
+          time_limit: float | None = None, stop: str | None = None, goal=None,
+          shooting=None, homotopy=None) -> Result:
     """Optimise the problem's controls.
 
     ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
@@ -70,25 +76,85 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     the rest mesh, momentum and impulse kept); stages and history records name the mesh's
     ``particles``, and the checkpoint always holds controls of ``problem`` itself.
 
+    ``homotopy`` (a third axis of stages, e.g. contact made soft and thick first) lists
+    levels of the model, each a problem or a dict of build overrides on the same particles
+    (:func:`~.stages.homotopy_levels`): every mesh is solved at each level, then as it is.
+
+    ``stop`` says when a search is done: ``"goal"`` (the default where a keyframe declares
+    a tolerance, :mod:`.goal`) once every keyframe is within its tolerance, checked at every
+    iteration (and at the start); ``"method"`` at the method's own test.  Either way a
+    stage is "converged" (status 0) only with the goal met, and a search that stopped short
+    of it says which keyframes it still misses and by how much (:func:`~.outcome.judge`).
+    ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
+    same frames, e.g. the true problem of an augmented-Lagrangian round).
+
+    ``shooting`` (a number of segments K, or :class:`~.shooting_search.ShootingOptions`
+    or a dict of them) runs multiple shooting first on each stage
+    (:mod:`.shooting_search`): controls and the states at K - 1 nodes searched together,
+    the segments' defects held by multipliers; its controls then start the stage's own
+    search (unless ``polish`` is off), which stops at once if the goal is already met.  After
+    the first stage the nodes start on the run of the controls carried over (``"guess"``).
+    Its stage record says ``segments`` and the largest scaled ``defect`` left.
+
     A simulation that fails at the starting controls raises :class:`SimulationError`;
     during the search a failing point counts as a failed evaluation.
     """
     options = check_settings(method, maxiter, tol, time_limit, options)
-    problems = stage_problems(problem, continuation, resolutions)
+    stop = check_stop(stop, goal or problem)
+    multiple = shooting_options(shooting)
+    problems = stage_problems(problem, continuation, resolutions, homotopy)
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
                      time_limit)
+    search.stop = stop
     u = None if u0 is None else carry(problem, problem.controls.check(u0), problems[0])
     stages = []
     for k, p in enumerate(problems):
-        ev = Evaluator(p, strategy, search.checkpoint, stage=k,
-                        export=lambda v, p=p: carry(p, v, problem))
-        stages.append(search.run(p, ev, p.initial_controls() if u is None else u,
-                                 (k, len(problems))))
+        judge_by = goal if (goal is not None and p is problem) else p
+        export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
+        ev = Evaluator(p, strategy, search.checkpoint, stage=k, export=export, goal=judge_by,
+                       stop=stop)
+        start, polish = p.initial_controls() if u is None else u, True
+        if multiple is not None and multiple.segments > 1:
+            start, ev, polish = _shoot(p, k, multiple, start, search, stages, ev, problem)
+        if polish:
+            stages.append(search.run(ev.problem, ev, start, (k, len(problems))))
         if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
         u = carry(p, ev.best_u, problems[k + 1])
     return _result(problem, p, ev, strategy, search, stages, len(problems))
+
+
+def _shoot(p, k, opts, start, search, stages, ev, origin):
+    """Stage ``k``'s multiple shooting (its record appended to ``stages``): ``(controls,
+    evaluator, polish?)``.  The polish searches the problem whose keyframes aim where the
+    shooting's multipliers left them (judged by the true targets); without a polish, or
+    after an interrupt or the time limit, the shooting's controls are evaluated and judged
+    as they are."""
+    opts = opts if k == 0 else replace(opts, init="guess")
+    record, start, aimed = run_shooting(p, opts, start, search, k, ev.goal, ev.export, origin)
+    stages.append(record)
+    if opts.polish and record["status"] != INTERRUPTED and not search.time_up():
+        if aimed is not p:
+            ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=k, export=ev.export,
+                           goal=ev.goal, stop=ev.stop)
+        return start, ev, True
+    evaluate_at(ev, start)
+    record["status"], record["message"] = judge(record["status"], record["message"],
+                                                ev.verdict())
+    record["success"] = record["status"] == CONVERGED
+    return start, ev, False
+
+
+def evaluate_at(ev, u) -> None:
+    """Evaluate ``ev`` at the controls ``u`` (its best point then), an interrupt during it
+    leaving the objective alone."""
+    try:
+        ev(u)
+    except KeyboardInterrupt:
+        handled()
+        f = ev.problem.objective(u)
+        ev.best_u, ev.best_f, ev.best_g = u, f, np.full(u.size, np.nan)
 
 
 def check_settings(method, maxiter, tol, time_limit, options) -> dict:
@@ -115,8 +181,11 @@ def _positive(value) -> bool:
 def _result(problem, p, ev, strategy, search, stages, count) -> Result:
     """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``)."""
     status, message = stages[-1]["status"], stages[-1]["message"]
-    if p is problem:
+    if p is problem and ev.problem is problem:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
+    elif p is problem:  # a polish whose keyframes aimed past their targets
+        u = ev.best_u
+        fun, jac = evaluate_final(problem, strategy, u)
     else:
         u = carry(p, ev.best_u, problem)
         fun, jac = evaluate_final(problem, strategy, u)
@@ -139,6 +208,7 @@ class _Search:
     def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
         self.method, self.maxiter, self.tol, self.options = method, maxiter, tol, options
         self.quiet, self.checkpoint, self.time_limit = quiet, checkpoint, time_limit
+        self.stop = "method"
         self.history, self.start = [], time.perf_counter()
         self.deadline = None if time_limit is None else self.start + time_limit
 
@@ -151,6 +221,7 @@ class _Search:
         status, message = self._search(problem, ev, u0, stage)
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
+        status, message = judge(status, message, ev.verdict())
         return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
                 "particles": problem.model.n,
                 "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
@@ -174,6 +245,10 @@ class _Search:
                                      "finer dt or mesh" if k == 0 else "; the controls "
                                      "carried from the previous stage fail here: start the "
                                      "continuation at a finer dt or mesh"), 0)
+        try:
+            ev.check_goal(0)
+        except GoalReached:
+            return CONVERGED, "converged: the start already meets the goal (stop='goal')"
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
         run = get_method(self.method).run
@@ -183,6 +258,9 @@ class _Search:
         try:
             return run(problem, searched, start, self.maxiter, self.tol, self.options,
                        lambda: ev.record(self.history, self.start, bar), self.deadline)
+        except GoalReached as reached:
+            return CONVERGED, (f"converged: the goal is met at iteration {reached.iteration} "
+                               "(stop='goal')")
         except KeyboardInterrupt as err:
             handled()
             signum = getattr(err, "signum", signal.SIGINT)

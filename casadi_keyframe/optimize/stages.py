@@ -1,21 +1,45 @@
-"""The problems one :func:`~.optimize.solve` goes through, coarse to fine (time steps of a
-continuation, coarser meshes of a cloth), and how controls pass from one to the next."""
+"""The problems one :func:`~.optimize.solve` goes through, coarse to fine, on three axes:
+coarser meshes of a cloth (space), a homotopy of the model (e.g. contact made soft and thick
+first, then the model's own) and the time steps of a continuation (time); and how controls
+pass from one to the next."""
 from __future__ import annotations
 
 from .transfer import carry_to_mesh
 
 
-def stage_problems(problem, continuation, resolutions=None) -> list:
+def stage_problems(problem, continuation, resolutions=None, homotopy=None) -> list:
     """The problems a continuation solves in turn, coarse to fine; the last is ``problem``.
 
-    For every mesh of ``resolutions`` (see :func:`coarser_meshes`) and then ``problem``, the
-    time stages of ``continuation`` on that mesh.  ``continuation`` None means one stage per
-    mesh.  Otherwise its time steps must decrease strictly and end at ``problem.dt``
-    (appended if missing), each dividing the horizon into whole steps with every keyframe on
-    its grid (else ValueError, from ``resampled``).
+    For every mesh of ``resolutions`` (see :func:`coarser_meshes`) and then ``problem``: the
+    mesh at each level of ``homotopy`` (see :func:`homotopy_levels`) and then as it is, each
+    at the time stages of ``continuation``.  ``continuation`` None means one time stage.
+    Otherwise its time steps must decrease strictly and end at ``problem.dt`` (appended if
+    missing), each dividing the horizon into whole steps with every keyframe on its grid
+    (else ValueError, from ``resampled``).
     """
     meshes = coarser_meshes(problem, resolutions) + [problem]
-    return [stage for mesh in meshes for stage in _time_stages(mesh, continuation)]
+    return [stage for mesh in meshes for level in homotopy_levels(mesh, homotopy)
+            for stage in _time_stages(level, continuation)]
+
+
+def homotopy_levels(problem, homotopy) -> list:
+    """``problem`` at each level of ``homotopy`` and then itself: a level is a problem or a
+    dict of build overrides (:meth:`~.problem.ControlProblem.at_resolution`, e.g. a cape's
+    ``{"contact": 3}``, its contact three times softer and thicker), checked to be the same
+    problem on the same particles, steps and controls."""
+    if homotopy is None:
+        return [problem]
+    if isinstance(homotopy, (dict, str)) or not hasattr(homotopy, "__iter__"):
+        raise ValueError(f"homotopy must be a list of problems or of build overrides such as "
+                         f"{{'contact': 3}}, first to last, got {homotopy!r}")
+    levels = [problem.at_resolution(**h) if isinstance(h, dict) else h for h in homotopy]
+    for h, level in zip(homotopy, levels):
+        if not (isinstance(level, type(problem)) and level.model.n == problem.model.n
+                and level.steps == problem.steps and level.size == problem.size):
+            raise ValueError(f"homotopy: {h!r} is not {problem.name} on its {problem.model.n} "
+                             f"particles, {problem.steps} steps and {problem.size} controls "
+                             "with another model: a level changes the model, not the problem")
+    return levels + [problem]
 
 
 def coarser_meshes(problem, resolutions) -> list:
@@ -80,6 +104,8 @@ def carry(source, u, target):
     """Controls ``u`` of problem ``source`` on the grid (and mesh) of problem ``target``."""
     if source is target:
         return u
-    if source.model is target.model:
-        return source.controls.resample(u, target.steps)
+    if source.model is target.model or (source.model.n == target.model.n
+                                        and source.steps == target.steps
+                                        and source.size == target.size):
+        return source.controls.resample(u, target.steps)  # same particles: the same forces
     return carry_to_mesh(source, u, target)

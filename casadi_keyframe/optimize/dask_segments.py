@@ -5,7 +5,7 @@ forward pass's records for its backward pass, as a local worker does
 (:class:`~.workers.LocalPool`)."""
 from __future__ import annotations
 
-from .segments import SegmentRunner
+from .segments import AskedSweeps, SegmentRunner
 
 
 def recipe(problem, origin):
@@ -49,7 +49,7 @@ class SegmentActor:
         self.runner.close()
 
 
-class DaskPool:
+class DaskPool(AskedSweeps):
     """The segments spread over the cluster's workers (at most ``workers`` of them, one
     actor each), asked in parallel like :class:`~.workers.LocalPool`."""
 
@@ -89,14 +89,6 @@ class DaskPool:
                 raise SimulationError(*payload)
             out.update(payload)
         return out if some else [out[k] for k in range(self.count)]
-
-    def forward(self, items: dict) -> dict:
-        """The segments ``items`` names, in parallel, each from the carry it is given."""
-        out = self._ask("forward", dict(items))
-        return {k: (x, v, items[k][2], carry) for k, (x, v, carry) in out.items()}
-
-    def backward(self, cotangents) -> list:
-        return self._ask("backward", list(cotangents))
 
     def rows(self, ends: dict) -> dict:
         return dict(enumerate(self._ask("rows", [ends.get(k, []) for k in range(self.count)])))

@@ -123,12 +123,15 @@ class _Gradient(ca.Callback):
         return [self.ev(np.asarray(arg[0]).ravel())[1].reshape(1, -1)]
 
 
-class _Iteration(ca.Callback):
-    """IPOPT's per-iteration hook: records history; returns 1 to stop on Ctrl-C."""
+class IterationHook(ca.Callback):
+    """IPOPT's per-iteration hook for ``n`` unknowns and ``m`` constraints: calls
+    ``on_iteration()`` (``on_iteration(x)`` with ``with_point``) after each iteration and
+    returns 1, which stops IPOPT, on Ctrl-C or when the goal is met."""
 
-    def __init__(self, n, on_iteration):
+    def __init__(self, n, on_iteration, *, m: int = 0, with_point: bool = False):
         ca.Callback.__init__(self)
-        self.n, self.on_iteration, self.interrupted, self.count = n, on_iteration, None, 0
+        self.n, self.m, self.on_iteration, self.with_point = n, m, on_iteration, with_point
+        self.count, self.interrupted = 0, None
         self.reached = None  # the GoalReached that stopped it
         self.construct("iteration", {})
 
@@ -142,18 +145,18 @@ class _Iteration(ca.Callback):
         return ca.nlpsol_out(i)
 
     def get_sparsity_in(self, i):
-        name = ca.nlpsol_out(i)
-        if name in ("x", "lam_x"):
-            return ca.Sparsity.dense(self.n, 1)
-        if name in ("f",):
-            return ca.Sparsity.dense(1, 1)
-        return ca.Sparsity(0, 0)
+        size = {"x": self.n, "lam_x": self.n, "f": 1, "g": self.m, "lam_g": self.m,
+                "lam_p": 0}[ca.nlpsol_out(i)]
+        return ca.Sparsity.dense(size, 1) if size else ca.Sparsity(0, 0)
 
     def eval(self, arg):
         try:
             self.count += 1
             if self.count > 1:  # IPOPT reports iteration 0, the start, first
-                self.on_iteration()
+                if self.with_point:
+                    self.on_iteration(np.asarray(arg[0]).ravel())
+                else:
+                    self.on_iteration()
         except KeyboardInterrupt as err:
             self.interrupted = getattr(err, "signum", signal.SIGINT)
             return [1]
@@ -163,6 +166,17 @@ class _Iteration(ca.Callback):
         return [0]
 
 
+def ipopt_options(maxiter, tol, options, deadline) -> dict:
+    """IPOPT's options for a search: limited-memory Hessian, silent, ``deadline`` (a
+    ``perf_counter`` time or None) as ``max_wall_time``, the user's ``options`` last."""
+    ipopt = {"hessian_approximation": "limited-memory", "max_iter": maxiter, "tol": tol,
+             "print_level": 0, "sb": "yes", "limited_memory_max_history": 20}
+    if deadline is not None:
+        ipopt["max_wall_time"] = max(deadline - time.perf_counter(), 1e-3)
+    ipopt.update(options)
+    return ipopt
+
+
 def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with the evaluator ``ev`` (f and gradient asked for separately,
     memoised), calling ``on_iteration()`` after each iteration; ``deadline`` becomes IPOPT's
@@ -170,13 +184,9 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     :class:`~casadi_keyframe.interrupts.Interrupted`."""
     n = problem.size
     phi = _Objective(ev, n)
-    it = _Iteration(n, on_iteration)
+    it = IterationHook(n, on_iteration)
     U = ca.MX.sym("u", n)
-    ipopt = {"hessian_approximation": "limited-memory", "max_iter": maxiter, "tol": tol,
-             "print_level": 0, "sb": "yes", "limited_memory_max_history": 20}
-    if deadline is not None:
-        ipopt["max_wall_time"] = max(deadline - time.perf_counter(), 1e-3)
-    ipopt.update(options)
+    ipopt = ipopt_options(maxiter, tol, options, deadline)
     solver = ca.nlpsol("keyframe", "ipopt", {"x": U, "f": phi(U)},
                        {"ipopt": ipopt, "print_time": False, "iteration_callback": it,
                         "error_on_fail": False})

@@ -139,3 +139,16 @@ def same_carry(a, b) -> bool:
     if isinstance(a, np.ndarray) and isinstance(b, np.ndarray):
         return a.shape == b.shape and bool(np.array_equal(a, b))
     return a == b
+
+
+class AskedSweeps:
+    """The sweeps a pool of workers runs in parallel: a pool gives ``_ask(what, payload)``,
+    which hands each worker its segments' part and gathers the answers."""
+
+    def forward(self, items: dict) -> dict:
+        """The segments ``items`` names, in parallel, each from the carry it is given."""
+        out = self._ask("forward", dict(items))
+        return {k: (x, v, items[k][2], carry) for k, (x, v, carry) in out.items()}
+
+    def backward(self, cotangents) -> list:
+        return self._ask("backward", list(cotangents))

@@ -12,13 +12,12 @@ makes IPOPT fail silently).
 from __future__ import annotations
 
 import signal
-import time
 
 import casadi as ca
 import numpy as np
 
 from ..interrupts import Interrupted, catching
-from .goal import GoalReached
+from .ipopt import IterationHook, ipopt_options
 from .outcome import ipopt_outcome
 
 
@@ -120,43 +119,6 @@ def jacobian_pattern(shooting, jac) -> ca.Sparsity:
     return ca.Sparsity.triplet(jac.shape[0], jac.shape[1], r, c)
 
 
-class _Iteration(ca.Callback):
-    """IPOPT's per-iteration hook: the history (through ``on_iteration``); 1 stops it."""
-
-    def __init__(self, n, m, on_iteration):
-        ca.Callback.__init__(self)
-        self.n, self.m, self.on_iteration = n, m, on_iteration
-        self.count, self.interrupted, self.reached = 0, None, None
-        self.construct("iteration", {})
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_sparsity_in(self, i):
-        size = {"x": self.n, "lam_x": self.n, "f": 1, "g": self.m, "lam_g": self.m,
-                "lam_p": 0}[ca.nlpsol_out(i)]
-        return ca.Sparsity.dense(size, 1) if size else ca.Sparsity(0, 0)
-
-    def eval(self, arg):
-        try:
-            self.count += 1
-            if self.count > 1:
-                self.on_iteration(np.asarray(arg[0]).ravel())
-        except KeyboardInterrupt as err:
-            self.interrupted = getattr(err, "signum", signal.SIGINT)
-            return [1]
-        except GoalReached as reached:
-            self.reached = reached
-            return [1]
-        return [0]
-
-
 def run_nlp(shooting, runner, ev, z0, maxiter, tol, options, on_iteration, deadline):
     """IPOPT on the constrained form from ``z0``; ``on_iteration(z)`` after each
     iteration.  Returns ``(status, message, z)`` with IPOPT's last point; an interrupt
@@ -166,13 +128,9 @@ def run_nlp(shooting, runner, ev, z0, maxiter, tol, options, on_iteration, deadl
     pattern = jacobian_pattern(shooting, point.jacobian(z0))
     n, m = shooting.size, 2 * shooting.nf * (shooting.K - 1)
     f, g = _Fn(point, "f", n, m, pattern), _Fn(point, "g", n, m, pattern)
-    it = _Iteration(n, m, on_iteration)
+    it = IterationHook(n, on_iteration, m=m, with_point=True)
     Z = ca.MX.sym("z", n)
-    ipopt = {"hessian_approximation": "limited-memory", "max_iter": maxiter, "tol": tol,
-             "print_level": 0, "sb": "yes", "limited_memory_max_history": 20}
-    if deadline is not None:
-        ipopt["max_wall_time"] = max(deadline - time.perf_counter(), 1e-3)
-    ipopt.update(options)
+    ipopt = ipopt_options(maxiter, tol, options, deadline)
     solver = ca.nlpsol("shooting", "ipopt", {"x": Z, "f": f(Z), "g": g(Z)},
                        {"ipopt": ipopt, "print_time": False, "iteration_callback": it,
                         "error_on_fail": False})

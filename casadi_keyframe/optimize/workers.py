@@ -20,7 +20,7 @@ import signal
 import traceback
 
 from ..state import SimulationError
-from .segments import SegmentRunner
+from .segments import AskedSweeps, SegmentRunner
 
 
 class Serial:
@@ -65,7 +65,7 @@ def _named(k, call, *args):
         raise SimulationError(f"segment {k}: {err}", err.step) from None
 
 
-class LocalPool:
+class LocalPool(AskedSweeps):
     """``workers`` forked processes, each owning the segments ``k`` with ``k % workers``
     equal to its number; they inherit the problem (no rebuild), ignore Ctrl-C (this
     process stops them) and end with :meth:`close`.  Needs the ``fork`` start method
@@ -113,14 +113,6 @@ class LocalPool:
                 raise SimulationError(*payload)
             raise RuntimeError(f"a shooting worker failed:\n{payload}")
         return out if some else [out[k] for k in range(len(per_segment))]
-
-    def forward(self, items: dict) -> dict:
-        """The segments ``items`` names, in parallel, each from the carry it is given."""
-        out = self._ask("forward", dict(items))
-        return {k: (x, v, items[k][2], carry) for k, (x, v, carry) in out.items()}
-
-    def backward(self, cotangents) -> list:
-        return self._ask("backward", list(cotangents))
 
     def rows(self, ends: dict) -> dict:
         per_segment = [ends.get(k, []) for k in range(sum(map(len, self.owned)))]

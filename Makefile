@@ -20,7 +20,7 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	touch $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/casadi-keyframe solve cloth_shapes --out results/cloth_shapes --quiet
+	$(BIN)/casadi-keyframe solve cloth_shapes --out results/cloth_shapes --quiet --stop method
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q

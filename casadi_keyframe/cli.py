@@ -23,6 +23,7 @@ from .files import writable_folder
 from .loading import (OverrideError, ProblemFileError, check_overrides, list_problems,
                       load_module, load_problem, overrides_of, solve_defaults)
 from .optimize import METHODS
+from .report import format_value
 from .run import EXIT_CODES, run_export, run_render, run_solve, solve_run
 from .sweep.plan import SWEEP_EXIT_CODES
 from .state import SimulationError
@@ -183,15 +184,6 @@ def describe_allowed(override) -> str:
     else:
         text = override.allowed or ("any" if override.kind != "floats" else "any numbers")
     return text + (", or None" if override.optional else "")
-
-
-def format_value(value) -> str:
-    """A default as typed on the command line: ``1/60`` rather than 0.016666666666666666."""
-    if isinstance(value, float) and len(repr(value)) > 8:
-        fraction = Fraction(value).limit_denominator(1000)
-        if float(fraction) == value:
-            return str(fraction)
-    return str(value)
 
 
 def cmd_solve(args) -> int:

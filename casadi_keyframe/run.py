@@ -18,7 +18,7 @@ from types import SimpleNamespace
 from .interrupts import NAMES, catching, check
 from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
 from .optimize.outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from .report import format_misses, format_physical, format_stage
+from .report import format_misses, format_physical, format_stage, set_value
 from .saved import check_trajectory
 from .state import SimulationError
 
@@ -268,21 +268,10 @@ def _hint(status: int, spec: SolveRun) -> None:
 def _command(spec: SolveRun, command: str) -> str:
     """``casadi-keyframe COMMAND PROBLEM --set ...`` for this run's problem and overrides (and,
     for ``solve``, its method and gradient route, so a resumed run goes on the same way)."""
-    sets = "".join(f" --set {k}={_as_given(v)}" for k, v in spec.overrides.items())
+    sets = "".join(f" --set {k}={set_value(v)}" for k, v in spec.overrides.items())
     if command == "solve":
         sets += f" --method {spec.method} --gradient {spec.gradient}"
     return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
-
-
-def _as_given(value) -> str:
-    """An override's value as ``--set`` reads it back (a sequence comma-separated)."""
-    if isinstance(value, str):
-        return value
-    if isinstance(value, (tuple, list)):
-        return ",".join(_as_given(v) for v in value)
-    if isinstance(value, float) and value.is_integer():
-        return str(int(value))
-    return repr(value)
 
 
 def _stopped(signum) -> str:

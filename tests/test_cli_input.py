@@ -205,9 +205,9 @@ def test_solve_records_the_overrides_as_build_got_them(tmp_path):
 
 
 def test_a_hint_gives_the_overrides_as_set_reads_them_back():
-    from casadi_keyframe.run import _as_given
+    from casadi_keyframe.report import set_value
 
     given = {"pins": "0,7", "agents": "8", "dt": "0.02", "collision": "guarded"}
     parsed = parse_overrides([f"{k}={v}" for k, v in given.items()])
-    assert {k: _as_given(v) for k, v in parsed.items()} == given
-    assert parse_overrides([f"pins={_as_given(parsed['pins'])}"]) == {"pins": parsed["pins"]}
+    assert {k: set_value(v) for k, v in parsed.items()} == given
+    assert parse_overrides([f"pins={set_value(parsed['pins'])}"]) == {"pins": parsed["pins"]}

@@ -54,6 +54,12 @@ def growth_bound(route: str) -> float:
     return GROWTH_BOUND if route in APPROXIMATE_ROUTES else math.inf
 
 
+def past_bound(growth: float, bound: float) -> bool:
+    """Whether a backward pass's ``growth`` fails its evaluation: not finite, or past
+    ``bound``."""
+    return not (math.isfinite(growth) and growth <= bound)
+
+
 class GradientError(SimulationError):
     """A gradient route's backward pass overflowed or grew past its bound: the
     evaluation fails (the simulation itself did not).  ``route`` names the route, ``step``
@@ -127,7 +133,7 @@ class BackwardWatch:
             self.growth, self.frame = size / self.source, n
         self.source = max(self.source, self.sources[n])
         self.previous = self._norm(total.x, total.v)
-        if self.guard and not (math.isfinite(self.growth) and self.growth <= self.bound):
+        if self.guard and past_bound(self.growth, self.bound):
             raise GradientError(self.message(), n, self.route, self.growth)
 
     def result(self) -> Growth:

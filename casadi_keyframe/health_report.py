@@ -34,7 +34,7 @@ import numpy as np
 
 from .adjoints import Adjoint, FiniteDifference, Swapped, get_gradient
 from .health import (GradientError, GradientRouteWarning, Growth, check_finite,
-                     growth_bound, refusal, route_limits)
+                     growth_bound, past_bound, refusal, route_limits)
 from .state import SimulationError
 
 STEPS = (1e-2, 1e-4, 1e-6)  # central-difference steps, times max(|u|, 1)
@@ -123,8 +123,7 @@ def gradient_health(problem, u=None, route: str = "adjoint", *, steps=STEPS,
 
 def _refusal(route, problem, g, growth) -> str | None:
     """The guard's message if the guarded route would refuse this gradient."""
-    if growth is not None and not (np.isfinite(growth.growth)
-                                   and growth.growth <= growth_bound(route)):
+    if growth is not None and past_bound(growth.growth, growth_bound(route)):
         return refusal(route, problem, growth)
     try:
         check_finite(route, g, problem)

@@ -37,7 +37,7 @@ import numpy as np
 from .adjoints import Adjoint, Swapped
 from .checks import frame_at
 from .controls import StepForces
-from .health import GROWTH_BOUND, GradientRouteWarning
+from .health import GROWTH_BOUND, GradientRouteWarning, past_bound
 from .integrators import LinearizedBackwardEuler
 from .models import Capsule, ClothModel, ClothParams, Plane, Sphere
 from .models.colliders import Contact, signed_distances
@@ -149,7 +149,7 @@ def swap_validity_point(contact: str = "none", collision: str = "guarded",
         return {**row, **dict.fromkeys(FIGURES, np.nan), "reason": str(err)}
     row.update({"cosine": cos, "relative_error": rel, "growth_swapped": swapped.growth.growth,
                 "growth_exact": exact.growth.growth,
-                "refused": not swapped.growth.growth <= GROWTH_BOUND})
+                "refused": past_bound(swapped.growth.growth, GROWTH_BOUND)})
     if solve:
         row.update(optimizer_outcome(prob, maxiter))
     return row

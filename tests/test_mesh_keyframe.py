@@ -4,7 +4,7 @@ topology checks and the misses."""
 import numpy as np
 import pytest
 
-from casadi_keyframe.mesh_keyframe import MeshKeyframe
+from casadi_keyframe.objectives import MeshKeyframe
 from casadi_keyframe.meshes import check_mesh
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import Smoothness

@@ -1,7 +1,7 @@
 """The animator's goal: every keyframe within its tolerance.
 
 Each keyframe term declares when it counts as met (``StateKeyframe(..., tolerance=...)``,
-``RegionTarget(..., fill=...)``, with defaults; see :mod:`casadi_keyframe.tolerances`).
+``RegionTarget(..., fill=...)``, with defaults; see :mod:`casadi_keyframe.objectives.tolerances`).
 :func:`verdict` checks a trajectory against them.  A search uses it twice: to stop as soon
 as the goal is met (``solve(..., stop="goal")``), and to say truthfully how it ended
 (:func:`~.outcome.judge`): a search whose method stopped is "converged" only when the goal

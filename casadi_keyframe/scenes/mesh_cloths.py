@@ -13,7 +13,7 @@ import numpy as np
 
 from ..controls import InitialVelocity, StepForces
 from ..loading import OverrideError
-from ..mesh_keyframe import MeshKeyframe
+from ..objectives import MeshKeyframe
 from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
 from ..models import ClothModel
 from ..models.colliders import Plane, Sphere

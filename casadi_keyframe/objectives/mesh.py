@@ -14,10 +14,10 @@ import os
 import casadi as ca
 import numpy as np
 
-from .geometry import best_rigid_motion
-from .meshes import Mesh, read_mesh
-from .models.base import Surface
-from .objectives import StateKeyframe
+from ..geometry import best_rigid_motion
+from ..meshes import Mesh, read_mesh
+from ..models.base import Surface
+from .keyframes import StateKeyframe
 
 
 class MeshKeyframe(StateKeyframe):

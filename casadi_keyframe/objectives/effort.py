@@ -1,0 +1,38 @@
+"""The control effort: the paper's ``alpha ||C_n u||^2`` and a penalty on changes between
+steps (:class:`Smoothness`)."""
+from __future__ import annotations
+
+
+import casadi as ca
+
+from .terms import ControlTerm
+
+
+class Smoothness(ControlTerm):
+    """The paper's ``alpha ||C_n u||^2``, plus an optional penalty on changes between steps.
+
+    For per-step forces u_n:  ``0.5 alpha dt sum_n |u_n|^2 + 0.5 temporal / dt sum_n
+    |u_{n+1} - u_n|^2``: Riemann sums of ``0.5 alpha int |u|^2 dt`` and ``0.5 temporal int
+    |du/dt|^2 dt``, so a weight means the same physical cost at any dt (a force held constant
+    has the same alpha-cost on a grid twice as fine; a jump between steps costs more on it).
+    For initial velocities: ``0.5 alpha |u|^2``.
+    """
+
+    label = "Smoothness"
+
+    def __init__(self, alpha: float, *, temporal: float = 0.0):
+        if alpha < 0 or temporal < 0:
+            raise ValueError("Smoothness weights must be non-negative")
+        self.alpha, self.temporal = float(alpha), float(temporal)
+
+    def symbolic(self, U, controls, dt):
+        """The term as a CasADi expression of the flat control vector ``U``."""
+        blocks = controls.step_blocks(U)  # (block, steps) matrix, or None for no steps
+        if blocks is None:
+            return 0.5 * self.alpha * ca.sumsqr(U)
+        val = 0.5 * self.alpha * dt * ca.sumsqr(blocks)
+        if self.temporal and blocks.shape[1] > 1:
+            val += 0.5 * self.temporal / dt * ca.sumsqr(blocks[:, 1:] - blocks[:, :-1])
+        return val
+
+

@@ -78,13 +78,23 @@ class StateKeyframe(StateTerm):
         vs = self._v + self.aim[1] if self._v is not None else zeros
         return np.concatenate([xs.ravel(), vs.ravel()])
 
-    def _expr(self, X, V, P, model):
+    def _errors(self, X, V, P, model):
+        """The position and velocity errors ``(dim x particles)`` of the term's particles."""
         k = self._idx.size * model.dim
         xs = ca.reshape(P[:k], model.dim, self._idx.size)
         vs = ca.reshape(P[k:], model.dim, self._idx.size)
         idx = self._idx.tolist()
-        return 0.5 * (self.position_weight * ca.sumsqr(X[:, idx] - xs)
-                      + self.velocity_weight * ca.sumsqr(V[:, idx] - vs))
+        return X[:, idx] - xs, V[:, idx] - vs
+
+    def _expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return 0.5 * (self.position_weight * ca.sumsqr(ex)
+                      + self.velocity_weight * ca.sumsqr(ev))
+
+    def _residual_expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return ca.vertcat(np.sqrt(self.position_weight) * ca.vec(ex),
+                          np.sqrt(self.velocity_weight) * ca.vec(ev))
 
     aim = (0.0, 0.0)  # where the penalty aims, relative to the targets (see aiming)
 
@@ -158,12 +168,21 @@ class CenterOfMassKeyframe(StateTerm):
         z = np.zeros(model.dim)
         return np.concatenate([z if self._x is None else self._x, z if self._v is None else self._v])
 
-    def _expr(self, X, V, P, model):
+    def _errors(self, X, V, P, model):
+        """The centre's position and velocity errors."""
         idx, w = self._idx.tolist(), ca.DM(self._w)
         cx, cv = ca.mtimes(X[:, idx], w), ca.mtimes(V[:, idx], w)
-        d = model.dim
-        return 0.5 * (self.position_weight * ca.sumsqr(cx - P[:d])
-                      + self.velocity_weight * ca.sumsqr(cv - P[d:]))
+        return cx - P[:model.dim], cv - P[model.dim:]
+
+    def _expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return 0.5 * (self.position_weight * ca.sumsqr(ex)
+                      + self.velocity_weight * ca.sumsqr(ev))
+
+    def _residual_expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return ca.vertcat(np.sqrt(self.position_weight) * ex,
+                          np.sqrt(self.velocity_weight) * ev)
 
     def marker(self):
         return None if self._x is None else Marker(self.label, self.frame, "center", self._x)

@@ -1,0 +1,245 @@
+"""A trust region on the Gauss-Newton model of the objective's residuals, matrix-free.
+
+The objective is ``0.5 |r(u)|^2`` (:mod:`.residuals`).  At each point the model
+``0.5 |r + J p|^2`` is minimised by conjugate gradients on ``J^T J p = -J^T r`` from p = 0
+(CGLS; each iteration one tangent pass ``J d`` and one backward pass ``J^T s``), stopped
+where the path leaves the trust region (Steihaug).  A step whose objective falls by less
+than the model predicts shrinks the region, and the next trial is the same CG path cut at
+the smaller radius: no new products, one evaluation.  So the search never steps where the
+linear model of the motion has not been shown to hold, which is where a line search on a
+buckling cloth fails.
+
+``options`` (over the defaults, :data:`DEFAULTS`): ``inner_maxiter`` CG iterations per
+step, ``inner_tol`` CG's relative tolerance on the model's gradient, ``radius`` the first
+trust radius (None: the first CG solve unbounded, cut when it fails), ``accept`` the
+smallest ratio of actual to predicted decrease that takes a step, ``maxfun`` evaluations
+(default ``10 * maxiter``), ``gtol`` the gradient's largest component that counts as zero.
+Bounds on the controls are kept by fixing those at a bound the gradient pushes against and
+clipping the step.  The products are the exact ones, whatever gradient route the evaluator
+runs for its own bookkeeping.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..interrupts import check
+from .outcome import CONVERGED, FAILED, LIMIT
+from .residuals import Linearization
+
+DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
+            "maxfun": None, "gtol": 1e-10}
+SHRINK, GROW = 0.25, 2.0  # the radius after a poor step (times its length) and a good one
+
+
+def option_names() -> tuple[str, ...]:
+    return tuple(DEFAULTS)
+
+
+_KINDS = {"inner_maxiter": ("a whole number >= 1", lambda v: _whole(v) and v >= 1),
+          "inner_tol": ("a number in (0, 1)", lambda v: _real(v) and 0 < v < 1),
+          "radius": ("a number > 0 or None", lambda v: v is None or (_real(v) and v > 0)),
+          "accept": ("a number in [0, 0.25)", lambda v: _real(v) and 0 <= v < 0.25),
+          "maxfun": ("a whole number >= 1 or None", lambda v: v is None or (_whole(v)
+                                                                             and v >= 1)),
+          "gtol": ("a number >= 0", lambda v: _real(v) and v >= 0)}
+
+
+def check_options(options: dict) -> list[str]:
+    """The names among ``options`` this method does not take; a ValueError for a value out
+    of its range, naming the option and what it takes."""
+    for key, value in options.items():
+        if key in _KINDS and not _KINDS[key][1](value):
+            raise ValueError(f"Gauss-Newton option {key!r} must be {_KINDS[key][0]}, got "
+                             f"{value!r}")
+    return [key for key in options if key not in DEFAULTS]
+
+
+def _real(v) -> bool:
+    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) \
+        and bool(np.isfinite(v))
+
+
+def _whole(v) -> bool:
+    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+
+
+class _Ended(Exception):
+    """The search ends here: ``status`` and ``message`` (:mod:`.outcome`)."""
+
+    def __init__(self, status: int, message: str):
+        super().__init__(message)
+        self.status, self.message = status, message
+
+
+class SteihaugPath:
+    """CG's path on the Gauss-Newton model ``0.5 |r + J p|^2`` from p = 0, up to the trust
+    ``radius`` (None: unbounded), ``maxiter`` iterations or the model's gradient below
+    ``rtol`` times its start; :meth:`step` cuts it at any radius up to that one.
+
+    ``jvp(d) -> J d``, ``vjp(s) -> J^T s``, ``gradient`` ``J^T r``; ``between()`` runs
+    before each product.  CG's iterates grow in norm (Steihaug), so the path crosses each
+    radius once."""
+
+    def __init__(self, jvp, vjp, r, gradient, radius, maxiter, rtol, between=lambda: None):
+        self.segments = []  # (start p, direction d, its longest step, |s|^2, s.q, |q|^2)
+        s = np.array(r, dtype=float)
+        z = -np.asarray(gradient, dtype=float)
+        gamma = first = z @ z
+        p, d = np.zeros_like(z), z.copy()
+        for _ in range(maxiter if first > 0 else 0):
+            between()
+            q = jvp(d)
+            qq = q @ q
+            if not qq > 0:
+                break
+            alpha = gamma / qq
+            self.segments.append((p, d, alpha, s @ s, s @ q, qq))
+            p = p + alpha * d
+            if radius is not None and np.linalg.norm(p) >= radius:
+                break
+            s = s + alpha * q
+            between()
+            z = -vjp(s)
+            gamma, last = z @ z, gamma
+            if gamma <= rtol ** 2 * first:
+                break
+            d = z + (gamma / last) * d
+
+    def step(self, radius):
+        """``(p, model value at p)``: the path's end, or where it first reaches ``radius``."""
+        if not self.segments:
+            return None, None
+        for p, d, alpha, ss, sq, qq in self.segments:
+            end = np.linalg.norm(p + alpha * d)
+            if radius is not None and end > radius:
+                alpha = _to_sphere(p, d, radius)
+                break
+        return p + alpha * d, 0.5 * (ss + 2 * alpha * sq + alpha * alpha * qq)
+
+
+def _to_sphere(p, d, radius) -> float:
+    """The tau >= 0 with ``|p + tau d| = radius`` (``|p| <= radius``)."""
+    a, b, c = d @ d, 2 * p @ d, p @ p - radius * radius
+    return float((-b + np.sqrt(max(b * b - 4 * a * c, 0.0))) / (2 * a))
+
+
+class _Space:
+    """Where the search moves: the evaluator's variables z (a smooth metric's, u = S z, or
+    the controls themselves), the bounds on u, and the Jacobian products in z."""
+
+    def __init__(self, problem, ev):
+        self.problem, self.metric = problem, getattr(ev, "metric", None)
+        self.lb, self.ub = problem.bounds()
+        self.bounded = bool(np.isfinite(self.lb).any() or np.isfinite(self.ub).any())
+
+    def controls(self, z):
+        return z if self.metric is None else self.metric.smooth(z)
+
+    def products(self, lin, free):
+        smooth = (lambda v: v) if self.metric is None else self.metric.smooth
+        return (lambda d: lin.jvp(smooth(free * d)),
+                lambda s: free * smooth(lin.vjp(s)))
+
+    def free(self, z, gradient):
+        """1 where a variable may move, 0 at a bound the gradient pushes against."""
+        if not self.bounded:
+            return 1.0
+        return np.where(((z <= self.lb) & (gradient > 0)) | ((z >= self.ub) & (gradient < 0)),
+                        0.0, 1.0)
+
+    def clipped(self, z, p):
+        return p if not self.bounded else np.clip(z + p, self.lb, self.ub) - z
+
+
+def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+    """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point),
+    calling ``on_iteration()`` after each step taken; stop at ``deadline``
+    (``time.perf_counter()``, or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
+    opts = {**DEFAULTS, **options}
+    opts["maxfun"] = opts["maxfun"] or 10 * maxiter
+    space, counts = _Space(problem, ev), _Counts()
+
+    def between():
+        check()
+        if deadline is not None and time.perf_counter() >= deadline:
+            raise _Ended(LIMIT, "time limit reached before converging")
+
+    z, radius = np.array(u0, dtype=float), opts["radius"]
+    try:
+        for _ in range(maxiter):
+            z, radius, before, after = _one_step(problem, ev, space, z, radius, opts, between,
+                                                 counts)
+            on_iteration()
+            if before - after <= tol * max(abs(before), abs(after), 1.0):
+                raise _Ended(CONVERGED, "converged: the objective stopped decreasing "
+                                        "(relative reduction below tol)")
+    except _Ended as end:
+        return end.status, counts.tagged(end.message)
+    return LIMIT, counts.tagged(f"iteration limit reached ({maxiter}) before converging")
+
+
+class _Counts:
+    """What the search did beyond the evaluator's evaluations."""
+
+    def __init__(self):
+        self.linearizations = self.products = 0
+
+    def tagged(self, message: str) -> str:
+        return (f"{message} [Gauss-Newton: {self.linearizations} linearizations, "
+                f"{self.products} Jacobian products]")
+
+
+def _one_step(problem, ev, space, z, radius, opts, between, counts):
+    """One step of the trust region from z: ``(z, radius, f before, f after)``; raises
+    :class:`_Ended` where the search ends."""
+    lin = Linearization(problem, space.controls(z))
+    counts.linearizations += 1
+    try:
+        f = lin.value
+        gradient = space.products(lin, 1.0)[1](lin.residual)
+        if np.max(np.abs(gradient), initial=0.0) <= opts["gtol"]:
+            raise _Ended(CONVERGED, "converged: the gradient vanished (below gtol)")
+        free = space.free(z, gradient)
+        jvp, vjp = space.products(lin, free)
+        path = SteihaugPath(jvp, vjp, lin.residual, free * gradient, radius,
+                            opts["inner_maxiter"], opts["inner_tol"], between)
+        while True:
+            p, model = path.step(radius)
+            if p is None:
+                raise _Ended(CONVERGED, "converged: no free direction lowers the model")
+            clipped = space.clipped(z, p)
+            if clipped is not p:
+                p, model = clipped, 0.5 * np.sum((lin.residual + jvp(clipped)) ** 2)
+            predicted, length = f - model, np.linalg.norm(p)
+            if not predicted > 0 or length <= 1e-14 * (1 + np.linalg.norm(z)):
+                raise _Ended(FAILED, _collapsed(length))
+            if getattr(ev, "ev", ev).nfev >= opts["maxfun"]:
+                raise _Ended(LIMIT, f"evaluation limit reached ({opts['maxfun']}) before "
+                                    "converging")
+            f_new = ev(z + p)[0]
+            ratio = (f - f_new) / predicted
+            radius = _new_radius(radius, ratio, length)
+            if ratio > opts["accept"]:
+                return z + p, radius, f, f_new
+    finally:
+        counts.products += lin.products
+        lin.release()
+
+
+def _new_radius(radius, ratio, length):
+    """The trust radius after a step of ``length`` whose actual decrease was ``ratio`` times
+    the predicted one (None: unbounded while full steps do well)."""
+    if ratio < 0.25:
+        return SHRINK * length
+    if ratio > 0.75 and (radius is None or length >= 0.99 * radius):
+        return None if radius is None else GROW * radius
+    return length if radius is None else radius
+
+
+def _collapsed(length) -> str:
+    return (f"search failed: the trust region collapsed (step {length:.3g}): no step the "
+            "Gauss-Newton model predicts lowers the objective; the residuals are not "
+            "smooth at this scale (a contact or a taut spring switching, a buckling sheet) "
+            "or the products are wrong (gradcheck)")

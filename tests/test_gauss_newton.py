@@ -1,0 +1,110 @@
+"""The Gauss-Newton trust region: its CG path is the least-squares solution cut at the radius,
+and as a method of solve it lowers the objective, never ends above its start, keeps bounds,
+stops at the time limit and on Ctrl-C, refuses bad options and says how it ended."""
+import time
+
+import numpy as np
+import pytest
+from helpers import InterruptAfter
+
+from casadi_keyframe import Adjoint, Smoothness, StateKeyframe, StepForces, load_problem, solve
+from casadi_keyframe.models import ClothModel
+from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
+from casadi_keyframe.optimize.gauss_newton import SteihaugPath
+from casadi_keyframe.scenes.cloths import cloth_problem
+
+
+@pytest.fixture(scope="module")
+def race():
+    return load_problem("flock_race", agents=8, steps=40)
+
+
+def test_the_path_ends_at_the_least_squares_step_and_is_cut_at_the_radius():
+    rng = np.random.default_rng(0)
+    J, r = rng.standard_normal((30, 12)), rng.standard_normal(30)
+    path = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, None, 50, 1e-12)
+    best = np.linalg.lstsq(J, -r, rcond=None)[0]
+    p, model = path.step(None)
+    assert np.allclose(p, best, atol=1e-9)
+    for radius in (1e-3, 0.3 * np.linalg.norm(best), 0.9 * np.linalg.norm(best)):
+        p, model = path.step(radius)
+        assert np.linalg.norm(p) == pytest.approx(radius, rel=1e-12)
+        assert model == pytest.approx(0.5 * np.sum((r + J @ p) ** 2), rel=1e-12)
+        assert model < 0.5 * r @ r
+    bounded = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, 0.5, 50, 1e-12)
+    assert np.allclose(bounded.step(0.5)[0], path.step(0.5)[0])  # the same path, stopped
+    assert len(bounded.segments) < len(path.segments)
+
+
+def test_it_lowers_the_objective_and_reports_what_it_did(race):
+    start = race.objective(race.initial_controls())
+    r = solve(race, "gauss-newton", maxiter=30, quiet=True, stop="method")
+    assert r.fun < 1e-2 * start and r.nit == len(r.history) > 0
+    assert r.fun == pytest.approx(race.objective(r.x), rel=1e-12)
+    assert "Gauss-Newton:" in r.message and "Jacobian products" in r.message
+    assert r.status in (CONVERGED, LIMIT)
+
+
+def test_bounds_hold_and_bind(race):
+    prob = load_problem("flock_race", agents=8, steps=40)
+    prob.controls.lower, prob.controls.upper = -0.5, 0.5
+    r = solve(prob, "gauss-newton", maxiter=20, quiet=True)
+    assert np.abs(r.x).max() <= 0.5 + 1e-12 and np.abs(r.x).max() > 0.4
+
+
+def test_a_smooth_metric_searches_in_its_variables():
+    model = ClothModel.grid(4, 4, plane="xz", pinned=[0, 3])
+    free = np.flatnonzero(model.free_mask()[::3])
+    x0 = model.rest_positions
+    prob = cloth_problem(model=model, steps=10, dt=1 / 30, name="smooth",
+                         objective=StateKeyframe(10, x=x0 + [0, 0.1, 0]) + Smoothness(1e-3),
+                         controls=StepForces(free, smoothing=0.3, time_smoothing=0.1))
+    start = prob.objective(prob.initial_controls())
+    r = solve(prob, "gauss-newton", maxiter=5, quiet=True, stop="method")
+    assert r.fun < start and r.fun == pytest.approx(prob.objective(r.x), rel=1e-12)
+
+
+def test_interrupt_keeps_the_best_point(race):
+    r = solve(race, "gauss-newton", gradient=InterruptAfter(6), maxiter=100, quiet=True)
+    assert r.status == INTERRUPTED and "interrupted" in r.message
+    assert r.fun <= race.objective(race.initial_controls())
+
+
+class Slow(Adjoint):
+    def __call__(self, problem, u):
+        time.sleep(0.05)
+        return super().__call__(problem, u)
+
+
+def test_the_time_limit_and_the_evaluation_limit_end_it_with_status_limit(race):
+    r = solve(race, "gauss-newton", gradient=Slow(), maxiter=500, quiet=True,
+              time_limit=0.5)
+    assert r.status == LIMIT and r.message.startswith("time limit reached (0.5 s)")
+    r = solve(race, "gauss-newton", maxiter=500, quiet=True, stop="method",
+              options={"maxfun": 4})
+    assert r.status == LIMIT and "evaluation limit reached (4)" in r.message
+    assert r.nfev <= 5  # the start and four trials
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"inner_maxiters": 3}, "did you mean 'inner_maxiter'"),
+    ({"inner_tol": 2.0}, "'inner_tol' must be a number in \\(0, 1\\)"),
+    ({"radius": -1}, "'radius' must be a number > 0 or None"),
+])
+def test_bad_options_are_refused_by_name(race, options, message):
+    with pytest.raises(ValueError, match=message):
+        solve(race, "gauss-newton", options=options)
+
+
+def test_a_jump_in_the_objective_collapses_the_region_and_fails_honestly(race):
+    """An objective that jumps up at every move (as a cloth's does where a spring's law
+    switches inside a step) is reported as a collapsed trust region, best point kept."""
+    class Jumps(Adjoint):
+        def __call__(self, problem, u):
+            f, g = super().__call__(problem, u)
+            return f + (1e6 if np.any(u != problem.initial_controls()) else 0.0), g
+
+    r = solve(race, "gauss-newton", gradient=Jumps(), maxiter=50, quiet=True,
+              stop="method", options={"maxfun": 200})
+    assert r.status == FAILED and "trust region collapsed" in r.message
+    assert np.array_equal(r.x, race.initial_controls())

@@ -169,12 +169,15 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     z, radius = np.array(u0, dtype=float), opts["radius"]
     try:
         for _ in range(maxiter):
-            z, radius, before, after = _one_step(problem, ev, space, z, radius, opts, between,
-                                                 counts)
+            z, radius, before, after, cut = _one_step(problem, ev, space, z, radius, opts,
+                                                      between, counts)
             on_iteration()
-            if before - after <= tol * max(abs(before), abs(after), 1.0):
-                raise _Ended(CONVERGED, "converged: the objective stopped decreasing "
-                                        "(relative reduction below tol)")
+            if before - after > tol * max(abs(before), abs(after), 1.0):
+                continue
+            if cut is not None:  # small only because the region is: the model fails there
+                raise _Ended(FAILED, _collapsed(*cut))
+            raise _Ended(CONVERGED, "converged: the objective stopped decreasing "
+                                    "(relative reduction below tol)")
     except _Ended as end:
         return end.status, counts.tagged(end.message)
     return LIMIT, counts.tagged(f"iteration limit reached ({maxiter}) before converging")
@@ -192,8 +195,9 @@ class _Counts:
 
 
 def _one_step(problem, ev, space, z, radius, opts, between, counts):
-    """One step of the trust region from z: ``(z, radius, f before, f after)``; raises
-    :class:`_Ended` where the search ends."""
+    """One step of the trust region from z: ``(z, radius, f before, f after, cut)``, ``cut``
+    the step's and the full step's lengths where the region cut it to a tenth or less;
+    raises :class:`_Ended` where the search ends."""
     lin = Linearization(problem, space.controls(z))
     counts.linearizations += 1
     try:
@@ -205,6 +209,7 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
         jvp, vjp = space.products(lin, free)
         path = SteihaugPath(jvp, vjp, lin.residual, free * gradient, radius,
                             opts["inner_maxiter"], opts["inner_tol"], between)
+        full = np.linalg.norm(path.step(None)[0]) if path.segments else 0.0
         while True:
             p, model = path.step(radius)
             if p is None:
@@ -214,7 +219,7 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
                 p, model = clipped, 0.5 * np.sum((lin.residual + jvp(clipped)) ** 2)
             predicted, length = f - model, np.linalg.norm(p)
             if not predicted > 0 or length <= 1e-14 * (1 + np.linalg.norm(z)):
-                raise _Ended(FAILED, _collapsed(length))
+                raise _Ended(FAILED, _collapsed(length, full))
             if getattr(ev, "ev", ev).nfev >= opts["maxfun"]:
                 raise _Ended(LIMIT, f"evaluation limit reached ({opts['maxfun']}) before "
                                     "converging")
@@ -222,7 +227,8 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
             ratio = (f - f_new) / predicted
             radius = _new_radius(radius, ratio, length)
             if ratio > opts["accept"]:
-                return z + p, radius, f, f_new
+                cut = (length, full) if length < 0.1 * full else None
+                return z + p, radius, f, f_new, cut
     finally:
         counts.products += lin.products
         lin.release()
@@ -238,8 +244,9 @@ def _new_radius(radius, ratio, length):
     return length if radius is None else radius
 
 
-def _collapsed(length) -> str:
-    return (f"search failed: the trust region collapsed (step {length:.3g}): no step the "
-            "Gauss-Newton model predicts lowers the objective; the residuals are not "
-            "smooth at this scale (a contact or a taut spring switching, a buckling sheet) "
-            "or the products are wrong (gradcheck)")
+def _collapsed(length, full) -> str:
+    return (f"search failed: the trust region collapsed (a step of {length:.3g} where the "
+            f"Gauss-Newton step is {full:.3g}): the objective does not follow its linear "
+            "model beyond that, so it jumps or bends at a smaller scale (a spring's law "
+            "switching inside a linearized step, a contact) or the products are wrong "
+            "(gradcheck)")

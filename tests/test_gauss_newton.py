@@ -108,3 +108,9 @@ def test_a_jump_in_the_objective_collapses_the_region_and_fails_honestly(race):
               stop="method", options={"maxfun": 200})
     assert r.status == FAILED and "trust region collapsed" in r.message
     assert np.array_equal(r.x, race.initial_controls())
+
+
+def test_multiple_shooting_is_refused_with_what_to_do(race):
+    with pytest.raises(ValueError, match="no residual form yet: run the shooting with method "
+                                         "'lbfgsb'"):
+        solve(race, "gauss-newton", shooting=2, maxiter=2, quiet=True)

@@ -157,6 +157,10 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point),
     calling ``on_iteration()`` after each step taken; stop at ``deadline``
     (``time.perf_counter()``, or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
+    if not hasattr(problem, "objective_terms"):
+        raise ValueError("method 'gauss-newton' searches a problem's residuals, and multiple "
+                         "shooting's merit function has no residual form yet: run the "
+                         "shooting with method 'lbfgsb', then 'gauss-newton' from its result")
     opts = {**DEFAULTS, **options}
     opts["maxfun"] = opts["maxfun"] or 10 * maxiter
     space, counts = _Space(problem, ev), _Counts()

@@ -2,21 +2,17 @@
 
 The objective is ``0.5 |r(u)|^2`` (:mod:`.residuals`).  At each point the model
 ``0.5 |r + J p|^2`` is minimised by conjugate gradients on ``J^T J p = -J^T r`` from p = 0
-(CGLS; each iteration one tangent pass ``J d`` and one backward pass ``J^T s``), stopped
-where the path leaves the trust region (Steihaug).  A step whose objective falls by less
-than the model predicts shrinks the region, and the next trial is the same CG path cut at
-the smaller radius: no new products, one evaluation.  So the search never steps where the
-linear model of the motion has not been shown to hold, which is where a line search on a
-buckling cloth fails.
+(CGLS: per iteration one tangent pass and one backward pass), stopped where the path leaves
+the trust region (Steihaug).  A step the model does not predict is rejected and the region
+shrinks; the next trial is the same path cut shorter, one evaluation and no new products.
 
-``options`` (over the defaults, :data:`DEFAULTS`): ``inner_maxiter`` CG iterations per
-step, ``inner_tol`` CG's relative tolerance on the model's gradient, ``radius`` the first
-trust radius (None: the first CG solve unbounded, cut when it fails), ``accept`` the
-smallest ratio of actual to predicted decrease that takes a step, ``maxfun`` evaluations
-(default ``10 * maxiter``), ``gtol`` the gradient's largest component that counts as zero.
-Bounds on the controls are kept by fixing those at a bound the gradient pushes against and
-clipping the step.  The products are the exact ones, whatever gradient route the evaluator
-runs for its own bookkeeping.
+``options`` (:data:`DEFAULTS`): ``inner_maxiter`` CG iterations per step, ``inner_tol`` its
+relative tolerance on the model's gradient, ``radius`` the first radius (None: the first
+step unbounded), ``accept`` the least ratio of actual to predicted decrease that takes a
+step, ``maxfun`` evaluations (default ``10 * maxiter``), ``gtol`` the gradient's largest
+component that counts as zero.  Bounds hold by fixing the controls at a bound the gradient
+pushes against and clipping the step.  The products are exact whatever gradient route the
+evaluator runs for its bookkeeping.
 """
 from __future__ import annotations
 
@@ -222,6 +218,8 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
             if clipped is not p:
                 p, model = clipped, 0.5 * np.sum((lin.residual + jvp(clipped)) ** 2)
             predicted, length = f - model, np.linalg.norm(p)
+            if full <= 1e-14 * (1 + np.linalg.norm(z)):
+                raise _Ended(FAILED, _too_sensitive(full, gradient))
             if not predicted > 0 or length <= 1e-14 * (1 + np.linalg.norm(z)):
                 raise _Ended(FAILED, _collapsed(length, full))
             if getattr(ev, "ev", ev).nfev >= opts["maxfun"]:
@@ -246,6 +244,14 @@ def _new_radius(radius, ratio, length):
     if ratio > 0.75 and (radius is None or length >= 0.99 * radius):
         return None if radius is None else GROW * radius
     return length if radius is None else radius
+
+
+def _too_sensitive(full, gradient) -> str:
+    return (f"search failed: the Gauss-Newton step ({full:.3g}) is below the controls' "
+            f"round-off, the gradient being {np.linalg.norm(gradient):.3g}: the motion "
+            "grows so fast with the controls over the horizon that no single-shooting "
+            "step resolves it (the health watch's backward growth); shorten the horizon "
+            "the gradient crosses (multiple shooting, --segments) or start elsewhere")
 
 
 def _collapsed(length, full) -> str:

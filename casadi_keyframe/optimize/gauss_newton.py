@@ -22,7 +22,7 @@ import numpy as np
 
 from ..interrupts import check
 from .outcome import CONVERGED, FAILED, LIMIT
-from .residuals import Linearization
+from .residuals import Linearization, SearchSpace
 
 DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
             "maxfun": None, "gtol": 1e-10}
@@ -74,18 +74,16 @@ class SteihaugPath:
     ``radius`` (None: unbounded), ``maxiter`` iterations or the model's gradient below
     ``rtol`` times its start; :meth:`step` cuts it at any radius up to that one.
 
-    ``jvp(d) -> J d``, ``vjp(s) -> J^T s``, ``gradient`` ``J^T r``; ``between()`` runs
-    before each product.  CG's iterates grow in norm (Steihaug), so the path crosses each
-    radius once."""
+    ``jvp(d) -> J d``, ``vjp(s) -> J^T s``, ``gradient`` ``J^T r``.  CG's iterates grow in
+    norm (Steihaug), so the path crosses each radius once."""
 
-    def __init__(self, jvp, vjp, r, gradient, radius, maxiter, rtol, between=lambda: None):
+    def __init__(self, jvp, vjp, r, gradient, radius, maxiter, rtol):
         self.segments = []  # (start p, direction d, its longest step, |s|^2, s.q, |q|^2)
         s = np.array(r, dtype=float)
         z = -np.asarray(gradient, dtype=float)
         gamma = first = z @ z
         p, d = np.zeros_like(z), z.copy()
         for _ in range(maxiter if first > 0 else 0):
-            between()
             q = jvp(d)
             qq = q @ q
             if not qq > 0:
@@ -96,7 +94,6 @@ class SteihaugPath:
             if radius is not None and np.linalg.norm(p) >= radius:
                 break
             s = s + alpha * q
-            between()
             z = -vjp(s)
             gamma, last = z @ z, gamma
             if gamma <= rtol ** 2 * first:
@@ -121,45 +118,13 @@ def _to_sphere(p, d, radius) -> float:
     return float((-b + np.sqrt(max(b * b - 4 * a * c, 0.0))) / (2 * a))
 
 
-class _Space:
-    """Where the search moves: the evaluator's variables z (a smooth metric's, u = S z, or
-    the controls themselves), the bounds on u, and the Jacobian products in z."""
-
-    def __init__(self, problem, ev):
-        self.problem, self.metric = problem, getattr(ev, "metric", None)
-        self.lb, self.ub = problem.bounds()
-        self.bounded = bool(np.isfinite(self.lb).any() or np.isfinite(self.ub).any())
-
-    def controls(self, z):
-        return z if self.metric is None else self.metric.smooth(z)
-
-    def products(self, lin, free):
-        smooth = (lambda v: v) if self.metric is None else self.metric.smooth
-        return (lambda d: lin.jvp(smooth(free * d)),
-                lambda s: free * smooth(lin.vjp(s)))
-
-    def free(self, z, gradient):
-        """1 where a variable may move, 0 at a bound the gradient pushes against."""
-        if not self.bounded:
-            return 1.0
-        return np.where(((z <= self.lb) & (gradient > 0)) | ((z >= self.ub) & (gradient < 0)),
-                        0.0, 1.0)
-
-    def clipped(self, z, p):
-        return p if not self.bounded else np.clip(z + p, self.lb, self.ub) - z
-
-
 def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point),
     calling ``on_iteration()`` after each step taken; stop at ``deadline``
     (``time.perf_counter()``, or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
-    if not hasattr(problem, "objective_terms"):
-        raise ValueError("method 'gauss-newton' searches a problem's residuals, and multiple "
-                         "shooting's merit function has no residual form yet: run the "
-                         "shooting with method 'lbfgsb', then 'gauss-newton' from its result")
+    space, counts = SearchSpace(problem, ev, "gauss-newton"), _Counts()
     opts = {**DEFAULTS, **options}
     opts["maxfun"] = opts["maxfun"] or 10 * maxiter
-    space, counts = _Space(problem, ev), _Counts()
 
     def between():
         check()
@@ -202,13 +167,13 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
     counts.linearizations += 1
     try:
         f = lin.value
-        gradient = space.products(lin, 1.0)[1](lin.residual)
+        gradient = space.products(lin, 1.0, between)[1](lin.residual)
         if np.max(np.abs(gradient), initial=0.0) <= opts["gtol"]:
             raise _Ended(CONVERGED, "converged: the gradient vanished (below gtol)")
         free = space.free(z, gradient)
-        jvp, vjp = space.products(lin, free)
+        jvp, vjp = space.products(lin, free, between)
         path = SteihaugPath(jvp, vjp, lin.residual, free * gradient, radius,
-                            opts["inner_maxiter"], opts["inner_tol"], between)
+                            opts["inner_maxiter"], opts["inner_tol"])
         full = np.linalg.norm(path.step(None)[0]) if path.segments else 0.0
         while True:
             p, model = path.step(radius)

@@ -82,3 +82,47 @@ class Linearization:
     def release(self) -> None:
         """Hand the run's kept factorisations back (no product after this)."""
         self.problem.integrator.release(self.trajectory)
+
+
+class SearchSpace:
+    """Where a residual search moves: the evaluator's variables z (a smooth metric's, u =
+    S z, or the controls themselves), the bounds on u, and the Jacobian products in z.
+    ``method`` names the search in the refusal of a problem without residuals (multiple
+    shooting's merit function)."""
+
+    def __init__(self, problem, ev, method: str):
+        if not hasattr(problem, "objective_terms"):
+            raise ValueError(f"method {method!r} searches a problem's residuals, and multiple "
+                             "shooting's merit function has no residual form yet: run the "
+                             f"shooting with method 'lbfgsb', then {method!r} from its result")
+        self.problem, self.metric = problem, getattr(ev, "metric", None)
+        self.lb, self.ub = problem.bounds()
+        self.bounded = bool(np.isfinite(self.lb).any() or np.isfinite(self.ub).any())
+
+    def controls(self, z):
+        return z if self.metric is None else self.metric.smooth(z)
+
+    def products(self, lin, free=1.0, between=lambda: None):
+        """``(z -> J_z p, w -> J_z^T w)`` at ``lin``, with only the ``free`` variables moving
+        and ``between()`` run before each product."""
+        smooth = (lambda v: v) if self.metric is None else self.metric.smooth
+
+        def jvp(d):
+            between()
+            return lin.jvp(smooth(free * d))
+
+        def vjp(s):
+            between()
+            return free * smooth(lin.vjp(s))
+
+        return jvp, vjp
+
+    def free(self, z, gradient):
+        """1 where a variable may move, 0 at a bound the gradient pushes against."""
+        if not self.bounded:
+            return 1.0
+        return np.where(((z <= self.lb) & (gradient > 0)) | ((z >= self.ub) & (gradient < 0)),
+                        0.0, 1.0)
+
+    def clipped(self, z, p):
+        return p if not self.bounded else np.clip(z + p, self.lb, self.ub) - z

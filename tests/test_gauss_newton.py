@@ -11,7 +11,7 @@ from helpers import InterruptAfter
 from casadi_keyframe import Adjoint, Smoothness, StateKeyframe, StepForces, load_problem, solve
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from casadi_keyframe.optimize.gauss_newton import SteihaugPath
+from casadi_keyframe.optimize.gauss_newton import SteihaugPath, trust_region_small
 from casadi_keyframe.scenes.cloths import cloth_problem
 
 
@@ -20,21 +20,40 @@ def race():
     return load_problem("flock_race", agents=8, steps=40)
 
 
-def test_the_path_ends_at_the_least_squares_step_and_is_cut_at_the_radius():
+@pytest.mark.parametrize("rtol", [1e-12, 0.3])
+def test_the_path_ends_at_the_least_squares_step_and_is_cut_at_the_radius(rtol):
     rng = np.random.default_rng(0)
-    J, r = rng.standard_normal((30, 12)), rng.standard_normal(30)
-    path = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, None, 50, 1e-12)
+    J = rng.standard_normal((30, 12)) * np.geomspace(1, 1e3, 12)  # a stiff model
+    r = rng.standard_normal(30)
+    path = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, None, 50, rtol, plane=False)
+    flat = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, None, 50, rtol)
     best = np.linalg.lstsq(J, -r, rcond=None)[0]
-    p, model = path.step(None)
-    assert np.allclose(p, best, atol=1e-9)
-    for radius in (1e-3, 0.3 * np.linalg.norm(best), 0.9 * np.linalg.norm(best)):
-        p, model = path.step(radius)
-        assert np.linalg.norm(p) == pytest.approx(radius, rel=1e-12)
-        assert model == pytest.approx(0.5 * np.sum((r + J @ p) ** 2), rel=1e-12)
-        assert model < 0.5 * r @ r
-    bounded = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, 0.5, 50, 1e-12)
-    assert np.allclose(bounded.step(0.5)[0], path.step(0.5)[0])  # the same path, stopped
-    assert len(bounded.segments) < len(path.segments)
+    if rtol < 1e-6:
+        assert np.allclose(path.step(None)[0], best, atol=1e-9)
+    for radius in np.geomspace(1e-4, 0.9, 5) * np.linalg.norm(path.step(None)[0]):
+        for way in (path, flat):
+            p, model = way.step(radius)
+            assert np.linalg.norm(p) <= radius * (1 + 1e-12)
+            assert model == pytest.approx(0.5 * np.sum((r + J @ p) ** 2), rel=1e-10)
+        assert np.linalg.norm(path.step(radius)[0]) == pytest.approx(radius, rel=1e-12)
+        assert flat.step(radius)[1] <= path.step(radius)[1] * (1 + 1e-12)
+    bounded = SteihaugPath(J.dot, J.T.dot, r, J.T @ r, 1e-3, 50, rtol, plane=False)
+    assert np.allclose(bounded.step(1e-3)[0], path.step(1e-3)[0])  # the same path, stopped
+    assert len(bounded.segments) <= len(path.segments)
+
+
+def test_the_small_trust_region_solve_is_the_best_point_of_the_disc():
+    rng = np.random.default_rng(3)
+    angles = np.linspace(0, 2 * np.pi, 4001)
+    for _ in range(20):
+        A = rng.standard_normal((2, 2))
+        B, c, radius = A @ A.T, rng.standard_normal(2), rng.uniform(0.05, 2)
+        x = trust_region_small(B, c, radius)
+        grid = [s * radius * np.array([np.cos(a), np.sin(a)]) for s in np.linspace(0, 1, 41)
+                for a in angles[::20]]
+        value = lambda y: 0.5 * y @ B @ y + c @ y  # noqa: E731
+        assert np.linalg.norm(x) <= radius * (1 + 1e-9)
+        assert value(x) <= min(value(y) for y in grid) + 1e-9
 
 
 RESIDUAL_METHODS = ["gauss-newton", "least-squares"]

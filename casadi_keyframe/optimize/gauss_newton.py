@@ -10,7 +10,8 @@ shrinks; the next trial is the same path cut shorter, one evaluation and no new 
 relative tolerance on the model's gradient, ``radius`` the first radius (None: the first
 step unbounded), ``accept`` the least ratio of actual to predicted decrease that takes a
 step, ``maxfun`` evaluations (default ``10 * maxiter``), ``gtol`` the gradient's largest
-component that counts as zero.  Bounds hold by fixing the controls at a bound the gradient
+component that counts as zero, ``plane`` (default True) a cut step chosen in the plane of
+the gradient and the Gauss-Newton step too (:class:`SteihaugPath`).  Bounds hold by fixing the controls at a bound the gradient
 pushes against and clipping the step.  The products are exact whatever gradient route the
 evaluator runs for its bookkeeping.
 """
@@ -25,7 +26,7 @@ from .outcome import CONVERGED, FAILED, LIMIT
 from .residuals import Linearization, SearchSpace
 
 DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
-            "maxfun": None, "gtol": 1e-10}
+            "maxfun": None, "gtol": 1e-10, "plane": True}
 SHRINK, GROW = 0.25, 2.0  # the radius after a poor step (times its length) and a good one
 
 
@@ -39,7 +40,8 @@ _KINDS = {"inner_maxiter": ("a whole number >= 1", lambda v: _whole(v) and v >= 
           "accept": ("a number in [0, 0.25)", lambda v: _real(v) and 0 <= v < 0.25),
           "maxfun": ("a whole number >= 1 or None", lambda v: v is None or (_whole(v)
                                                                              and v >= 1)),
-          "gtol": ("a number >= 0", lambda v: _real(v) and v >= 0)}
+          "gtol": ("a number >= 0", lambda v: _real(v) and v >= 0),
+          "plane": ("True or False", lambda v: isinstance(v, bool))}
 
 
 def check_options(options: dict) -> list[str]:
@@ -72,44 +74,92 @@ class _Ended(Exception):
 class SteihaugPath:
     """CG's path on the Gauss-Newton model ``0.5 |r + J p|^2`` from p = 0, up to the trust
     ``radius`` (None: unbounded), ``maxiter`` iterations or the model's gradient below
-    ``rtol`` times its start; :meth:`step` cuts it at any radius up to that one.
+    ``rtol`` times its start; :meth:`step` gives the step at any radius up to that one.
 
     ``jvp(d) -> J d``, ``vjp(s) -> J^T s``, ``gradient`` ``J^T r``.  CG's iterates grow in
-    norm (Steihaug), so the path crosses each radius once."""
+    norm (Steihaug), so the path crosses each radius once.  With ``plane`` a step the radius
+    cuts is the better (by the model) of the path's point there and the best point within
+    the radius in the plane of the gradient and the path's end (scipy's ``trf`` subspace):
+    on a stiff model the path's first segment, steepest descent, is a poor step."""
 
-    def __init__(self, jvp, vjp, r, gradient, radius, maxiter, rtol):
+    def __init__(self, jvp, vjp, r, gradient, radius, maxiter, rtol, plane=True):
         self.segments = []  # (start p, direction d, its longest step, |s|^2, s.q, |q|^2)
-        s = np.array(r, dtype=float)
-        z = -np.asarray(gradient, dtype=float)
+        self.r, self.gradient, self.plane = np.asarray(r, dtype=float), gradient, plane
+        s, z = self.r.copy(), -np.asarray(gradient, dtype=float)
         gamma = first = z @ z
         p, d = np.zeros_like(z), z.copy()
         for _ in range(maxiter if first > 0 else 0):
             q = jvp(d)
+            if not self.segments:
+                self.j_gradient = -q  # d = -gradient at first
             qq = q @ q
             if not qq > 0:
                 break
             alpha = gamma / qq
             self.segments.append((p, d, alpha, s @ s, s @ q, qq))
-            p = p + alpha * d
+            p, s = p + alpha * d, s + alpha * q
             if radius is not None and np.linalg.norm(p) >= radius:
                 break
-            s = s + alpha * q
             z = -vjp(s)
             gamma, last = z @ z, gamma
             if gamma <= rtol ** 2 * first:
                 break
             d = z + (gamma / last) * d
+        self.end = (p, s)  # the path's last point and its model residual r + J p
 
     def step(self, radius):
-        """``(p, model value at p)``: the path's end, or where it first reaches ``radius``."""
+        """``(p, model value at p)``: the path's end, or its best step within ``radius``."""
         if not self.segments:
             return None, None
+        p_end, s_end = self.end
+        if radius is None or np.linalg.norm(p_end) <= radius:
+            return p_end, 0.5 * s_end @ s_end
         for p, d, alpha, ss, sq, qq in self.segments:
-            end = np.linalg.norm(p + alpha * d)
-            if radius is not None and end > radius:
+            if np.linalg.norm(p + alpha * d) > radius:
                 alpha = _to_sphere(p, d, radius)
                 break
-        return p + alpha * d, 0.5 * (ss + 2 * alpha * sq + alpha * alpha * qq)
+        cut, model = p + alpha * d, 0.5 * (ss + 2 * alpha * sq + alpha * alpha * qq)
+        if self.plane:
+            flat, flat_model = self._in_plane(radius)
+            if flat_model < model:
+                return flat, flat_model
+        return cut, model
+
+    def _in_plane(self, radius):
+        """The model's best point within ``radius`` in the span of the gradient and the
+        path's end, from products already made (``J g``, ``J p_end = s_end - r``)."""
+        p_end, s_end = self.end
+        basis, tri = np.linalg.qr(np.stack([self.gradient, p_end], axis=1))
+        keep = np.abs(np.diag(tri)) > 1e-12 * np.abs(tri[0, 0])
+        basis, tri = basis[:, keep], tri[np.ix_(keep, keep)]
+        images = np.stack([self.j_gradient, s_end - self.r], axis=1)[:, keep]
+        j_basis = np.linalg.solve(tri.T, images.T).T  # J basis = images tri^-1
+        x = trust_region_small(j_basis.T @ j_basis, j_basis.T @ self.r, radius)
+        residual = self.r + j_basis @ x
+        return basis @ x, 0.5 * residual @ residual
+
+
+def trust_region_small(B, c, radius) -> np.ndarray:
+    """argmin ``0.5 x^T B x + c^T x`` over ``|x| <= radius`` for a small symmetric positive
+    semi-definite B (its eigenvectors, and the secular equation solved by bisection)."""
+    w, V = np.linalg.eigh(B)
+    ct = V.T @ c
+
+    def length(lam):
+        return np.linalg.norm(ct / (w + lam))
+
+    if w.min() > 0 and length(0.0) <= radius:
+        return -V @ (ct / w)
+    lo = max(0.0, -w.min()) + 1e-300
+    hi = lo + np.linalg.norm(c) / radius + np.abs(w).max() + 1.0
+    if not length(lo) > radius:  # the hard case: along the flattest direction to the edge
+        x = -ct / np.where(w + lo > 0, w + lo, np.inf)
+        x[np.argmin(w)] += np.sqrt(max(radius ** 2 - x @ x, 0.0))
+        return V @ x
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if length(mid) > radius else (lo, mid)
+    return -V @ (ct / (w + hi))
 
 
 def _to_sphere(p, d, radius) -> float:
@@ -172,8 +222,9 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
             raise _Ended(CONVERGED, "converged: the gradient vanished (below gtol)")
         free = space.free(z, gradient)
         jvp, vjp = space.products(lin, free, between)
-        path = SteihaugPath(jvp, vjp, lin.residual, free * gradient, radius,
-                            opts["inner_maxiter"], opts["inner_tol"])
+        bound = None if opts["plane"] else radius  # the plane needs the path's end
+        path = SteihaugPath(jvp, vjp, lin.residual, free * gradient, bound,
+                            opts["inner_maxiter"], opts["inner_tol"], opts["plane"])
         full = np.linalg.norm(path.step(None)[0]) if path.segments else 0.0
         while True:
             p, model = path.step(radius)

@@ -12,7 +12,22 @@ from .tolerances import center_tolerance, keyframe_tolerance, shortfall_phrase, 
 from .terms import StateTerm, checked_target, particle_indices
 
 
-class StateKeyframe(StateTerm):
+class WeightedErrors(StateTerm):
+    """A term whose value is ``0.5 (position_weight |e_x|^2 + velocity_weight |e_v|^2)`` of
+    the errors its ``_errors`` gives, and whose residual is those errors, weighted."""
+
+    def _expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return 0.5 * (self.position_weight * ca.sumsqr(ex)
+                      + self.velocity_weight * ca.sumsqr(ev))
+
+    def _residual_expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return ca.vertcat(np.sqrt(self.position_weight) * ca.vec(ex),
+                          np.sqrt(self.velocity_weight) * ca.vec(ev))
+
+
+class StateKeyframe(WeightedErrors):
     """Positions and/or velocities of all particles (or ``agents``) at ``frame``.
 
     value = 0.5 * (position_weight ||x - x*||^2 + velocity_weight ||v - v*||^2)
@@ -86,15 +101,6 @@ class StateKeyframe(StateTerm):
         idx = self._idx.tolist()
         return X[:, idx] - xs, V[:, idx] - vs
 
-    def _expr(self, X, V, P, model):
-        ex, ev = self._errors(X, V, P, model)
-        return 0.5 * (self.position_weight * ca.sumsqr(ex)
-                      + self.velocity_weight * ca.sumsqr(ev))
-
-    def _residual_expr(self, X, V, P, model):
-        ex, ev = self._errors(X, V, P, model)
-        return ca.vertcat(np.sqrt(self.position_weight) * ca.vec(ex),
-                          np.sqrt(self.velocity_weight) * ca.vec(ev))
 
     aim = (0.0, 0.0)  # where the penalty aims, relative to the targets (see aiming)
 
@@ -134,7 +140,7 @@ class ParticleKeyframe(StateKeyframe):
         super().__init__(frame, agents=agents, **kw)
 
 
-class CenterOfMassKeyframe(StateTerm):
+class CenterOfMassKeyframe(WeightedErrors):
     """Mass-weighted centre of mass (and/or its velocity) of ``agents`` at ``frame``.
 
     ``tolerance``: the centre's distance and its velocity's miss that count as met, one
@@ -174,15 +180,6 @@ class CenterOfMassKeyframe(StateTerm):
         cx, cv = ca.mtimes(X[:, idx], w), ca.mtimes(V[:, idx], w)
         return cx - P[:model.dim], cv - P[model.dim:]
 
-    def _expr(self, X, V, P, model):
-        ex, ev = self._errors(X, V, P, model)
-        return 0.5 * (self.position_weight * ca.sumsqr(ex)
-                      + self.velocity_weight * ca.sumsqr(ev))
-
-    def _residual_expr(self, X, V, P, model):
-        ex, ev = self._errors(X, V, P, model)
-        return ca.vertcat(np.sqrt(self.position_weight) * ex,
-                          np.sqrt(self.velocity_weight) * ev)
 
     def marker(self):
         return None if self._x is None else Marker(self.label, self.frame, "center", self._x)

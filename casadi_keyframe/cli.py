@@ -19,7 +19,7 @@ from .adjoints import ROUTES as GRADIENT_ROUTES
 from .cli_options import add_shooting_options, parse_levels, parse_shooting
 from .export import FORMATS as EXPORT_FORMATS
 from .export.alembic import BlenderError
-from .files import writable_folder
+from .saved import writable_folder
 from .loading import (OverrideError, ProblemFileError, check_overrides, list_problems,
                       load_module, load_problem, overrides_of, solve_defaults)
 from .optimize import METHODS

@@ -16,7 +16,7 @@ from pathlib import Path
 from types import SimpleNamespace
 
 from .interrupts import NAMES, catching, check
-from .io import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
+from .saved import CHECKPOINT, RESULT, Checkpoint, read_run, save_result
 from .optimize.outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT
 from .report import format_misses, format_physical, format_stage, set_value
 from .saved import check_trajectory
@@ -321,7 +321,7 @@ def run_render(source, *, animation: bool = True) -> int:
 
 
 def _render(source, animation: bool) -> int:
-    from .files import writable_folder
+    from .saved import writable_folder
     from .saved import load_saved, saved_file
 
     path = saved_file(source)

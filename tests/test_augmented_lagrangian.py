@@ -106,7 +106,7 @@ def test_an_aiming_keyframe_aims_past_its_target_and_is_judged_by_it():
 
 
 def test_the_rounds_stop_once_the_goal_is_met_and_a_resumed_run_keeps_its_multipliers(tmp_path):
-    from casadi_keyframe.io import Checkpoint, read_run
+    from casadi_keyframe.saved import Checkpoint, read_run
 
     prob = swing()
     tight = StateKeyframe(10, x=prob.objective_terms.state_terms[0].position_target,

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from casadi_keyframe import cli, files, load_problem
+from casadi_keyframe import cli, load_problem
+from casadi_keyframe.saved import files
 from casadi_keyframe.cli import main, parse_overrides
 from casadi_keyframe.loading import (OverrideError, check_overrides, list_problems,
                                      load_module, overrides_of)

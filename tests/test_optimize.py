@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import Adjoint, SimulationError, load_problem, solve
-from casadi_keyframe.io import Checkpoint, read_run
+from casadi_keyframe.saved import Checkpoint, read_run
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
 
 from helpers import InterruptAfter

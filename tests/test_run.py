@@ -10,7 +10,7 @@ import pytest
 
 from casadi_keyframe import adjoints
 from casadi_keyframe.cli import main
-from casadi_keyframe.io import atomic_path, read_run
+from casadi_keyframe.saved import atomic_path, read_run
 from casadi_keyframe.run import exit_code
 
 SMALL = ["flock_path", "--set", "agents=6", "--set", "steps=20", "--set", "tolerance=2"]

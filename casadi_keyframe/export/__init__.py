@@ -61,7 +61,7 @@ def export(source, fmt: str, *, out=None) -> list[Path]:
     that cannot be written or an unknown format, a FileNotFoundError for a
     folder with no result, an ImportError naming the extra to install when ``usd`` or
     ``html`` lacks its library."""
-    from ..files import writable_folder
+    from ..saved import writable_folder
     from ..saved import load_saved, saved_file
 
     check_library(fmt)

@@ -19,7 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..io import atomic_path
+from ..saved import atomic_path
 from .pc2 import write_cache
 
 SCRIPT = Path(__file__).with_name("blender_alembic_script.py")

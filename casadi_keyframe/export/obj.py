@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..interrupts import check
-from ..io import atomic_path
+from ..saved import atomic_path
 
 
 def obj_text(vertices, faces=None, *, comment: str = "") -> str:

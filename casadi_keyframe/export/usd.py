@@ -23,7 +23,7 @@ import numpy as np
 
 from ..geometry import basis, circle, plane_patch
 from ..interrupts import check
-from ..io import atomic_path
+from ..saved import atomic_path
 
 INSTALL = "pip install casadi_keyframe[usd]"
 CLOTH, CLIP, HIGHLIGHT, AGENT, TARGET, BODY, RING = (

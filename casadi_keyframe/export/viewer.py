@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
+from ..saved import atomic_path
 from . import traces as tr
 
 INSTALL = "pip install casadi_keyframe[viewer]"

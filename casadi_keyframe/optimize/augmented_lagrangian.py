@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from ..adjoints import get_gradient
-from ..io import as_checkpoint
+from ..saved import as_checkpoint
 from .evaluator import evaluate_final
 from .goal import check_stop, verdict
 from .multipliers import KeyframeMultipliers

@@ -23,7 +23,7 @@ class Evaluator:
     Search methods ask for f and its gradient at the same point in separate calls (IPOPT)
     or together (L-BFGS-B): the last point's pair is kept, so each point is simulated once.
     ``stage`` is the stage it serves; ``export`` maps its controls to the final problem's
-    grid for the checkpoint (an :class:`~casadi_keyframe.io.Checkpoint` or None).
+    grid for the checkpoint (an :class:`~casadi_keyframe.saved.Checkpoint` or None).
 
     The goal (:mod:`.goal`) is judged by the keyframe terms of ``goal`` (default: the
     problem itself; an augmented-Lagrangian round passes the true problem, whose targets do

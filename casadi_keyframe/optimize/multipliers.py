@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Checkpoint
+from ..saved import Checkpoint
 from ..objectives import Objective, StateKeyframe
 
 

@@ -23,7 +23,7 @@ from tqdm.auto import tqdm
 from ..adjoints import get_gradient
 from ..health import GradientError
 from ..interrupts import NAMES, handled
-from ..io import as_checkpoint
+from ..saved import as_checkpoint
 from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
 from .goal import GoalReached, check_stop
@@ -47,7 +47,7 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``gradient`` a route name or strategy; ``maxiter`` (a whole number >= 1) and ``tol``
     (> 0) the search's limits; ``u0`` the starting controls at ``problem.dt`` (default: the
     problem's guess, else passive); ``checkpoint`` a ``.npz`` path (or
-    :class:`~casadi_keyframe.io.Checkpoint`) that always holds the best controls so far (at
+    :class:`~casadi_keyframe.saved.Checkpoint`) that always holds the best controls so far (at
     ``problem.dt``, also during a coarse stage); ``options`` go to the method's library
     (an unknown name is refused before the search, with the valid ones); ``time_limit``
     (seconds, wall clock, over all stages) stops the search at the first iteration past it

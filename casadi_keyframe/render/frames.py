@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.animation import PillowWriter
 
 from ..interrupts import check
-from ..io import atomic_path
+from ..saved import atomic_path
 
 
 def keyframes(problem) -> list[int]:

@@ -1,84 +1,23 @@
-"""Results on disk: ``result.npz`` (controls, trajectory, history), ``summary.json`` and the
-``checkpoint.npz`` a search keeps its best controls in.
-
-Every file is written whole or not at all: to a temporary name in the same folder, then
-moved onto its name with :func:`os.replace` (:func:`atomic_path`), so an interrupted or
-killed run never leaves a half-written file, only the previous version or none.  Both
-``.npz`` files carry ``meta`` (the problem's name and file, the overrides, the method...) as
-JSON, so either is enough to resume a run or to draw it again.
+"""A results folder: ``result.npz`` (controls, trajectory, history), ``summary.json`` and
+``checkpoint.npz``, written by :func:`save_result` and read back by :func:`read_run`
+(checked: the arrays fit together) and :func:`load_saved` (the problem rebuilt from its
+file and overrides, the trajectory stored or simulated).  ``solve --resume``, ``render``
+and ``export`` all start here.  Both ``.npz`` files carry ``meta`` (the problem's name and
+file, the overrides, the method...) as JSON, so either is enough to resume or draw a run.
 """
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 from pathlib import Path
+from typing import NamedTuple
 
 import numpy as np
 
-from .files import FileDamaged, read_json, read_npz, writable_file, writable_folder
-from .interrupts import deferred
+from ..state import Trajectory
+from .files import (FileDamaged, as_json, read_json, read_npz, writable_folder, write_json,
+                    write_npz)
 
 RESULT, SUMMARY, CHECKPOINT = "result.npz", "summary.json", "checkpoint.npz"
-
-
-@contextlib.contextmanager
-def atomic_path(path):
-    """Yield a temporary path beside ``path`` (same suffix, so writers pick the format) to
-    write to; it replaces ``path`` when the block ends normally and is deleted otherwise
-    (an exception, Ctrl-C)."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
-        yield tmp
-        with deferred():
-            os.replace(tmp, path)
-    finally:
-        with deferred():
-            tmp.unlink(missing_ok=True)
-
-
-def write_npz(path, *, compressed: bool = False, **arrays) -> Path:
-    """``np.savez`` (or ``savez_compressed``) through :func:`atomic_path`."""
-    with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        (np.savez_compressed if compressed else np.savez)(f, **arrays)
-    return Path(path)
-
-
-def write_json(path, obj) -> Path:
-    """Indented JSON (numpy scalars and arrays allowed) through :func:`atomic_path`."""
-    text = json.dumps(obj, indent=2, default=_jsonable)
-    with atomic_path(path) as tmp:
-        tmp.write_text(text)
-    return Path(path)
-
-
-class Checkpoint:
-    """Where a search keeps its best controls: ``write(u, fun=, nit=, stage=, stage_dt=)``
-    replaces the file with ``u`` (on the final grid), those fields and ``meta`` (what
-    rebuilds the problem: ``problem``, ``problem_file``, ``overrides``; the method...)."""
-
-    def __init__(self, path, **meta):
-        self.path, self.meta = Path(path), meta
-
-    def write(self, u, **fields) -> None:
-        meta = json.dumps({**self.meta, **fields}, default=_jsonable)
-        write_npz(self.path, u=np.asarray(u, dtype=float), meta=np.array(meta), **fields)
-
-
-def as_checkpoint(checkpoint) -> Checkpoint | None:
-    """None, a :class:`Checkpoint`, or a path made into one; its path checked writable
-    (ValueError naming ``checkpoint=``) before a search starts, not at its first
-    iteration."""
-    if checkpoint is None:
-        return None
-    if not isinstance(checkpoint, Checkpoint):
-        if not isinstance(checkpoint, (str, os.PathLike)):
-            raise TypeError(f"checkpoint= is a file path (or a Checkpoint), got "
-                            f"{type(checkpoint).__name__}")
-        checkpoint = Checkpoint(checkpoint)
-    writable_file(checkpoint.path, "checkpoint=")
-    return checkpoint
 
 
 def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = None,
@@ -94,7 +33,7 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
     about = {k: summary[k] for k in ("problem", "overrides", *meta, "method", "gradient",
                                      "status", "nit", "fun")}
     write_npz(out / RESULT, compressed=True, u=result.x, jac=result.jac, x=traj.x, v=traj.v,
-              dt=traj.dt, meta=np.array(json.dumps(about, default=_jsonable)),
+              dt=traj.dt, meta=np.array(json.dumps(about, default=as_json)),
               history_objective=np.array([h["objective"] for h in hist]),
               history_keyframe_error=np.array([h["keyframe_error"] for h in hist]),
               history_seconds=np.array([h["seconds"] for h in hist]),
@@ -211,11 +150,58 @@ def _check_trajectory(arrays: dict, path: Path, fix: str) -> None:
                                 f"({', '.join(f'{k} {n}' for k, n in lengths.items())})", fix)
 
 
-def _jsonable(obj):
-    if isinstance(obj, np.generic):
-        return obj.item()
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"cannot write {type(obj).__name__} to JSON")
+class SavedRun(NamedTuple):
+    """A run on disk: its ``problem`` (rebuilt), ``trajectory``, the file's ``meta`` and
+    other ``arrays`` (history...), and the ``path`` it was read from."""
+
+    problem: object
+    trajectory: Trajectory
+    meta: dict
+    arrays: dict
+    path: Path
+
+
+def saved_file(source) -> Path:
+    """The file a saved run is read from: ``source`` if it is a file, else its folder's
+    ``result.npz``, or its ``checkpoint.npz`` alone (FileNotFoundError if neither)."""
+    source = Path(source)
+    return source / RESULT if (source / RESULT).is_file() else run_file(source)
+
+
+def load_saved(source, *, quiet: bool = False) -> SavedRun:
+    """Read the run in ``source`` (a results folder, preferring its ``result.npz``, or a
+    ``.npz`` file) and rebuild its problem; a ValueError if the controls do not fit it."""
+    from ..loading import load_problem
+
+    path = saved_file(source)
+    run = read_run(path)
+    meta, arrays = run["meta"], run["arrays"]
+    name = meta.get("problem_file")
+    prob = load_problem(name if name and Path(name).is_file() else meta["problem"],
+                        **meta.get("overrides", {}))
+    if run["u"].size != prob.size:
+        raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
+                         f"{meta.get('overrides', {})} has {prob.size}")
+    check_trajectory(run, prob)
+    if "x" in arrays:
+        traj = Trajectory(arrays["x"], arrays["v"], float(arrays["dt"]))
+    else:
+        if not quiet:
+            print(f"{prob.name}: {path.name} holds controls only: simulating them")
+        traj = prob.simulate(run["u"])
+    return SavedRun(prob, traj, meta, arrays, path)
+
+
+def check_trajectory(run: dict, prob) -> None:
+    """A ValueError if the trajectory a run file stores (:func:`.io.read_run`) is not one of
+    ``prob``: another number of frames, particles or dimensions, or another dt."""
+    arrays = run["arrays"]
+    if "x" not in arrays:
+        return
+    frames = (prob.steps + 1, prob.model.n, prob.model.dim)
+    if arrays["x"].shape != frames or not np.isclose(float(arrays["dt"]), prob.dt):
+        raise ValueError(f"{run['path']} holds a trajectory of shape {arrays['x'].shape} at dt "
+                         f"{float(arrays['dt']):.6g} s, but {prob.name} built with "
+                         f"{run['meta'].get('overrides', {})} has {frames} at dt "
+                         f"{prob.dt:.6g} s: the file was altered, or the problem file changed "
+                         "since the run")

@@ -1,20 +1,17 @@
-"""Files at the library's edge: what it reads is checked before it is trusted, and where it
-writes is checked before any work starts.
+"""Files at the library's edge, each written whole or not at all and read back checked.
 
-:func:`read_npz` and :func:`read_json` are the one way the library reads its own files
-(``result.npz``, ``checkpoint.npz``, ``summary.json``, a sweep point's ``row.json``).  An
-``.npz`` is read with ``allow_pickle=False``: a file of Python objects is refused, never
-unpickled, since unpickling runs whatever code the file holds.  Any damage (empty,
-truncated, not an npz, a corrupt or missing array, not JSON) is a :class:`FileDamaged`, a
-ValueError naming the file, what is wrong with it and what to do.
-
-:func:`writable_folder` and :func:`writable_file` check an output path (``--out``,
-``export --out``, ``checkpoint=``) by writing a scratch file there, so a path that cannot
-be written is refused by the option's name before a problem is built or a search starts,
-not after minutes of work.
+Every file is written to a temporary name in the same folder, then moved onto its name with
+:func:`os.replace` (:func:`atomic_path`), so an interrupted or killed run never leaves a
+half-written file, only the previous version or none.  :func:`read_npz` and
+:func:`read_json` are the one way the library reads its own files: an ``.npz`` is read with
+``allow_pickle=False`` (unpickling runs whatever code the file holds), and any damage is a
+:class:`FileDamaged` naming the file, what is wrong and what to do.  :func:`writable_folder`
+and :func:`writable_file` check an output path by writing a scratch file there, so a path
+that cannot be written is refused by the option's name before any work starts.
 """
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
@@ -23,6 +20,8 @@ import zlib
 from pathlib import Path
 
 import numpy as np
+
+from ..interrupts import deferred
 
 ZIP_MAGIC, NPY_MAGIC = b"PK\x03\x04", b"\x93NUMPY"
 
@@ -173,3 +172,44 @@ def _reason(folder: Path, err: OSError) -> str:
 
 def _one_line(err) -> str:
     return " ".join(str(err).split())
+
+
+@contextlib.contextmanager
+def atomic_path(path):
+    """Yield a temporary path beside ``path`` (same suffix, so writers pick the format) to
+    write to; it replaces ``path`` when the block ends normally and is deleted otherwise
+    (an exception, Ctrl-C)."""
+    path = Path(path)
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        yield tmp
+        with deferred():
+            os.replace(tmp, path)
+    finally:
+        with deferred():
+            tmp.unlink(missing_ok=True)
+
+
+def write_npz(path, *, compressed: bool = False, **arrays) -> Path:
+    """``np.savez`` (or ``savez_compressed``) through :func:`atomic_path`."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        (np.savez_compressed if compressed else np.savez)(f, **arrays)
+    return Path(path)
+
+
+def write_json(path, obj) -> Path:
+    """Indented JSON (numpy scalars and arrays allowed) through :func:`atomic_path`."""
+    text = json.dumps(obj, indent=2, default=as_json)
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+    return Path(path)
+
+
+def as_json(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot write {type(obj).__name__} to JSON")

@@ -14,7 +14,7 @@ import functools
 import warnings
 
 from casadi_keyframe.health import GradientRouteWarning
-from casadi_keyframe.health_report import format_health, gradient_health
+from casadi_keyframe.studies.health_report import format_health, gradient_health
 from casadi_keyframe.loading import load_module
 from casadi_keyframe.scenes import capes
 

@@ -31,7 +31,7 @@ swapped route under penalty springs on curved bodies, or with self-contact): the
 strategy warns once per model (:class:`GradientRouteWarning`).
 
 The full report at a point (dot-product test, finite differences, linearity radius, the
-exact route for comparison) is :mod:`casadi_keyframe.health_report`.
+exact route for comparison) is :mod:`casadi_keyframe.studies.health_report`.
 """
 from __future__ import annotations
 

@@ -3,7 +3,8 @@ import json
 
 import pytest
 
-from casadi_keyframe.cli import main, parse_overrides
+from casadi_keyframe.cli import main
+from casadi_keyframe.cli.values import parse_overrides
 
 
 def test_list(capsys):

@@ -9,7 +9,8 @@ import pytest
 
 from casadi_keyframe import cli, load_problem
 from casadi_keyframe.saved import files
-from casadi_keyframe.cli import main, parse_overrides
+from casadi_keyframe.cli import main
+from casadi_keyframe.cli.values import parse_overrides
 from casadi_keyframe.loading import (OverrideError, check_overrides, list_problems,
                                      load_module, overrides_of)
 
@@ -101,7 +102,7 @@ def test_maxiter_zero_is_refused_not_ignored(capsys):
 def test_an_out_folder_under_a_file_is_refused_before_the_build(tmp_path, capsys, monkeypatch):
     blocker = tmp_path / "a_file"
     blocker.write_text("")
-    monkeypatch.setattr(cli, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
+    monkeypatch.setattr(cli.commands, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
     assert main(["solve", "flock_path", "--out", str(blocker / "run")]) == 2
     err = capsys.readouterr().err
     assert f"cannot write the output folder {blocker / 'run'} (--out): {blocker} is a file" in err
@@ -112,7 +113,7 @@ def test_an_unwritable_out_folder_is_refused_before_the_build(tmp_path, capsys, 
         raise OSError(errno.EROFS, "Read-only file system")
 
     monkeypatch.setattr(files.tempfile, "TemporaryFile", read_only)
-    monkeypatch.setattr(cli, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
+    monkeypatch.setattr(cli.commands, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
     assert main(["solve", "flock_path", "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err
     assert f"cannot write the output folder {tmp_path / 'run'} (--out): Read-only file system" in err
@@ -206,7 +207,7 @@ def test_solve_records_the_overrides_as_build_got_them(tmp_path):
 
 
 def test_a_hint_gives_the_overrides_as_set_reads_them_back():
-    from casadi_keyframe.report import set_value
+    from casadi_keyframe.runs.report import set_value
 
     given = {"pins": "0,7", "agents": "8", "dt": "0.02", "collision": "guarded"}
     parsed = parse_overrides([f"{k}={v}" for k, v in given.items()])

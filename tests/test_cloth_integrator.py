@@ -11,7 +11,7 @@ from casadi_keyframe.models.base import ForceJacobians, Model
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
-from casadi_keyframe.studies import relative_error_and_cosine
+from casadi_keyframe.studies.accuracy import relative_error_and_cosine
 from casadi_keyframe.state import State
 
 

@@ -210,7 +210,8 @@ def test_cloth_continuation_reaches_the_direct_objective_in_fewer_fine_iteration
 def test_cli_solves_with_continuation(tmp_path, capsys):
     import json
 
-    from casadi_keyframe.cli import main, parse_time_steps
+    from casadi_keyframe.cli import main
+    from casadi_keyframe.cli.values import parse_time_steps
 
     assert parse_time_steps("1/15, 1/30,0.0125") == pytest.approx([1 / 15, 1 / 30, 0.0125])
     with pytest.raises(ValueError, match="--continuation expects"):

@@ -12,7 +12,7 @@ from casadi_keyframe.adjoints import get_gradient
 from casadi_keyframe.cli import main
 from casadi_keyframe.health import (GROWTH_BOUND, BackwardWatch, GradientError,
                                     GradientRouteWarning, growth_bound, route_limits)
-from casadi_keyframe.health_report import gradient_health
+from casadi_keyframe.studies.health_report import gradient_health
 from casadi_keyframe.loading import list_problems
 from casadi_keyframe.optimize.evaluator import Evaluator
 from casadi_keyframe.scenes.sheets import contact_problem, hanging_sheet

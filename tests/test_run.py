@@ -11,7 +11,7 @@ import pytest
 from casadi_keyframe import adjoints
 from casadi_keyframe.cli import main
 from casadi_keyframe.saved import atomic_path, read_run
-from casadi_keyframe.run import exit_code
+from casadi_keyframe.runs import exit_code
 
 SMALL = ["flock_path", "--set", "agents=6", "--set", "steps=20", "--set", "tolerance=2"]
 
@@ -203,7 +203,7 @@ def test_atomic_files_are_whole_or_absent(tmp_path):
 
 
 def test_misses_say_what_their_rms_is_over():
-    from casadi_keyframe.report import format_misses
+    from casadi_keyframe.optimize.report import format_misses
 
     line = format_misses([{"term": "StateKeyframe@60", "particles": 416,
                            "rms_position_error": 0.01}, {"term": "RegionTarget@50",

@@ -49,6 +49,11 @@ def write_sequence(scene, folder) -> list[Path]:
     return paths
 
 
+def write_frames(scene, folder) -> list[Path]:
+    """``folder/obj/NAME_0000.obj`` ... (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return write_sequence(scene, Path(folder) / "obj")
+
+
 def read_obj(path) -> tuple[np.ndarray, np.ndarray]:
     """``(vertices (n, 3) float32, faces (m, k) 0-based)`` of an OBJ file's ``v`` and ``f``
     lines (``f 1/1/1 ...`` forms read by their vertex index)."""

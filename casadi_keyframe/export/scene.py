@@ -13,7 +13,7 @@ import numpy as np
 
 from ..geometry import body_geometry, moves
 from ..models.base import PhysicalReport, Surface
-from ..report import format_misses
+from ..optimize.report import format_misses
 from ..views import BlendView, ClothView, FlockView
 
 

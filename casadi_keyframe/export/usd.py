@@ -290,3 +290,8 @@ def validate(path) -> list[str]:
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     errors = UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
     return [e.GetErrorAsString() for e in errors]
+
+
+def write_stage(scene, folder) -> list[Path]:
+    """``NAME.usd`` in ``folder`` (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return [write_usd(scene, Path(folder) / f"{scene.name}.usd")]

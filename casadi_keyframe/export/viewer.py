@@ -228,3 +228,8 @@ def write_viewer(scene, path) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(html, encoding="utf-8")
     return Path(path)
+
+
+def write_page(scene, folder) -> list[Path]:
+    """``viewer.html`` in ``folder`` (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return [write_viewer(scene, Path(folder) / "viewer.html")]

@@ -22,7 +22,7 @@ from ..interrupts import NAMES, catching, handled
 from ..saved import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
 from ..optimize.outcome import INTERRUPTED
-from ..run import exit_code
+from ..runs import exit_code
 from .grid import points
 from .progress import Progress, format_seconds
 from .runner import check_workers, connect, run_specs

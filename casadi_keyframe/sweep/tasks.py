@@ -77,7 +77,7 @@ def read_row(folder) -> dict | None:
 
 def _solve(spec: dict, folder: Path) -> dict:
     from ..loading import load_module
-    from ..run import run_solve, solve_run
+    from ..runs import run_solve, solve_run
     from .grid import start_controls
 
     module = load_module(spec["problem_file"])

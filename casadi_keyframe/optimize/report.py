@@ -1,26 +1,6 @@
 """One-line reports of a search, for the terminal, summaries and exports: a stage's or a
-round's outcome, the keyframes' misses, how physical a motion stays; values as typed on
-the command line."""
+round's outcome, the keyframes' misses, how physical a motion stays."""
 from __future__ import annotations
-
-from fractions import Fraction
-
-
-def format_value(value) -> str:
-    """A default as typed on the command line: ``1/60`` rather than 0.016666666666666666."""
-    if isinstance(value, float) and len(repr(value)) > 8:
-        fraction = Fraction(value).limit_denominator(1000)
-        if float(fraction) == value:
-            return str(fraction)
-    return str(value)
-
-
-def set_value(value) -> str:
-    """An override's value as ``--set`` reads it back: a sequence comma-separated."""
-    if isinstance(value, (tuple, list)):
-        return ",".join(format_value(v) for v in value)
-    return format_value(value)
-
 
 def format_stage(stage: dict) -> str:
     """One line for a continuation stage (its dt) or an augmented-Lagrangian round (its

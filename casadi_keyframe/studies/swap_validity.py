@@ -34,18 +34,18 @@ from fractions import Fraction
 
 import numpy as np
 
-from .adjoints import Adjoint, Swapped
-from .checks import frame_at
-from .controls import StepForces
-from .health import GROWTH_BOUND, GradientRouteWarning, past_bound
-from .integrators import LinearizedBackwardEuler
-from .models import Capsule, ClothModel, ClothParams, Plane, Sphere
-from .models.colliders import Contact, signed_distances
-from .objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
-from .problem import ControlProblem
-from .simulate import simulate
-from .state import SimulationError, State
-from .studies import fitted_order, quick_mode, relative_error_and_cosine
+from ..adjoints import Adjoint, Swapped
+from ..checks import frame_at
+from ..controls import StepForces
+from ..health import GROWTH_BOUND, GradientRouteWarning, past_bound
+from ..integrators import LinearizedBackwardEuler
+from ..models import Capsule, ClothModel, ClothParams, Plane, Sphere
+from ..models.colliders import Contact, signed_distances
+from ..objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
+from ..problem import ControlProblem
+from ..simulate import simulate
+from ..state import SimulationError, State
+from .accuracy import fitted_order, quick_mode, relative_error_and_cosine
 
 KINDS = ("none", "ground", "sphere", "capsule", "self")
 REFERENCE_DT = 1 / 60  # the step at which ``stiffness`` is dt sqrt(k/m)
@@ -209,7 +209,7 @@ def optimizer_outcome(prob, maxiter: int) -> dict:
     route's best objective (NaN when the search cannot start: its gradient refused there,
     ``failed_ROUTE`` says why), the evaluations it had refused, and whether the swapped one
     ``reaches`` within 10 % of the exact one (None when the exact one cannot start)."""
-    from .optimize import solve
+    from ..optimize import solve
 
     out = {"start_objective": prob.objective(prob.initial_controls())}
     for route in ("adjoint", "swapped"):
@@ -280,23 +280,16 @@ def map_points(quick: bool | None = None) -> dict[str, list[dict]]:
     }
 
 
-def swap_validity(quick: bool | None = None, *, sweep: dict | None = None) -> dict:
-    """The map: :func:`map_points` run (in this process, or with ``sweep`` as the sweep
-    runner's options, e.g. ``{"out": "results/study-swap-validity", "workers": 2}``), each
-    slice a list of rows (the point's keywords and figures), and ``order``: the relative
-    error's fitted order in dt per contact case."""
-    slices = map_points(quick)
-    if sweep is None:
-        study = _run_here(slices)
-    else:
-        from .sweep.studies import study_points
+def swap_validity(quick: bool | None = None) -> dict:
+    """The map: :func:`map_points` run in this process (on the sweep runner:
+    :func:`~.sweeps.swap_validity_map`), each slice a list of rows (the point's keywords
+    and figures), and ``order``: the relative error's fitted order in dt per contact case."""
+    return assembled(_run_here(map_points(quick)))
 
-        result = study_points("swap-validity", [p for ps in slices.values() for p in ps],
-                              **sweep)
-        by_key = {_key(r): r for r in result.rows}
-        study = {name: [by_key.get(_key(p), {**p, "reason": "not run"}) for p in points]
-                 for name, points in slices.items()}
-        study["sweep"] = {"exit_code": result.exit_code, "failed": len(result.failed)}
+
+def assembled(study: dict) -> dict:
+    """The map's slices ``study`` (name -> rows) with each contact case's fitted orders in
+    dt added (``order``, ``step_order``)."""
     cases = dict.fromkeys((r["contact"], r["collision"]) for r in study["dt"])
     study["order"] = {f"{c} {k}": dt_order([r for r in study["dt"]
                                             if (r["contact"], r["collision"]) == (c, k)])
@@ -309,7 +302,7 @@ def swap_validity(quick: bool | None = None, *, sweep: dict | None = None) -> di
     return study
 
 
-def _key(values: dict) -> tuple:
+def point_key(values: dict) -> tuple:
     """A point's identity: its keywords' values, in :data:`DEFAULTS`' order, and what it
     measures."""
     return tuple(round(values[k], 12) if isinstance(values[k], float) else values[k]
@@ -320,9 +313,9 @@ def _run_here(slices: dict) -> dict:
     """Every slice's rows computed in this process, each distinct point once."""
     done = {}
     for point in (p for points in slices.values() for p in points):
-        if _key(point) not in done:
-            done[_key(point)] = {**point, **swap_validity_point(**point)}
-    return {name: [done[_key(p)] for p in points] for name, points in slices.items()}
+        if point_key(point) not in done:
+            done[point_key(point)] = {**point, **swap_validity_point(**point)}
+    return {name: [done[point_key(p)] for p in points] for name, points in slices.items()}
 
 
 def dt_order(rows, figure: str = "relative_error") -> float:

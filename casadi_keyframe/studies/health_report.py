@@ -32,10 +32,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .adjoints import Adjoint, FiniteDifference, Swapped, get_gradient
-from .health import (GradientError, GradientRouteWarning, Growth, check_finite,
+from ..adjoints import Adjoint, FiniteDifference, Swapped, get_gradient
+from ..health import (GradientError, GradientRouteWarning, Growth, check_finite,
                      growth_bound, past_bound, refusal, route_limits)
-from .state import SimulationError
+from ..state import SimulationError
 
 STEPS = (1e-2, 1e-4, 1e-6)  # central-difference steps, times max(|u|, 1)
 LINEARITY = 0.1  # the linear model's allowed relative miss for the linearity radius
@@ -147,7 +147,7 @@ def _relative(value, reference) -> float:
 
 
 def _compare(g, reference) -> tuple[float, float]:
-    from .studies import relative_error_and_cosine
+    from .accuracy import relative_error_and_cosine
 
     with np.errstate(all="ignore"):
         return relative_error_and_cosine(g, reference)
@@ -260,7 +260,7 @@ def _growth(growth, route: str) -> str:
 def compare_routes(problem, u, names) -> str:
     """Each route's gradient at ``u`` and its time against the last route's (``gradcheck
     --routes``): relative error and cosine, one line each."""
-    from .studies import relative_error_and_cosine
+    from .accuracy import relative_error_and_cosine
 
     routes = {}
     for name in names:

@@ -9,25 +9,27 @@ folder like a solve's point, so a large grid can use a cluster and ``--resume``.
 """
 from __future__ import annotations
 
-import importlib
 import json
 from pathlib import Path
 
 from ..loading import OverrideError, check_overrides
-from .grid import Point, folder_name, points
-from .plan import Plan, SweepResult, check_grid, check_group_by, run_plan, study_module
+from ..sweep.grid import Point, folder_name, points
+from ..sweep.plan import (Plan, SweepResult, check_grid, check_group_by, run_plan,
+                          study_module)
+from .accuracy import one_step_point, swapped_vs_exact
+from .swap_validity import assembled, map_points, point_key, swap_validity_point
 
 # name: (the function computing one row, the ranges of its keywords, the figures to rank by)
 STUDIES = {
-    "gradient-accuracy": ("casadi_keyframe.studies:swapped_vs_exact",
+    "gradient-accuracy": (swapped_vs_exact,
                           {"dt": "(0, inf)", "horizon": "(0, inf)", "stretch": "(0, inf)",
                            "amplitude": "[0, inf)", "seed": "[0, inf)"},
                           ("relative_error",)),
-    "integrator-accuracy": ("casadi_keyframe.studies:one_step_point",
+    "integrator-accuracy": (one_step_point,
                             {"dt": "(0, inf)", "stretch": "(0, inf)", "rows": "[2, inf)",
                              "seed": "[0, inf)"},
                             ("gap_x", "gap_v")),
-    "swap-validity": ("casadi_keyframe.swap_validity:swap_validity_point",
+    "swap-validity": (swap_validity_point,
                       {"contact": ("none", "ground", "sphere", "capsule", "self"),
                        "collision": ("guarded", "penalty", "constraint"),
                        "stiffness": "(0, inf)", "dt": "(0, inf)", "amplitude": "[0, inf)",
@@ -39,14 +41,14 @@ STUDIES = {
 
 
 def _study(study: str):
-    """``(target, module, figures)`` of a study: its function's name, a module whose
-    ``build`` is that function (checked like a problem file), the figures it ranks by."""
+    """``(target, module, figures)`` of a study: its function's ``"module:name"`` (what a
+    worker imports), a module whose ``build`` is that function (checked like a problem
+    file), the figures it ranks by."""
     if study not in STUDIES:
         raise ValueError(f"unknown study {study!r}; choose one of {', '.join(STUDIES)}")
-    target, ranges, figures = STUDIES[study]
-    path, _, name = target.partition(":")
-    return target, study_module(study, getattr(importlib.import_module(path), name),
-                                ranges), figures
+    function, ranges, figures = STUDIES[study]
+    target = f"{function.__module__}:{function.__qualname__}"
+    return target, study_module(study, function, ranges), figures
 
 
 def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
@@ -76,7 +78,7 @@ def study_sweep(study: str, grid: dict, *, out, overrides: dict | None = None,
 def study_points(study: str, values: list, *, out, **runner) -> SweepResult:
     """Run the study ``study`` at each of ``values`` (dicts of its keywords, each point's
     own: a map made of slices that no one grid spans, such as
-    :func:`~casadi_keyframe.swap_validity.map_points`); a point given twice runs once, and
+    :func:`~.swap_validity.map_points`); a point given twice runs once, and
     ``runner`` as for :func:`study_sweep`."""
     target, module, figures = _study(study)
     specs = {}
@@ -93,3 +95,17 @@ def study_points(study: str, values: list, *, out, **runner) -> SweepResult:
     about = {"study": study, "points": len(specs)}
     return run_plan(Plan(list(specs.values()), Path(out), keys, figures[0], [], about),
                     **runner)
+
+
+def swap_validity_map(quick: bool | None = None, **runner) -> dict:
+    """The swap-validity map (:func:`~.swap_validity.swap_validity`) with its points run on
+    the sweep runner (``runner``: ``out``, ``workers``, ``scheduler``, ...), each kept in
+    its folder; ``sweep`` says how the runner ended."""
+    slices = map_points(quick)
+    result = study_points("swap-validity", [p for ps in slices.values() for p in ps],
+                          **runner)
+    by_key = {point_key(r): r for r in result.rows}
+    study = assembled({name: [by_key.get(point_key(p), {**p, "reason": "not run"})
+                              for p in points] for name, points in slices.items()})
+    study["sweep"] = {"exit_code": result.exit_code, "failed": len(result.failed)}
+    return study

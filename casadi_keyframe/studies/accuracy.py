@@ -16,10 +16,10 @@ import os
 
 import numpy as np
 
-from .integrators import BackwardEuler, LinearizedBackwardEuler
-from .scenes.flock_path import flock_path_problem
-from .scenes.sheets import contact_problem, hanging_sheet
-from .simulate import simulate
+from ..integrators import BackwardEuler, LinearizedBackwardEuler
+from ..scenes.flock_path import flock_path_problem
+from ..scenes.sheets import contact_problem, hanging_sheet
+from ..simulate import simulate
 
 
 def quick_mode() -> bool:
@@ -171,7 +171,7 @@ def convergence_runs(runs, maxiter: int) -> dict:
     """Solve each ``(label, problem, method, gradient)`` from the problem's start and keep
     its convergence: objective per iteration and seconds, final objective, iterations, wall
     seconds (a failed run keeps its message instead of stopping the study)."""
-    from .optimize import solve
+    from ..optimize import solve
     out = {}
     for label, problem, method, gradient in runs:
         start = problem.objective(problem.initial_controls())

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -24,11 +25,13 @@ class ControlProblem:
     is where the problem came from, when it was built from a problem file: an object whose
     ``build(**overrides)`` builds it again with more overrides
     (:class:`~casadi_keyframe.loading.ProblemSource`, see :meth:`at_resolution`).
+    ``inputs`` are the files it was built from (a cloth's mesh, target meshes): a saved run
+    records their content and is read back only while they are unchanged.
     """
 
     def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
                  controls: Controls, objective, external=None, name: str = "problem",
-                 view: View | None = None, guess=None, source=None, scene=None):
+                 view: View | None = None, guess=None, source=None, scene=None, inputs=()):
         if not (isinstance(steps, (int, np.integer)) and steps >= 1):
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -55,6 +58,7 @@ class ControlProblem:
         self.view = checked_view(view, scene)
         self._guess = None if guess is None else self.controls.check(guess).copy()
         self.source = source
+        self.inputs = tuple(Path(p).expanduser().resolve() for p in inputs)
 
     # -- the simulation ------------------------------------------------------------------
     @property
@@ -136,7 +140,7 @@ class ControlProblem:
         args = dict(model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0,
                     steps=steps, dt=self.dt, controls=self.controls.for_steps(steps),
                     objective=self.objective_terms, external=self.external, name=self.name,
-                    view=self.view, guess=self._guess)
+                    view=self.view, guess=self._guess, inputs=self.inputs)
         return ControlProblem(**{**args, **changes})
 
     def _steps_for(self, dt: float) -> int:

@@ -19,7 +19,7 @@ def main(argv=None) -> int:
         return args.func(args)
     except OverrideError as err:
         _error(err, debug, f"\n  'casadi-keyframe show {err.problem}' lists the overrides "
-                           "with their types, defaults and ranges")
+                           "with their types, defaults and ranges" if err.listed else "")
         return 2
     except SimulationError as err:
         text = " ".join(str(err).split())

@@ -17,7 +17,8 @@ from types import SimpleNamespace
 from ..interrupts import check
 from ..optimize.outcome import INTERRUPTED
 from ..optimize.report import format_misses, format_physical
-from ..saved import CHECKPOINT, Checkpoint, check_trajectory, read_run, save_result
+from ..saved import (CHECKPOINT, Checkpoint, check_inputs, check_trajectory, input_record,
+                     read_run, save_result)
 from ..state import SimulationError
 from .exits import exit_code, guarded, stopped
 from .outputs import draw, write_outputs
@@ -116,11 +117,12 @@ def _solve(spec: SolveRun, caught, done) -> int:
     print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
           f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}")
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
-            "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient}
+            "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient,
+            **input_record(prob)}
     done.started = True
     result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed)
     signum = caught.signum if result.status == INTERRUPTED else None
-    extra = {"problem_file": spec.problem_file,
+    extra = {"problem_file": spec.problem_file, **input_record(prob),
              **({"resumed_from": {k: v for k, v in resumed.items() if k != "meta"}}
                 if resumed else {})}
     summary = save_result(result, out, problem_name=prob.name, overrides=spec.overrides,
@@ -178,6 +180,7 @@ def resume_controls(spec: SolveRun):
         raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
                          f"{prob.size}")
     check_trajectory(run, prob)  # a stored trajectory that does not fit: an altered file
+    check_inputs(meta, path, prob.inputs)
     return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun"),
                       "meta": meta}
 

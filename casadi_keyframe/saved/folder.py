@@ -7,7 +7,10 @@ file, the overrides, the method...) as JSON, so either is enough to resume or dr
 """
 from __future__ import annotations
 
+import contextlib
+import hashlib
 import json
+import os
 from pathlib import Path
 from typing import NamedTuple
 
@@ -45,6 +48,51 @@ def save_result(result, out_dir, *, problem_name: str, overrides: dict | None = 
               start_keyframe_error=np.array(_or_nan(result.start["keyframe_error"])))
     write_json(out / SUMMARY, summary)
     return summary
+
+
+def input_record(problem) -> dict:
+    """What a run keeps of where its problem came from, so that it stands alone: the folder
+    its overrides' relative paths resolve in (``folder``) and each file the problem was built
+    from (``inputs``: absolute path -> SHA-256 of its content)."""
+    return {"folder": os.getcwd(), "inputs": {str(p): file_digest(p) for p in problem.inputs}}
+
+
+def file_digest(path) -> str:
+    """The SHA-256 of a file's content, in hex."""
+    digest = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+def check_inputs(meta: dict, path, now=None) -> None:
+    """Refuse (ValueError naming the file) a run read back from ``path`` whose input files
+    changed or went missing since it ran; with ``now`` (a problem's ``inputs``), also one
+    that problem does not read the same files as."""
+    recorded = meta.get("inputs") or {}
+    for name, digest in recorded.items():
+        if not Path(name).is_file():
+            raise ValueError(f"{path} was solved from {name}, which is gone: put it back, or "
+                             "solve again")
+        if file_digest(name) != digest:
+            raise ValueError(f"{path} was solved from {name}, which has changed since: "
+                             "restore it, or solve again from the new file")
+    if now is not None and sorted(map(str, now)) != sorted(recorded):
+        raise ValueError(f"{path} was solved from the files {sorted(recorded) or 'none'}, this "
+                         f"problem reads {sorted(map(str, now)) or 'none'}: give the same files")
+
+
+@contextlib.contextmanager
+def working_directory(folder):
+    """Run the block in ``folder`` (None: where we are), then come back."""
+    here = os.getcwd()
+    if folder is not None and Path(folder).is_dir():
+        os.chdir(folder)
+    try:
+        yield
+    finally:
+        os.chdir(here)
 
 
 def _or_nan(value) -> float:
@@ -176,9 +224,11 @@ def load_saved(source, *, quiet: bool = False) -> SavedRun:
     path = saved_file(source)
     run = read_run(path)
     meta, arrays = run["meta"], run["arrays"]
+    check_inputs(meta, path)
     name = meta.get("problem_file")
-    prob = load_problem(name if name and Path(name).is_file() else meta["problem"],
-                        **meta.get("overrides", {}))
+    with working_directory(meta.get("folder")):
+        prob = load_problem(name if name and Path(name).is_file() else meta["problem"],
+                            **meta.get("overrides", {}))
     if run["u"].size != prob.size:
         raise ValueError(f"{path} holds {run['u'].size} controls but {prob.name} built with "
                          f"{meta.get('overrides', {})} has {prob.size}")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from ..adjoints import ROUTES as GRADIENT_ROUTES
+from ..adjoints import route_help
 from ..export import FORMATS as EXPORT_FORMATS
 from ..export import format_help
 from ..optimize import METHODS
@@ -47,7 +48,7 @@ def add_sweep_parser(sub) -> None:
     w.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a build() argument at every point")
     w.add_argument("--method", choices=list(METHODS))
-    w.add_argument("--gradient", choices=GRADIENT_ROUTES)
+    w.add_argument("--gradient", choices=GRADIENT_ROUTES, help=route_help())
     w.add_argument("--maxiter", type=positive_int, help="iteration limit of each point")
     w.add_argument("--continuation", metavar="DT,DT,...", help="as for solve")
     w.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
@@ -96,11 +97,7 @@ def solve_parser(sub) -> None:
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
     s.add_argument("--method", choices=list(METHODS))
-    s.add_argument("--gradient", choices=GRADIENT_ROUTES,
-                   help="gradient route (default: the problem's SOLVE, else 'adjoint'): "
-                        "'adjoint' the exact hand adjoint, 'swapped' the paper's approximate "
-                        "one (cloth), 'casadi' CasADi reverse mode (small systems), 'fd' "
-                        "finite differences ('exact' is a deprecated name of 'casadi')")
+    s.add_argument("--gradient", choices=GRADIENT_ROUTES, help=route_help())
     s.add_argument("--maxiter", type=positive_int, help="iteration limit (per stage with --continuation)")
     s.add_argument("--continuation", metavar="DT,DT,...",
                    help="solve at these time steps first, coarse to fine (e.g. 1/15,1/30,1/60); "
@@ -138,8 +135,8 @@ def gradcheck_parser(sub) -> None:
     g.add_argument("problem")
     g.add_argument("--set", action="append", metavar="KEY=VALUE")
     g.add_argument("--gradient", choices=GRADIENT_ROUTES,
-                   help="the route checked (default: the problem's SOLVE, else 'adjoint'); "
-                        "an approximate one is compared with the exact adjoint")
+                   help=route_help("the route checked") + "; an approximate one is compared "
+                        "with the exact adjoint")
     g.add_argument("--routes", help="also compare these comma-separated routes' gradients; "
                                     "the last is the reference (e.g. adjoint,casadi)")
     g.add_argument("--directions", type=at_least(int, 0), default=1,

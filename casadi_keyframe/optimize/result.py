@@ -226,11 +226,11 @@ class Result:
 
 def _health(stages, route: str) -> dict:
     """The gradients' health over ``stages``: the largest backward growth (None if no stage
-    watched one), the bound ``route`` is held to (None: an exact route, refused only when
-    not finite) and the evaluations refused."""
-    from ..health import growth_bound
+    watched one), the bound the route named ``route`` is held to (None: refused only when
+    not finite, or a strategy of the user's own) and the evaluations refused."""
+    from ..adjoints import GRADIENTS
 
-    bound = growth_bound(route)
+    bound = getattr(GRADIENTS.get(route), "bound", math.inf)
     growth = [s["gradient_growth"] for s in stages if "gradient_growth" in s]
     return {"largest_growth": max(growth) if growth else None,
             "bound": bound if math.isfinite(bound) else None,

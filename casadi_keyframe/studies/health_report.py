@@ -8,19 +8,20 @@ What it measures, and why each:
 * **the dot-product test**: the route's gradient against one tangent-linear pass
   (:meth:`~casadi_keyframe.problem.ControlProblem.directional_derivative`, the exact
   derivative of the scheme simulated) along a random direction, ``|g.d - J d| / |J d|``:
-  round-off for an exact adjoint, the approximation's size for the swapped one;
+  round-off for an exact route, the approximation's size for an approximate one;
 * **central differences** along the gradient and along a random direction at several step
   sizes: an independent witness that needs no derivative code; where no step size agrees
   the objective is rougher than its gradient says;
 * **the linearity radius**: the largest step along the gradient (descent) for which the
   objective stays within 10 % of its linear model ``phi + s g.d``, found by a ladder of
   steps a factor sqrt(10) apart: what a line search can hope to take;
-* for an approximate route, its cosine and relative error against the exact adjoint.
+* for a route that is not exact, its cosine and relative error against the default exact
+  route (:data:`~casadi_keyframe.adjoints.DEFAULT`).
 
 The verdict is one of ``healthy`` (exact, consistent, differences agree), ``stiff`` (exact
 and consistent, but the objective is linear only over short steps: differences disagree at
-every step tried), ``approximate`` (an approximate route within cosine 0.9 of the exact
-gradient and not refused), ``unreliable`` (refused by the guard, non-finite, or pointing
+every step tried), ``approximate`` (a route that is not exact, within cosine 0.9 of the
+exact gradient and not refused), ``unreliable`` (refused by the guard, non-finite, or pointing
 elsewhere than the exact gradient) or ``inconsistent`` (an exact route whose adjoint and
 tangent disagree: a bug to report).
 """
@@ -32,9 +33,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..adjoints import Adjoint, FiniteDifference, Swapped, get_gradient
-from ..health import (GradientError, GradientRouteWarning, Growth, check_finite,
-                     growth_bound, past_bound, refusal, route_limits)
+from ..adjoints import DEFAULT, FiniteDifference, get_gradient
+from ..health import (GradientError, GradientRouteWarning, Growth, check_finite, past_bound,
+                     refusal)
 from ..state import SimulationError
 
 STEPS = (1e-2, 1e-4, 1e-6)  # central-difference steps, times max(|u|, 1)
@@ -51,9 +52,8 @@ class HealthReport:
     ``dot_test`` (relative), ``differences`` (rows: direction, step, central difference,
     the route's slope, relative error), ``radius`` (the linearity radius; 0 if not even the
     smallest resolvable step; None if not measured), ``versus_exact`` ((relative error,
-    cosine) for an approximate route), ``exact_growth``, the ``verdict`` with its
-    ``reason``, and the route's known ``limits`` on this model
-    (:func:`~casadi_keyframe.health.route_limits`)."""
+    cosine) for a route that is not exact), ``exact_growth``, the ``verdict`` with its
+    ``reason``, the route's known ``limits`` on this model and its growth ``bound``."""
 
     problem: str
     route: str
@@ -70,6 +70,7 @@ class HealthReport:
     verdict: str = ""
     reason: str = ""
     limits: list = field(default_factory=list)
+    bound: float = np.inf
 
     def best_difference(self, direction: str) -> float:
         """The smallest relative error of the central differences along ``direction``."""
@@ -77,35 +78,30 @@ class HealthReport:
         return min(errors) if errors else np.nan
 
 
-def _unguarded(route: str):
-    """The route's strategy with its guard off, so an overflowing pass is measured whole."""
-    kinds = {"adjoint": Adjoint, "swapped": Swapped}
-    return kinds[route](guard=False) if route in kinds else get_gradient(route)
-
-
-def gradient_health(problem, u=None, route: str = "adjoint", *, steps=STEPS,
+def gradient_health(problem, u=None, route=DEFAULT.name, *, steps=STEPS,
                     directions: int = 1, seed: int = 0, radius: bool = True) -> HealthReport:
-    """The :class:`HealthReport` of ``route`` on ``problem`` at controls ``u`` (default: where
-    the optimizer starts); ``steps`` the central differences' steps (times ``max(|u|, 1)``),
-    ``directions`` random directions beside the gradient, ``radius=False`` skips the
-    linearity radius (a ladder of simulations)."""
+    """The :class:`HealthReport` of ``route`` (a name or a route object) on ``problem`` at
+    controls ``u`` (default: where the optimizer starts), its guard off so an overflowing
+    pass is measured whole; ``steps`` the central differences' steps (times
+    ``max(|u|, 1)``), ``directions`` random directions beside the gradient,
+    ``radius=False`` skips the linearity radius (a ladder of simulations)."""
     u = problem.initial_controls() if u is None else problem.controls.check(u)
     rng = np.random.default_rng(seed)
-    strategy = _unguarded(route)
+    strategy = get_gradient(route).unguarded()
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", GradientRouteWarning)  # the report lists the limits
         value, g = strategy(problem, u)
-    growth = getattr(strategy, "growth", None)
-    refused = _refusal(route, problem, g, growth)
+    growth = strategy.growth
+    refused = _refusal(strategy, problem, g, growth)
     exact_g, exact_growth = g, growth
-    if not getattr(strategy, "exact", False):
-        reference = Adjoint(guard=False)
+    if not strategy.exact:
+        reference = DEFAULT().unguarded()
         exact_g = reference(problem, u)[1]
         exact_growth = reference.growth
-    report = HealthReport(problem.name, route, problem.size, float(value),
-                          float(np.linalg.norm(g)), growth, refused, np.nan,
-                          exact_growth=None if exact_g is g else exact_growth,
-                          limits=route_limits(route, problem.model))
+    report = HealthReport(problem.name, route if isinstance(route, str) else strategy.name,
+                          problem.size, float(value), float(np.linalg.norm(g)), growth,
+                          refused, np.nan, exact_growth=None if exact_g is g else exact_growth,
+                          limits=strategy.limits(problem.model), bound=strategy.bound)
     if exact_g is not g:
         report.versus_exact = _compare(g, exact_g)
     scale = max(float(np.linalg.norm(u)), 1.0)
@@ -117,13 +113,13 @@ def gradient_health(problem, u=None, route: str = "adjoint", *, steps=STEPS,
         report.differences += _differences(problem, u, g, d, name, [h * scale for h in steps])
     if radius:
         report.radius = linearity_radius(problem, u, value, along, scale)
-    report.verdict, report.reason = verdict(report, getattr(strategy, "exact", False))
+    report.verdict, report.reason = verdict(report, strategy.exact)
     return report
 
 
 def _refusal(route, problem, g, growth) -> str | None:
-    """The guard's message if the guarded route would refuse this gradient."""
-    if growth is not None and past_bound(growth.growth, growth_bound(route)):
+    """The guard's message if the guarded ``route`` would refuse this gradient."""
+    if growth is not None and past_bound(growth.growth, route.bound):
         return refusal(route, problem, growth)
     try:
         check_finite(route, g, problem)
@@ -158,11 +154,12 @@ def _differences(problem, u, g, d, name, steps) -> list[dict]:
     rows, slope = [], _slope(g, d)
     for h in steps:
         try:
-            fd = FiniteDifference(h).directional(problem, u, d)
+            difference = FiniteDifference(h).directional(problem, u, d)
         except SimulationError:
-            fd = np.nan
-        rows.append({"direction": name, "step": h, "difference": fd, "slope": slope,
-                     "relative_error": _relative(slope, fd) if np.isfinite(fd) else np.nan})
+            difference = np.nan
+        rows.append({"direction": name, "step": h, "difference": difference, "slope": slope,
+                     "relative_error": (_relative(slope, difference)
+                                        if np.isfinite(difference) else np.nan)})
     return rows
 
 
@@ -196,10 +193,11 @@ def verdict(report: HealthReport, exact: bool) -> tuple[str, str]:
     if not exact:
         rel, cos = report.versus_exact
         if cos < APPROXIMATE_COSINE:
-            return "unreliable", (f"cosine {cos:.3f} against the exact adjoint (relative error "
-                                  f"{rel:.2g}): it points elsewhere; use --gradient adjoint")
+            return "unreliable", (f"cosine {cos:.3f} against the exact {DEFAULT.name} (relative "
+                                  f"error {rel:.2g}): it points elsewhere; use --gradient "
+                                  f"{DEFAULT.name}")
         return "approximate", (f"cosine {cos:.4f}, relative error {rel:.2g} against the exact "
-                               "adjoint")
+                               f"{DEFAULT.name}")
     if not report.dot_test <= DOT_TOLERANCE:
         return "inconsistent", (f"the adjoint and the tangent pass disagree by "
                                 f"{report.dot_test:.2g}: a bug in a backward or tangent step")
@@ -225,13 +223,15 @@ def format_health(report: HealthReport) -> str:
     lines = [f"gradient health of '{report.route}' on {report.problem} ({report.size} "
              f"controls)", f"  objective                  {report.value:.6g}",
              f"  gradient norm              {report.norm:.3g}"]
-    lines.append(f"  backward growth            {_growth(report.growth, report.route)}")
+    lines.append(f"  backward growth            {_growth(report.growth, report.bound)}")
     if report.exact_growth is not None:
-        lines.append(f"    exact adjoint's          {_growth(report.exact_growth, 'adjoint')}")
+        label = f"exact {DEFAULT.name}'s"
+        lines.append(f"    {label:25s}{_growth(report.exact_growth, DEFAULT.bound)}")
     lines.append(f"  dot test (vs tangent)      {report.dot_test:.2e}")
     if report.versus_exact is not None:
         rel, cos = report.versus_exact
-        lines.append(f"  vs exact adjoint           cosine {cos:.4f}, relative error {rel:.3g}")
+        label = f"vs exact {DEFAULT.name}"
+        lines.append(f"  {label:27s}cosine {cos:.4f}, relative error {rel:.3g}")
     steps = sorted({r["step"] for r in report.differences}, reverse=True)
     lines.append("  central differences, step " + "".join(f"{h:>10.0e}" for h in steps))
     for name in dict.fromkeys(r["direction"] for r in report.differences):
@@ -248,10 +248,9 @@ def format_health(report: HealthReport) -> str:
     return "\n".join(lines)
 
 
-def _growth(growth, route: str) -> str:
+def _growth(growth, bound: float) -> str:
     if growth is None:
         return "not watched (no backward loop of its own)"
-    bound = growth_bound(route)
     held = f"bound {bound:.0e}" if np.isfinite(bound) else "exact: refused only if not finite"
     return (f"{growth.growth:.3g} by frame {growth.frame} ({held}); "
             f"fastest x{growth.fastest:.3g} in step {growth.fastest_step}")

@@ -213,3 +213,17 @@ def test_a_hint_gives_the_overrides_as_set_reads_them_back():
     parsed = parse_overrides([f"{k}={v}" for k, v in given.items()])
     assert {k: set_value(v) for k, v in parsed.items()} == given
     assert parse_overrides([f"pins={set_value(parsed['pins'])}"]) == {"pins": parsed["pins"]}
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--shooting", "garbage"], "--shooting expects KEY=VALUE such as init=blend,workers=2"),
+    (["--shooting", "init=foo", "--segments", "2"], "--shooting: shooting init must be one of"),
+    (["--homotopy", "garbage"], "--homotopy expects KEY=VALUE such as contact=3"),
+    (["--homotopy", "agents=0"], "--homotopy: flock_path: agents must be"),
+    (["--shooting", "workers=2"], "--shooting workers (or --scheduler) set multiple shooting's "
+                                  "options, but this run has none: give --segments K"),
+])
+def test_each_option_names_itself_and_what_it_needs(args, said, capsys, tmp_path):
+    code = main(["solve", "flock_path", "--set", "agents=4", "--set", "steps=10", "--quiet",
+                 "--out", str(tmp_path), *args])
+    assert code == 2 and said in capsys.readouterr().err

@@ -267,8 +267,10 @@ def test_a_line_search_failure_is_converged_only_when_the_goal_is_met(monkeypatc
     loose = load_problem("flock_path", agents=6, steps=20, tolerance=100.0)
     r = solve(loose, maxiter=50, quiet=True, stop="method")  # met, but run the method
     assert len(starts) == 2 and r.status == CONVERGED and r.success
-    assert r.message.startswith("converged: every keyframe within its tolerance; then line "
-                                "search failed: no step along the steepest descent")
+    assert r.message.startswith("converged: every keyframe within its tolerance (then the "
+                                "method stopped: line search failed: no step along the "
+                                "steepest descent")
+    assert "inaccurate" not in r.message  # the gradient is not in question where it converged
     starts.clear()
     monkeypatch.setattr(lbfgsb, "minimize", scripted([0, 0]))
     r = solve(prob, maxiter=50, quiet=True)
@@ -296,8 +298,26 @@ def test_a_line_search_failure_off_the_goal_exits_1_and_still_writes_its_best_po
     assert said.startswith("flock_path: line search failed") and "converged" not in said
     assert "still missed: CenterOfMass@2: position miss 3.17 (tolerance 0.15)" in said
     assert said.endswith("CenterOfMass@20: position miss 32.1 (tolerance 0.15)")
+    hints = [line for line in out.splitlines() if "hint:" in line]
+    assert "--rounds N" in hints[0] and "--segments K" in hints[0] and "--method ipopt" in hints[0]
+    assert "gradcheck" in hints[1] and "--gradient" not in hints[1]  # already the exact route
     run = read_run(tmp_path / "result.npz")
     assert run["u"].size == load_problem("flock_path", agents=6, steps=20).size
+
+
+def test_advice_never_suggests_an_option_in_use(capsys):
+    from types import SimpleNamespace
+
+    from casadi_keyframe.runs.report import hint
+
+    failed = SimpleNamespace(status=FAILED, message="search failed: ...; still missed: x")
+    spec = SimpleNamespace(rounds={"rounds": 3}, shooting={"segments": 4}, method="ipopt",
+                           gradient="swapped", overrides={}, problem_arg="p", out="o")
+    hint(failed, spec)
+    assert capsys.readouterr().out == ""  # every remedy is in use, the gradient not in question
+    failed.message += "; the gradient may be inaccurate"
+    hint(failed, spec)
+    assert "--gradient adjoint is exact" in capsys.readouterr().out
 
 
 def test_a_search_stops_once_the_goal_is_met_and_a_miss_is_never_a_success(race):

@@ -66,8 +66,10 @@ def cmd_solve(args) -> int:
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
     continuation = parse_time_steps(args.continuation)
     out = writable_folder(args.out, "--out") if args.out is not None else None
-    shooting = parse_shooting(args.segments, option_items(args.shooting), args.scheduler)
-    homotopy = parse_levels(module, option_items(args.homotopy))
+    shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
+                                                          "init=blend,workers=2"),
+                              args.scheduler)
+    homotopy = parse_levels(module, option_items(args.homotopy, "--homotopy", "contact=3"))
     spec = solve_run(module, args.problem, overrides, out, method=args.method,
                      gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
                      weight_growth=args.weight_growth, continuation=continuation,

@@ -9,16 +9,17 @@ from fractions import Fraction
 
 import numpy as np
 
-from ..loading import check_overrides
+from ..loading import OverrideError, check_overrides
 
 
-def parse_overrides(items) -> dict:
+def parse_overrides(items, option: str = "--set", example: str = "agents=50") -> dict:
     """``["agents=50", "cutoff=hard", "dt=1/60"]`` -> ``{"agents": 50, "cutoff": "hard",
     "dt": 0.016666666666666666}``: Python literals, fractions as floats, anything else a
-    string (checked against the problem's ``build`` by :func:`loading.check_overrides`)."""
+    string (checked against the problem's ``build`` by :func:`loading.check_overrides`);
+    ``option`` and ``example`` name the option in messages."""
     out = {}
     for item in items or []:
-        key, value = key_value(item, "--set", "agents=50")
+        key, value = key_value(item, option, example)
         out[key] = parse_value(value)
     return out
 
@@ -64,9 +65,9 @@ def split_top(text: str) -> list[str]:
     return [p.strip() for p in parts + [current] if p.strip()]
 
 
-def option_items(texts) -> list[dict]:
-    """``["init=blend,workers=2", ...]`` (repeatable KEY=VALUE,... options) as dicts."""
-    return [parse_overrides(split_top(t)) for t in texts or []]
+def option_items(texts, option: str, example: str) -> list[dict]:
+    """``["init=blend,workers=2", ...]`` (a repeatable KEY=VALUE,... ``option``) as dicts."""
+    return [parse_overrides(split_top(t), option, example) for t in texts or []]
 
 
 def parse_value(text: str):
@@ -143,18 +144,23 @@ def parse_shooting(segments, items: list[dict], scheduler) -> dict | None:
         out["scheduler"] = scheduler
     if not out:
         return None
-    shooting_options({"segments": 2, **out})  # every option checked (the count later)
+    try:
+        shooting_options({"segments": 2, **out})  # every option checked (the count later)
+    except ValueError as err:
+        raise ValueError(f"--shooting: {err}") from None
     return out
 
 
 def parse_levels(module, items: list[dict]) -> list[dict] | None:
     """The ``--homotopy`` items (each read as a dict) as build overrides, each checked
     against the problem's ``build``; None without any."""
-    from ..loading import check_overrides
 
     if not items:
         return None
     for item in items:
         if not item:
             raise ValueError("--homotopy expects KEY=VALUE,... such as contact=3")
-    return [check_overrides(module, item) for item in items]
+    try:
+        return [check_overrides(module, item) for item in items]
+    except OverrideError as err:
+        raise ValueError(f"--homotopy: {err}") from None

@@ -12,8 +12,8 @@ STATUS = {CONVERGED: "converged", LIMIT: "limit reached", FAILED: "search failed
           INTERRUPTED: "interrupted"}
 
 INACCURATE = ("the gradient may be inaccurate or the problem badly scaled: compare the "
-              "gradient routes (gradcheck), use an exact route (--gradient adjoint, not the "
-              "approximate swapped one), or bring the keyframe and control weights closer")
+              "gradient routes (gradcheck), use an exact route, or bring the keyframe and "
+              "control weights closer")
 
 _IPOPT_FAILURES = {
     "Search_Direction_Becomes_Too_Small": "the search direction became too small to make "
@@ -69,8 +69,8 @@ def ipopt_outcome(return_status: str, *, maxiter: int) -> tuple[int, str]:
     return FAILED, f"search failed: {why}{tag}"
 
 
-HARD = ("hold the keyframes hard (rounds, --rounds), raise their weights, or start closer "
-        "(a guess, multiple shooting: --segments)")
+HARD = ("hold the keyframes hard (rounds), raise their weights, or start closer (a guess, "
+        "multiple shooting)")
 
 
 def judge(status: int, message: str, verdict) -> tuple[int, str]:
@@ -82,8 +82,9 @@ def judge(status: int, message: str, verdict) -> tuple[int, str]:
     if status == INTERRUPTED or not verdict.checked:
         return status, message
     if verdict.met:
-        if status == FAILED:
-            return CONVERGED, f"converged: every keyframe within its tolerance; then {message}"
+        if status == FAILED:  # the goal is met: how the method then stopped is a detail
+            return CONVERGED, ("converged: every keyframe within its tolerance (then the "
+                               f"method stopped: {message.split('; ')[0]})")
         return status, f"{message}; every keyframe within its tolerance"
     missed = verdict.describe()
     if status == CONVERGED:

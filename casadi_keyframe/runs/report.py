@@ -6,6 +6,7 @@ from __future__ import annotations
 from fractions import Fraction
 from pathlib import Path
 
+from ..adjoints import DEFAULT, get_gradient
 from ..optimize.outcome import FAILED, LIMIT
 from ..optimize.report import format_misses, format_physical, format_stage
 from ..saved import CHECKPOINT, RESULT
@@ -41,13 +42,25 @@ def report(result, summary, out) -> None:
     print(f"  result written to {out}/{RESULT} and summary.json")
 
 
-def hint(status: int, spec) -> None:
-    if status == LIMIT:
+def hint(result, spec) -> None:
+    """What to try after a run that did not converge: options it does not use yet, and the
+    gradient only where the search's end puts it in question."""
+    if result.status == LIMIT:
         print(f"  hint: raise --maxiter or --time-limit, or continue from this result:\n"
               f"    {command_line(spec, 'solve')} --out {spec.out} --resume {spec.out}")
-    elif status == FAILED:
-        print(f"  hint: '{command_line(spec, 'gradcheck')}' compares the gradient routes; "
-              "--gradient casadi uses CasADi's reverse mode (small systems)")
+    if result.status != FAILED:
+        return
+    tries = [text for used, text in (
+        (spec.rounds, "--rounds N (the keyframes held hard)"),
+        (spec.shooting, "--segments K (multiple shooting)"),
+        (spec.method != "lbfgsb", "--method ipopt")) if not used]
+    if "still missed" in result.message and tries:
+        print(f"  hint: try {', or '.join(tries)}")
+    if "gradient" in result.message:
+        route = get_gradient(spec.gradient)
+        instead = "" if route.exact else f"; --gradient {DEFAULT.name} is exact at the same cost"
+        print(f"  hint: '{command_line(spec, 'gradcheck')}' measures the gradient and how far "
+              f"its linear model holds{instead}")
 
 
 def command_line(spec, command: str) -> str:

@@ -69,10 +69,16 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
 
     prob = build_problem(module, **overrides)
     defaults = solve_defaults(module, overrides)
-    shooting = {**defaults.get("shooting", {}), **(shooting or {})} or None
+    asked = dict(shooting or {})
+    shooting = {**defaults.get("shooting", {}), **asked} or None
     if options.get("homotopy") is None and defaults.get("homotopy"):
         options["homotopy"] = [dict(h) for h in defaults["homotopy"]]
     if shooting and shooting.get("segments", 1) <= 1:
+        others = sorted(set(asked) - {"segments"})
+        if others:
+            raise ValueError(f"--shooting {', '.join(others)} (or --scheduler) set multiple "
+                             f"shooting's options, but this run has none: give --segments K "
+                             f"(K >= 2){'' if 'segments' in asked else f'; {prob.name} asks for none'}")
         shooting = None
     given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
              if v is not None}
@@ -140,7 +146,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
              start=start_trajectory)
         print(f"  pictures drawn in {out}/")
         write_outputs(spec, result.trajectory)
-    hint(result.status, spec)
+    hint(result, spec)
     check()  # a signal after the last safe point still counts
     return exit_code(result.status, signum)
 

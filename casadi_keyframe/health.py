@@ -182,8 +182,7 @@ def route_limits(route: str, model) -> list[str]:
     and damping terms make its backward pass grow without bound, and with self-contact."""
     if route != "swapped":
         return []
-    from .models.penalty import BodyPenalty
-    from .models.self_contact import SelfContact
+    from .models.penalty import BodyPenalty, SelfPenalty
 
     families = getattr(model, "families", ())
     curved = sorted({f.body.kind for f in families
@@ -192,7 +191,7 @@ def route_limits(route: str, model) -> list[str]:
     if curved:
         out.append(f"penalty contact on curved bodies ({', '.join(curved)}s) can make it "
                    "overflow")
-    if any(isinstance(f, SelfContact) for f in families):
+    if any(isinstance(f, SelfPenalty) for f in families):
         out.append("self-contact makes it inaccurate")
     return out
 

@@ -297,8 +297,9 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
     symbols ``x``, ``v``, ``params``, as ``{"force", "jac", "df_dx", "vjp", "jvp"}``:
 
     * ``force(x, v, *params) -> f``;
-    * ``jac(...) -> (vec K, vec D)``, row-major 3x3 blocks, ``D = df/dv`` and K the stiffness
-      the implicit step uses: ``stiffness`` when given (a 3x3 expression, e.g. the force
+    * ``jac(...) -> (vec K, vec D)``, row-major (3x3 for a law of one particle or of a
+      pair's difference, ``3k x 3k`` for k stacked particles), ``D = df/dv`` and K the
+      stiffness the implicit step uses: ``stiffness`` when given (an expression, e.g. the force
       Jacobian with its destabilising parts clamped away so the step matrix stays positive
       definite), else ``d/dx`` of the force at ``v = 0`` (the damping's position derivative
       is left out, so K stays symmetric);

@@ -11,9 +11,10 @@ second derivatives contracted per interaction (:func:`~..kernels.interaction_ker
 parameters (:meth:`~Interaction.parameters`).
 
 What a family acts over or decides per step is its ``found``, given back to every method:
-what :meth:`find` sees at x (self-contact's pairs), or what a step decided and carries to the
-next (:meth:`decide`, :meth:`revise`, :meth:`carry`, :meth:`decision_parameters`: the
-springs taken taut, the particles the hold holds).
+what :meth:`find` sees at x (self-contact's pairs), or what a step decides (:meth:`decide`),
+learns from its solve (:meth:`solved`), revises at its end (:meth:`stops`, :meth:`revise`),
+carries to the next (:meth:`carry`) and gives the symbolic step
+(:meth:`decision_parameters`): the springs taken taut, the particles the hold holds.
 
 Three shapes of family, after jax-md's split of a law and its lifting: a
 :class:`PairInteraction` lifts a kernel of ``d = x_j - x_i`` over pairs (``+f`` on i, ``-f``

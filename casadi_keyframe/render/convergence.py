@@ -91,9 +91,10 @@ def _draw(axes, history) -> list[str]:
     for ax, xkey, xlabel in ((axes[0], "iteration", "iteration (0: the start)"),
                              (axes[1], "seconds", "wall time [s]")):
         x = np.array([h.get(xkey, i) for i, h in enumerate(history)], float)
-        alone = {"marker": "o", "ms": 6} if len(history) == 1 else {}  # a point, not a line
+        alone = {"marker": "o", "ms": 5} if len(history) == 1 else {}  # a point, not a line
         ax.plot(x, _shown(f, high), color=AGENT, lw=2.2, label="objective",
-                **(alone or {"marker": "." if len(history) < 30 else None}))
+                **({"marker": "o", "ms": 9} if alone else
+                   {"marker": "." if len(history) < 30 else None}))
         ax.plot(x, _shown(k, high | zero), "--", color=PARTICLE, lw=1.3,
                 label="keyframe error", **alone)
         ax.plot(x, _shown(c, high), ":", color=CONTROL, lw=1.3, label="control cost", **alone)

@@ -181,7 +181,7 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
                 panel = BlendPanel(ax, problem, trajectory, p, range(steps + 1), box)
                 panel.draw(k, full_title=False)
                 middle = panel if p == "blend" else middle
-        save_grid(fig, path, titled(problem.name, middle.markers, trajectory), middle,
+        save_grid(fig, path, titled(problem.name, middle.markers, trajectory, problem), middle,
                   _handles())
     finally:
         plt.close(fig)

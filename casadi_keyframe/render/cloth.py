@@ -363,7 +363,7 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
             panel = TrajectoryPanel(ax, problem, trajectory, box=box,
                                     camera=keyframe_camera(problem, [n], trajectory))
             panel.draw(n, full_title=False, ahead=False)
-        save_grid(fig, path, titled(problem.name, panel.markers, trajectory), panel,
+        save_grid(fig, path, titled(problem.name, panel.markers, trajectory, problem), panel,
                   scale=panel.scale if coloured(problem, frames) else None)
     finally:
         plt.close(fig)
@@ -391,7 +391,7 @@ def side_by_side(problem, rows: dict, path, frames=None) -> Path:
                 panel.draw(n, full_title=False, ahead=False)
                 ax.set_title(f"{label}: " + ax.get_title() if c == 0 else ax.get_title(),
                              fontsize=8)
-        title = "; ".join(titled(label, panel.markers, t) for label, t in rows.items())
+        title = "  |  ".join(titled(label, panel.markers, t, problem) for label, t in rows.items())
         save_grid(fig, path, f"{problem.name} \u2014 {title}", panel,
                   scale=panel.scale if coloured(problem, frames) else None)
     finally:

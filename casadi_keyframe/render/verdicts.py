@@ -121,11 +121,12 @@ def stack_height(labels, fontsize: float) -> float:
     return fontsize * (LINE * lines + GAP * max(len(texts) - 1, 0)) if texts else 0.0
 
 
-def titled(name: str, markers, trajectory) -> str:
+def titled(name: str, markers, trajectory, problem=None) -> str:
     """``"name: 3 of 4 keyframes hit"`` over the keyframes the goal judges (``name`` alone
-    when it judges none)."""
+    when it judges none), then what the motion breaks of ``problem``'s physical limits
+    (``"; torn: stretch 1.88 at frame 2 (limit 1.3)"``), which the goal judges too."""
     judged = [c for c in checks_at(markers, trajectory) if c.met is not None]
-    if not judged:
-        return name
-    hit = sum(c.met for c in judged)
-    return f"{name}: {hit} of {len(judged)} keyframe{'s' * (len(judged) > 1)} hit"
+    broken = [] if problem is None else problem.physical_shortfall(trajectory)
+    hits = (f": {sum(c.met for c in judged)} of {len(judged)} "
+            f"keyframe{'s' * (len(judged) > 1)} hit" if judged else "")
+    return name + hits + "".join(f"; {b}" for b in broken)

@@ -11,10 +11,10 @@ from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, Smoothness, S
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.optimize import solve
 from casadi_keyframe.optimize.multipliers import Multipliers
-from casadi_keyframe.optimize.segments import boundaries
 from casadi_keyframe.optimize.shooting import Shooting
-from casadi_keyframe.optimize.shooting_nodes import initial_nodes
-from casadi_keyframe.optimize.workers import LocalPool, Serial
+from casadi_keyframe.optimize.shooting.nodes import initial_nodes
+from casadi_keyframe.optimize.shooting.segments import boundaries
+from casadi_keyframe.optimize.shooting.workers import LocalPool, Serial
 from casadi_keyframe.scenes.sheets import hanging_sheet
 from casadi_keyframe.state import State
 
@@ -240,7 +240,7 @@ def test_solve_with_shooting_reports_each_part_and_judges_by_the_controls_own_ru
 def test_segments_on_a_dask_cluster_give_the_same_numbers():
     distributed = pytest.importorskip("distributed")
     from casadi_keyframe import load_problem
-    from casadi_keyframe.optimize.dask_segments import DaskPool
+    from casadi_keyframe.optimize.shooting.dask_pool import DaskPool
 
     prob = load_problem("cloth_shapes", rows=3, cols=3, steps=12)
     shooting, z, mult = random_point(prob, 3, np.random.default_rng(2))
@@ -261,7 +261,7 @@ def test_a_new_round_evaluates_its_own_merit_at_the_point_the_last_one_ended():
     """The multipliers move between rounds, so the memo of the last point is stale: a round
     that started from it with the old merit's value and gradient failed its first line
     search (seen: every other round of the cape's 1 iteration)."""
-    from casadi_keyframe.optimize.shooting_search import ShootingEvaluator
+    from casadi_keyframe.optimize.shooting.stage import ShootingEvaluator
 
     prob = sheet_problem()
     shooting, z, mult = random_point(prob, 3, np.random.default_rng(4))

@@ -30,7 +30,7 @@ from .goal import GoalReached, check_stop
 from .methods import check_options, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .shooting_search import run_shooting, shooting_options
+from .shooting import run_shooting, shooting_options
 from .result import Result, assemble
 from .stages import carry, stage_name, stage_problems
 
@@ -88,9 +88,9 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
     same frames, e.g. the true problem of an augmented-Lagrangian round).
 
-    ``shooting`` (a number of segments K, or :class:`~.shooting_search.ShootingOptions`
+    ``shooting`` (a number of segments K, or :class:`~.shooting.ShootingOptions`
     or a dict of them) runs multiple shooting first on each stage
-    (:mod:`.shooting_search`): controls and the states at K - 1 nodes searched together,
+    (:mod:`.shooting.stage`): controls and the states at K - 1 nodes searched together,
     the segments' defects held by multipliers; its controls then start the stage's own
     search (unless ``polish`` is off), which stops at once if the goal is already met.  After
     the first stage the nodes start on the run of the controls carried over (``"guess"``).

@@ -16,94 +16,21 @@ already met and otherwise closes what the defects left.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
-from ..interrupts import check, handled
-from ..objectives import StateKeyframe
-from ..state import SimulationError
-from .goal import GoalReached, verdict
-from .methods import get_method
-from .multipliers import KeyframeMultipliers, Multipliers
-from .outcome import CONVERGED, INTERRUPTED, LIMIT
-from .result import history_record
-from .shooting import Shooting
-from .shooting_nodes import INITS, initial_nodes, reference_run
+from ...interrupts import check, handled
+from ...objectives import StateKeyframe
+from ...state import SimulationError
+from ..goal import GoalReached, verdict
+from ..methods import get_method
+from ..multipliers import KeyframeMultipliers, Multipliers
+from ..outcome import CONVERGED, INTERRUPTED, LIMIT
+from ..result import history_record
+from .form import Shooting
+from .nodes import initial_nodes, reference_run
+from .options import ShootingOptions
 from .workers import segment_runner
-
-
-FORMULATIONS = ("lagrangian", "ipopt")
-
-
-@dataclass(frozen=True)
-class ShootingOptions:
-    """How multiple shooting runs (``solve(..., shooting=...)``).
-
-    * ``segments``: K, the segments the horizon is cut into (1: single shooting);
-    * ``init``: where the node states start (:mod:`.shooting_nodes`): ``"passive"``,
-      ``"guess"`` (the start controls' run: no defect), ``"target"``, ``"blend"``, or a
-      function of the problem giving a path of positions (a problem's own guess of states);
-    * ``rounds``: augmented-Lagrangian rounds at most (the stage's ``maxiter`` is shared
-      among them);
-    * ``workers``: processes sweeping the segments (1: this one); ``scheduler``: a Dask
-      scheduler's address instead;
-    * ``penalty``: factor on the defects' starting weights (1: a defect as large as the
-      tolerance costs what the keyframe's miss of that size costs); ``growth``: factor a
-      weight grows by where its defect did not shrink to a quarter;
-    * ``polish``: end with the stage's single-shooting search from the result;
-    * ``hold``: hold the StateKeyframes by multipliers too (``"lagrangian"`` only);
-    * ``formulation``: ``"lagrangian"`` (the defects held by multipliers, rounds of the
-      solve's method on the merit function) or ``"ipopt"`` (IPOPT with the defects as
-      constraints and their Jacobian by one backward sweep per row,
-      :mod:`.shooting_ipopt`; one run, ``rounds`` unused).
-    """
-
-    segments: int
-    init: str = "passive"
-    rounds: int = 8
-    workers: int = 1
-    scheduler: str | None = None
-    penalty: float = 1.0
-    growth: float = 10.0
-    polish: bool = True
-    hold: bool = True
-    formulation: str = "lagrangian"
-
-
-def shooting_options(value) -> ShootingOptions | None:
-    """``value`` (None, a whole number K, a dict of :class:`ShootingOptions` fields, or one)
-    as checked options, or None for no multiple shooting; ValueError naming what is wrong."""
-    if value is None or isinstance(value, ShootingOptions):
-        opts = value
-    elif isinstance(value, dict):
-        unknown = sorted(set(value) - set(ShootingOptions.__dataclass_fields__))
-        if unknown:
-            raise ValueError(f"shooting: unknown option(s) {unknown}; it takes "
-                             f"{', '.join(ShootingOptions.__dataclass_fields__)}")
-        opts = ShootingOptions(**value)
-    elif isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        opts = ShootingOptions(int(value))
-    else:
-        raise ValueError(f"shooting must be a number of segments, a dict of options or "
-                         f"ShootingOptions, got {value!r}")
-    if opts is None:
-        return None
-    if opts.formulation not in FORMULATIONS:
-        raise ValueError(f"shooting formulation must be one of {', '.join(FORMULATIONS)}, got "
-                         f"{opts.formulation!r}")
-    if not callable(opts.init) and opts.init not in INITS:
-        raise ValueError(f"shooting init must be one of {', '.join(INITS)} or a function of "
-                         f"the problem giving a path of positions, got {opts.init!r}")
-    for name in ("segments", "rounds", "workers"):
-        got = getattr(opts, name)
-        if isinstance(got, bool) or not isinstance(got, (int, np.integer)) or got < 1:
-            raise ValueError(f"shooting {name} must be a whole number >= 1, got {got!r}")
-    if not (np.isfinite(opts.penalty) and opts.penalty > 0 and np.isfinite(opts.growth)
-            and opts.growth >= 1):
-        raise ValueError(f"shooting penalty must be > 0 and growth >= 1, got "
-                         f"{opts.penalty!r} and {opts.growth!r}")
-    return opts
 
 
 class ShootingEvaluator:
@@ -269,7 +196,7 @@ def true_objective(problem, u, info) -> tuple[float, float]:
 def _nlp(problem, opts, search, ev, z, stage, goal, export):
     """IPOPT on the constrained form: ``(status, message, 1)``; its last point becomes the
     evaluator's best."""
-    from .shooting_ipopt import run_nlp
+    from .ipopt_form import run_nlp
 
     hook = _Hook(problem, search, ev, stage, goal, export, 0)
     try:

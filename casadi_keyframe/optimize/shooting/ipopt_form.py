@@ -2,7 +2,7 @@
 objective on the stitched segments, the scaled defects as equality constraints.
 
 IPOPT needs the constraints' Jacobian as a matrix: each defect row is one backward sweep
-over its segment (:meth:`~.shooting.Shooting.defect_jacobian`, reusing the forward pass's
+over its segment (:meth:`~.form.Shooting.defect_jacobian`, reusing the forward pass's
 factorisations, in the workers that ran it), so a Jacobian costs ``2 x free components``
 sweeps per segment, and the Lagrangian's Hessian is IPOPT's limited-memory one.  The
 objective, its gradient, the defects and their Jacobian are Callbacks over one memoised
@@ -16,9 +16,9 @@ import signal
 import casadi as ca
 import numpy as np
 
-from ..interrupts import Interrupted, catching
-from .ipopt import IterationHook, ipopt_options
-from .outcome import ipopt_outcome
+from ...interrupts import Interrupted, catching
+from ..ipopt import IterationHook, ipopt_options
+from ..outcome import ipopt_outcome
 
 
 class _Point:

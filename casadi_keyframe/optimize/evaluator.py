@@ -57,6 +57,12 @@ class Evaluator:
         """Gradients computed: the evaluations that did not fail."""
         return self.nfev - self.failures
 
+    def counts(self) -> dict:
+        """Its evaluations, gradients, seconds and failed simulations, as a
+        :class:`~.result.Stage` names them."""
+        return {"nfev": self.nfev, "njev": self.njev, "evaluation_seconds": self.seconds,
+                "failed_simulations": self.failures}
+
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
         if self.last_u is not None and np.array_equal(u, self.last_u):

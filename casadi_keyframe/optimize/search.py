@@ -31,7 +31,7 @@ from .methods import check_options, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
 from .shooting import run_shooting, shooting_options
-from .result import Result, assemble
+from .result import Result, assemble, stage_record
 from .stages import carry, stage_name, stage_problems
 
 
@@ -222,14 +222,9 @@ class _Search:
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         status, message = judge(status, message, ev.verdict())
-        return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
-                "particles": problem.model.n,
-                "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
-                "fun": float(ev.best_f),
-                "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
-                "success": status == CONVERGED, "status": status, "message": message,
-                "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
-                "failed_simulations": ev.failures, **ev.health.stage_fields()}
+        return stage_record(problem, stage[0], nit=len(self.history) - first, fun=ev.best_f,
+                            status=status, message=message, seconds=time.perf_counter() - t,
+                            start=ev.start, **ev.counts(), **ev.health.stage_fields())
 
     def _search(self, problem, ev, u0, stage):
         k, count = stage

@@ -26,7 +26,7 @@ from ..goal import GoalReached, verdict
 from ..methods import get_method
 from ..multipliers import KeyframeMultipliers, Multipliers
 from ..outcome import CONVERGED, INTERRUPTED, LIMIT
-from ..result import history_record
+from ..result import history_record, stage_record
 from .form import Shooting
 from .nodes import initial_nodes, reference_run
 from .options import ShootingOptions
@@ -124,16 +124,12 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
     info = ev.best_info or {}
     u = shooting.unpack(ev.best_z)[0] if ev.best_z is not None else u0
     fun = true_objective(problem, u, info)[1] if info else np.nan
-    record = {"stage": stage, "dt": problem.dt, "steps": problem.steps,
-              "particles": problem.model.n, "nit": len(search.history) - first,
-              "nfev": ev.nfev, "njev": ev.njev, "fun": float(fun),
-              "start_objective": None, "start_keyframe_error": None,
-              "success": status == CONVERGED, "status": status,
-              "message": f"multiple shooting, {opts.segments} segments, {rounds} rounds: "
-                         f"{message}", "seconds": time.perf_counter() - t,
-              "evaluation_seconds": ev.seconds, "failed_simulations": ev.failures,
-              "segments": opts.segments,
-              "defect": shooting.defect_size(info.get("defects", []))}
+    record = stage_record(
+        problem, stage, nit=len(search.history) - first, fun=fun, status=status,
+        message=f"multiple shooting, {opts.segments} segments, {rounds} rounds: {message}",
+        seconds=time.perf_counter() - t, nfev=ev.nfev, njev=ev.njev,
+        evaluation_seconds=ev.seconds, failed_simulations=ev.failures,
+        segments=opts.segments, defect=shooting.defect_size(info.get("defects", [])))
     return record, u, shooting.problem
 
 

@@ -10,8 +10,10 @@ from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, Smoothness, S
                              StepForces, StrainLimit)
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.optimize import solve
+from casadi_keyframe.optimize.evaluator import Evaluator
 from casadi_keyframe.optimize.multipliers import Multipliers
 from casadi_keyframe.optimize.shooting import Shooting
+from casadi_keyframe.optimize.shooting.merit import ShootingMerit
 from casadi_keyframe.optimize.shooting.nodes import initial_nodes
 from casadi_keyframe.optimize.shooting.segments import boundaries
 from casadi_keyframe.optimize.shooting.workers import LocalPool, Serial
@@ -261,11 +263,10 @@ def test_a_new_round_evaluates_its_own_merit_at_the_point_the_last_one_ended():
     """The multipliers move between rounds, so the memo of the last point is stale: a round
     that started from it with the old merit's value and gradient failed its first line
     search (seen: every other round of the cape's 1 iteration)."""
-    from casadi_keyframe.optimize.shooting.stage import ShootingEvaluator
-
     prob = sheet_problem()
     shooting, z, mult = random_point(prob, 3, np.random.default_rng(4))
-    ev = ShootingEvaluator(shooting, Serial(prob, shooting.spans), mult)
+    merit = ShootingMerit(prob, shooting, Serial(prob, shooting.spans), mult)
+    ev = Evaluator(prob, None, None, merit=merit, report="best", failed_best=False)
     before = ev(z)[0]
     c = ev.last_info["defects"]
     mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},

@@ -25,7 +25,7 @@ class RouteMerit:
 
     An evaluation's ``info`` keeps the trajectory the route simulated (:func:`watched`), so
     the goal check at the best point costs no simulation.  A merit of other variables
-    (multiple shooting's) gives the same methods.
+    (multiple shooting's :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
     """
 
     def __init__(self, problem, gradient):

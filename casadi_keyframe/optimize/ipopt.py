@@ -3,9 +3,9 @@
 The objective is a ``casadi.Callback`` whose Jacobian is another Callback returning the
 chosen gradient route's gradient; equality constraints with a sparse Jacobian (multiple
 shooting's defects) are a second pair of the same Callbacks (:func:`search`).  IPOPT runs
-with a limited-memory Hessian.  Every Callback
-is kept referenced on the solver (one collected early makes IPOPT fail silently with
-``Invalid_Number_Detected``), and ``stats()['return_status']`` says how it ended.
+with a limited-memory Hessian.  Every Callback is kept referenced on the solver (one
+collected early makes IPOPT fail silently with ``Invalid_Number_Detected``), and
+``stats()['return_status']`` says how it ended.
 
 ``options`` go to IPOPT over this module's defaults (limited-memory Hessian with 20 pairs,
 ``max_iter``, ``tol``, silent).  Their names are IPOPT's own: IPOPT decides whether it

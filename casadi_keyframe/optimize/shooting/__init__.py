@@ -5,6 +5,7 @@ their continuity held by multipliers or by IPOPT's constraints, on the optimizer
 * :mod:`.options`: :class:`ShootingOptions`, :func:`shooting_options`;
 * :mod:`.form`: :class:`Shooting`, the variables, the merit and its exact gradient, the
   defects and their Jacobian;
+* :mod:`.merit`: the merit as the evaluator evaluates it and an iteration's record reads it;
 * :mod:`.segments`: a segment's sweeps through the public loops; :mod:`.workers` (this
   process, forked processes) and :mod:`.dask_pool` (Dask actors) run them;
 * :mod:`.nodes`: where the node states start;

@@ -239,6 +239,23 @@ def test_solve_with_shooting_reports_each_part_and_judges_by_the_controls_own_ru
         solve(prob, shooting={"segments": 3, "nodes": "blend"})
 
 
+def test_the_ipopt_formulation_holds_the_defects_as_constraints_and_reports_its_iterates():
+    """IPOPT with the defects as equality constraints (their sparse Jacobian by backward
+    sweeps): the defects stay a fraction of the tolerance while the objective falls, and
+    the stage ends on IPOPT's last iterate, the one each record described last."""
+    prob = sheet_problem(ground=False)
+    result = solve(prob, maxiter=15, quiet=True, stop="method",
+                   shooting={"segments": 3, "init": "blend", "formulation": "ipopt",
+                             "polish": False})
+    (stage,) = result.stages
+    records = [h for h in result.history if "defect" in h]
+    assert "3 segments, 1 rounds" in stage["message"] and "IPOPT" in stage["message"]
+    assert len(records) == stage["nit"] == 15 and {h["round"] for h in records} == {0}
+    assert records[-1]["objective"] < 0.5 * records[0]["objective"]
+    assert stage["defect"] < 0.1 and stage["defect"] == pytest.approx(records[-1]["defect"])
+    assert stage["fun"] == pytest.approx(records[-1]["objective"], rel=1e-12)
+
+
 def test_segments_on_a_dask_cluster_give_the_same_numbers():
     distributed = pytest.importorskip("distributed")
     from casadi_keyframe import load_problem

@@ -212,7 +212,7 @@ def test_the_status_says_how_the_search_ended(race):
     for method in ("lbfgsb", "ipopt"):
         r = solve(race, method, maxiter=3, quiet=True)
         assert r.status == LIMIT and not r.success and r.nit == 3
-        assert r.message.startswith("iteration limit reached (3) before converging")
+        assert r.message.startswith("iteration limit reached (3 iterations in this stage) before converging")
         assert r.summary()["status"] == LIMIT and r.summary()["status_name"] == "limit reached"
 
 

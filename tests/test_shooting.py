@@ -227,8 +227,10 @@ def test_solve_with_shooting_reports_each_part_and_judges_by_the_controls_own_ru
                    shooting={"segments": 3, "init": "blend", "rounds": 2})
     shooting, polish = result.stages
     assert shooting["segments"] == 3 and "multiple shooting, 3 segments" in shooting["message"]
-    assert "segments" not in polish and polish["stage"] == shooting["stage"] == 0
+    assert "segments" not in polish and (shooting["stage"], polish["stage"]) == (0, 1)
     assert result.nit == shooting["nit"] + polish["nit"] == len(result.history)
+    assert [h["stage"] for h in result.history] == [0] * shooting["nit"] + [1] * polish["nit"]
+    assert result.fun == polish["fun"]  # one story: the last stage's objective is the result's
     records = [h for h in result.history if "defect" in h]
     assert len(records) == shooting["nit"] and records[-1]["defect"] < records[0]["defect"]
     # the result is the problem's own: its controls simulated from the start

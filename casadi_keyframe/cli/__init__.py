@@ -7,6 +7,8 @@ import traceback
 
 from ..export.alembic import BlenderError
 from ..loading import OverrideError, ProblemFileError
+from ..optimize.outcome import INTERRUPTED
+from ..runs import exit_code
 from ..state import SimulationError
 from .parser import build_parser
 
@@ -36,6 +38,8 @@ def main(argv=None) -> int:
     except BlenderError as err:  # an export through Blender that Blender did not finish
         _error(err, debug)
         return 1
+    except KeyboardInterrupt:  # a Ctrl-C outside the guarded work (its files are whole)
+        return exit_code(INTERRUPTED)
 
 
 def _error(err, debug: bool, more: str = "", *, text: str | None = None) -> None:

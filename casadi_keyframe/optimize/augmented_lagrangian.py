@@ -23,6 +23,7 @@ import numpy as np
 from ..adjoints import get_gradient
 from ..saved import as_checkpoint
 from .evaluator import evaluate_final
+from .kept import Kept, kept_outcome, kept_stage
 from .goal import check_stop, verdict
 from .multipliers import KeyframeMultipliers
 from .outcome import INTERRUPTED, LIMIT
@@ -57,6 +58,8 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     checkpoint = as_checkpoint(options.pop("checkpoint", None))
     stop = check_stop(options.pop("stop", None), problem)
     history, stages, start = [], [], time.perf_counter()
+    kept = Kept(problem, problem, hard.checkpoint(checkpoint, first), by_objective=False)
+    kept.offer(u, "its start")
     res = None
     for k in range(first, max(rounds, first + 1)):
         left = None if time_limit is None else max(time_limit - (time.perf_counter() - start),
@@ -67,12 +70,19 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
         stages.append(_round(problem, k, hard.scale, res))
+        kept.offer(u, f"round {k}'s result", trajectory=traj, stage=k, nit=len(history))
         if (res.status == INTERRUPTED or _time_up(time_limit, start)
                 or (stop == "goal" and verdict(problem, traj).met)):
             break
         hard.update(traj, multipliers)
-    f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
+    earlier = kept.u is not u  # an earlier round, or the start, was better than the last
+    if earlier:
+        u, traj = kept.u, kept.trajectory
+        status, message = kept_outcome(kept, status, message)
+    f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
+    if earlier:
+        kept_stage(problem, stages, f, status, message)
     if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and _time_up(time_limit,
                                                                                    start):
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "

@@ -24,12 +24,14 @@ class RouteMerit:
     the ``gradient`` route (a name or strategy, :attr:`route`).
 
     An evaluation's ``info`` keeps the trajectory the route simulated (:func:`watched`), so
-    the goal check at the best point costs no simulation.  A merit of other variables
-    (multiple shooting's :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
+    judging the goal (``goal``, default ``problem``: the true targets where ``problem``'s
+    keyframes aim elsewhere) costs no simulation.  A merit of other variables (multiple
+    shooting's :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
     """
 
-    def __init__(self, problem, gradient):
+    def __init__(self, problem, gradient, goal=None):
         self.problem, self.route = problem, get_gradient(gradient)
+        self.goal = goal or problem
         self._seen = {}
         self._watched = watched(problem, self._seen)
 
@@ -43,8 +45,16 @@ class RouteMerit:
 
     def describe(self, u, f, info):
         """What an iteration's record says of an evaluated point: ``(controls, objective,
-        keyframe error, extra record keys)``."""
-        return u, f, f - self.problem.control_cost(u)[0], {}
+        keyframe error, extra record keys)``, of the goal's true targets."""
+        control = self.goal.control_cost(u)[0]
+        if self.goal is not self.problem:
+            f = self.goal.state_cost(self.run(u, info), gradient=False)[0] + control
+        return u, f, f - control, {}
+
+    def meets(self, goal, info) -> bool:
+        """Whether the evaluated point meets ``goal`` (judged on the run it kept)."""
+        traj = None if info is None else info["trajectory"]
+        return traj is not None and verdict(goal, traj).met
 
     def may_meet(self, goal, info) -> bool:
         """Whether the point may meet ``goal`` (the merit's cheap test before its run)."""
@@ -64,18 +74,20 @@ class Evaluator:
     It evaluates ``merit`` (default: ``problem``'s objective by the ``gradient`` route,
     :class:`RouteMerit`).  ``stage`` is the stage it serves; ``export`` maps its controls to
     the final problem's grid for the checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint`
-    or None).  Each iteration's record describes the ``report``: the ``"last"`` point
-    evaluated or the ``"best"``; with ``failed_best`` a failed evaluation stands as the best
-    while there is no other.  The goal (:mod:`.goal`) is judged by the keyframe terms of
-    ``goal`` (default ``problem``); with ``stop="goal"`` each iteration checks it at the
-    best point and raises :class:`~.goal.GoalReached` once it is met.
+    or None; ``final``: its points are the final problem's, comparable with any other
+    there).  The best point is judged by the goal (:mod:`.goal`, the terms and limits of
+    ``goal``, default ``problem``) first, then by the merit; each iteration's record
+    describes the ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
+    ``failed_best`` a failed evaluation stands as the best while there is no other.  With
+    ``stop="goal"`` each iteration raises :class:`~.goal.GoalReached` once the best point
+    meets the goal.
     """
 
     def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None,
-                 goal=None, stop: str = "method", merit=None, report: str = "last",
-                 failed_best: bool = True):
-        self.problem = problem
-        self.merit = RouteMerit(problem, gradient) if merit is None else merit
+                 goal=None, stop: str = "method", merit=None, report: str = "best",
+                 failed_best: bool = True, final: bool = True):
+        self.problem, self.final = problem, final
+        self.merit = RouteMerit(problem, gradient, goal) if merit is None else merit
         self.gradient = self.merit.route
         self.checkpoint, self.stage = checkpoint, stage
         self.export = export or (lambda u: u)
@@ -99,6 +111,7 @@ class Evaluator:
         self.last_u = self.last = self.last_info = None
         self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.best_info = self.best_traj = self._judged = None
+        self.best_met = False
 
     @property
     def njev(self) -> int:
@@ -135,9 +148,11 @@ class Evaluator:
         self.seconds += time.perf_counter() - t
         self.nfev += 1
         self.last_u, self.last, self.last_info = u, (f, g), info
-        if f < self.best_f and (info is not None or self.failed_best):
+        met = info is not None and self.merit.meets(self.goal, info)
+        if (not met, f) < (not self.best_met, self.best_f) and (
+                info is not None or self.failed_best):
             self.best_u, self.best_f, self.best_g, self.best_info = u, f, g, info
-            self.best_traj = None
+            self.best_traj, self.best_met = None, met
         return f, g
 
     def take(self, x) -> bool:
@@ -173,6 +188,22 @@ class Evaluator:
         if found.checked and found.met:
             raise GoalReached(found, iteration)
 
+    def best_objective(self) -> float:
+        """The best point's objective on the goal's true targets (the merit's value where
+        they are its own)."""
+        return float(self._described("best")[1]) if self.best_u is not None else np.inf
+
+    def keep(self, nit: int = 0) -> None:
+        """Offer the best point to the checkpoint (on the final grid, with its objective on
+        the goal's true targets, whether it meets the goal, the iterations so far), which
+        keeps it only if it is better than what it holds."""
+        if self.checkpoint is None or self.best_u is None:
+            return
+        u, fun = self._described("best")[:2]
+        self.checkpoint.write(self.export(u), fun=float(fun), met=bool(self.best_met),
+                              final=self.final, nit=nit, stage=self.stage,
+                              stage_dt=float(self.problem.dt))
+
     def _described(self, which: str):
         if which == "best":
             return self.merit.describe(self.best_u, self.best_f, self.best_info)
@@ -189,11 +220,7 @@ class Evaluator:
             self.problem, u, objective=objective, keyframe_error=keyframe,
             iteration=len(history) + 1, stage=self.stage,
             seconds=time.perf_counter() - start, nfev=self.nfev, **growth, **extra, **more))
-        if self.checkpoint is not None and self.best_u is not None:
-            best, fun = (u, objective) if self.report == "best" else (
-                self._described("best")[:2])
-            self.checkpoint.write(self.export(best), fun=float(fun), nit=len(history),
-                                  stage=self.stage, stage_dt=float(self.problem.dt))
+        self.keep(nit=len(history))
         if bar is not None:
             bar.update(1)
             bar.set_postfix(f=f"{objective:.4g}")

@@ -41,9 +41,11 @@ def lbfgsb_outcome(message: str, *, maxiter: int, maxfun: int) -> tuple[int, str
                "the objective stopped decreasing (relative reduction below ftol)")
         return CONVERGED, f"converged: {why}{tag}"
     if "ITERATIONS" in text:
-        return LIMIT, f"iteration limit reached ({maxiter}) before converging{tag}"
+        return LIMIT, (f"iteration limit reached ({maxiter} iterations in this stage) before "
+                       f"converging{tag}")
     if "EVALUATIONS" in text or "F,G" in text:
-        return LIMIT, f"evaluation limit reached ({maxfun}) before converging{tag}"
+        return LIMIT, (f"evaluation limit reached ({maxfun} evaluations in this stage) before "
+                       f"converging{tag}")
     if text.startswith("ABNORMAL"):
         return FAILED, ("line search failed: no step along the search direction lowered the "
                         f"objective; {INACCURATE}{tag}")
@@ -62,7 +64,8 @@ def ipopt_outcome(return_status: str, *, maxiter: int) -> tuple[int, str]:
     if return_status == "Solved_To_Acceptable_Level":
         return CONVERGED, f"converged to IPOPT's acceptable tolerance{tag}"
     if return_status == "Maximum_Iterations_Exceeded":
-        return LIMIT, f"iteration limit reached ({maxiter}) before converging{tag}"
+        return LIMIT, (f"iteration limit reached ({maxiter} iterations in this stage) before "
+                       f"converging{tag}")
     if return_status in ("Maximum_WallTime_Exceeded", "Maximum_CpuTime_Exceeded"):
         return LIMIT, f"time limit reached before converging{tag}"
     why = _IPOPT_FAILURES.get(return_status, "IPOPT failed")

@@ -30,6 +30,11 @@ class ShootingMerit:
         keyframe, objective = true_objective(self.problem, u, info)
         return u, objective, keyframe, {"defect": self.shooting.defect_size(info["defects"])}
 
+    def meets(self, goal, info) -> bool:
+        """Never judged met on its own: a stitched run is not the controls' run (the rounds
+        rank points by the merit alone; the stage's result is judged as a run)."""
+        return False
+
     def may_meet(self, goal, info) -> bool:
         """Whether the point may meet ``goal``: its defects within their tolerance and its
         stitched trajectory meeting it (then its controls' own run is judged)."""

@@ -53,7 +53,7 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
     runner = segment_runner(problem, shooting.spans, opts.workers, opts.scheduler, origin)
     ev = Evaluator(problem, None, search.checkpoint, stage=stage, export=export, goal=goal,
                    stop=search.stop, merit=ShootingMerit(problem, shooting, runner, mult),
-                   report="best", failed_best=False)
+                   failed_best=False, final=False)
     z = shooting.pack(u0, initial_nodes(problem, shooting, opts.init, reference))
     first, rounds, status, message = len(search.history), 0, None, ""
     try:

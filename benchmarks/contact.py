@@ -25,6 +25,7 @@ import time  # noqa: E402
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
+from casadi_keyframe.models import COLLISIONS  # noqa: E402
 from casadi_keyframe.scenes.drops import drop_model, drop_start  # noqa: E402
 from casadi_keyframe.state import SimulationError  # noqa: E402
 
@@ -67,7 +68,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[25, 50])
     ap.add_argument("--speeds", type=float, nargs="+", default=[4.0, 8.0, 12.0])
-    ap.add_argument("--models", nargs="+", default=["penalty", "guarded", "constraint"])
+    ap.add_argument("--models", nargs="+", default=list(COLLISIONS), choices=COLLISIONS)
     ap.add_argument("--duration", type=float, default=0.5)
     ap.add_argument("--dt", type=float, default=1 / 60)
     ap.add_argument("--repeat", type=int, default=1)

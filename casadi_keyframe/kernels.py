@@ -260,6 +260,27 @@ def scatter_pairs(values: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> n
     return out
 
 
+def stencil_values(a: np.ndarray, stencils: np.ndarray) -> np.ndarray:
+    """``(P, k m)``: row p holds the rows ``a[stencils[p, 0]], a[stencils[p, 1]], ...`` of an
+    ``(n, m)`` array, one after another (a kernel's input over stencils of k particles)."""
+    return np.take(a, stencils, axis=0).reshape(stencils.shape[0], -1)
+
+
+def scatter_stencils(values: np.ndarray, stencils: np.ndarray, n: int) -> np.ndarray:
+    """Add each particle's part of ``values`` (``(P, 3 k)``, as :func:`stencil_values`
+    lays them out) into its row of an ``(n, 3)`` array."""
+    flat, rows = values.reshape(-1, 3), stencils.ravel()
+    return np.stack([np.bincount(rows, flat[:, c], minlength=n) for c in range(3)], axis=1)
+
+
+def stencil_incidence(stencils: np.ndarray, n: int) -> ca.DM:
+    """Sparse ``(P k, n)`` matrix with 1 at ``(p k + a, stencils[p, a])``: with
+    ``reshape(per_stencil_columns, 3, P k)`` on its left, :func:`scatter_stencils` in CasADi."""
+    rows = np.arange(stencils.size)
+    return ca.DM(sp.csc_matrix((np.ones(rows.size), (rows, stencils.ravel())),
+                               shape=(rows.size, n)))
+
+
 def pair_incidence(i: np.ndarray, j: np.ndarray, n: int) -> ca.DM:
     """Sparse ``(P, n)`` matrix with +1 at (p, i[p]) and -1 at (p, j[p]).
 
@@ -276,8 +297,9 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
     symbols ``x``, ``v``, ``params``, as ``{"force", "jac", "df_dx", "vjp", "jvp"}``:
 
     * ``force(x, v, *params) -> f``;
-    * ``jac(...) -> (vec K, vec D)``, row-major 3x3 blocks, ``D = df/dv`` and K the stiffness
-      the implicit step uses: ``stiffness`` when given (a 3x3 expression, e.g. the force
+    * ``jac(...) -> (vec K, vec D)``, row-major (3x3 for a law of one particle or of a
+      pair's difference, ``3k x 3k`` for k stacked particles), ``D = df/dv`` and K the
+      stiffness the implicit step uses: ``stiffness`` when given (an expression, e.g. the force
       Jacobian with its destabilising parts clamped away so the step matrix stays positive
       definite), else ``d/dx`` of the force at ``v = 0`` (the damping's position derivative
       is left out, so K stays symmetric);

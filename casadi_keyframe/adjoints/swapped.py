@@ -4,8 +4,7 @@ to a growth bound and known not to apply to some models (:meth:`Swapped.limits`)
 from __future__ import annotations
 
 from ..health import GROWTH_BOUND, warn_route_limits
-from ..models.penalty import BodyPenalty
-from ..models.self_contact import SelfContact
+from ..models.penalty import BodyPenalty, SelfPenalty
 from .adjoint import Adjoint
 
 
@@ -44,7 +43,7 @@ class Swapped(Adjoint):
         if curved:
             out.append(f"penalty contact on curved bodies ({', '.join(curved)}s) can make it "
                        "overflow")
-        if any(isinstance(f, SelfContact) for f in families):
+        if any(isinstance(f, SelfPenalty) for f in families):
             out.append("self-contact makes it inaccurate")
         return out
 

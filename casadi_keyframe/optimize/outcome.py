@@ -83,9 +83,9 @@ def judge(status: int, message: str, verdict) -> tuple[int, str]:
         return status, message
     if verdict.met:
         if status == FAILED:  # the goal is met: how the method then stopped is a detail
-            return CONVERGED, ("converged: every keyframe within its tolerance (then the "
-                               f"method stopped: {message.split('; ')[0]})")
-        return status, f"{message}; every keyframe within its tolerance"
+            return CONVERGED, (f"converged: {verdict.describe()} (then the method stopped: "
+                               f"{message.split('; ')[0]})")
+        return status, f"{message}; {verdict.describe()}"
     missed = verdict.describe()
     if status == CONVERGED:
         return FAILED, (f"search failed: the method stopped short of the goal ({message}); "

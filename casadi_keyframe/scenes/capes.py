@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..integrators import LinearizedBackwardEuler
-from ..models import Attachment, ClothModel, ClothParams
+from ..models import DEFAULT_COLLISION, Attachment, ClothModel, ClothParams
 from ..models.colliders import Contact, Plane
 from ..simulate import simulate
 from .animations import Animation, Walk, fall, walk
@@ -71,7 +71,7 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
                width: float = 0.6, length: float = 1.0, mass: float = 0.4,
                attach_width: float = 0.44, params: ClothParams | None = None,
                dt: float = 1 / 60, lead: float | None = None, contacts: dict | None = None,
-               collision: str = "guarded", jit: bool | None = None) -> ClothModel:
+               collision: str = DEFAULT_COLLISION, jit: bool | None = None) -> ClothModel:
     """The cape as a :class:`ClothModel` on ``character`` moving through ``animation``.
 
     Rest shape: a ``width`` x ``length`` sheet in the xz plane, top row (row 0) along x at

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..integrators import LinearizedBackwardEuler
-from ..models import Capsule, ClothModel, Plane, Sphere
+from ..models import DEFAULT_COLLISION, Capsule, ClothModel, Plane, Sphere
 from ..state import SimulationError
 
 BODIES = ("ground", "sphere", "capsule")
@@ -46,8 +46,9 @@ def drop_start(model, speed: float, tilt: float = 0.0, gap: float = 0.03):
     return x, v
 
 
-def drop(rows: int, body: str, speed: float, *, tilt: float = 0.0, collision: str = "guarded",
-         dt: float = 1 / 60, duration: float = 0.5, solver: str = "auto"):
+def drop(rows: int, body: str, speed: float, *, tilt: float = 0.0,
+         collision: str = DEFAULT_COLLISION, dt: float = 1 / 60, duration: float = 0.5,
+         solver: str = "auto"):
     """Simulate a drop: ``(problem-free trajectory or None, report)``; the report has the
     deepest particle inside the body over all frames (m, and its frame), the largest spring
     stretch, and ``failed`` (the simulation's error) when it blew up."""

@@ -39,7 +39,7 @@ from ..checks import frame_at
 from ..controls import StepForces
 from ..health import GROWTH_BOUND, GradientRouteWarning, past_bound
 from ..integrators import LinearizedBackwardEuler
-from ..models import Capsule, ClothModel, ClothParams, Plane, Sphere
+from ..models import DEFAULT_COLLISION, Capsule, ClothModel, ClothParams, Plane, Sphere
 from ..models.colliders import Contact, signed_distances
 from ..objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from ..problem import ControlProblem
@@ -52,8 +52,8 @@ REFERENCE_DT = 1 / 60  # the step at which ``stiffness`` is dt sqrt(k/m)
 REACH = 1.1  # the swapped route "reaches" when its objective is at most this times the exact's
 
 
-def sheet_model(contact: str, *, stiffness: float, collision: str = "guarded", rows: int = 5,
-                speed: float = 1.0, damping: float = 1.0):
+def sheet_model(contact: str, *, stiffness: float, collision: str = DEFAULT_COLLISION,
+                rows: int = 5, speed: float = 1.0, damping: float = 1.0):
     """``(model, x0)``: the map's sheet touching ``contact`` (module docstring)."""
     if contact not in KINDS:
         raise ValueError(f"contact must be one of {KINDS}, got {contact!r}")
@@ -120,7 +120,7 @@ def sheet_problem(contact: str = "none", *, stiffness: float = 4.0, dt: float = 
                           objective=objective, name=f"swap_validity_{contact}")
 
 
-def swap_validity_point(contact: str = "none", collision: str = "guarded",
+def swap_validity_point(contact: str = "none", collision: str = DEFAULT_COLLISION,
                         stiffness: float = 4.0, dt: float = 1 / 60, amplitude: float = 1.0,
                         horizon: float = 1 / 3, speed: float = 1.0, damping: float = 1.0,
                         rows: int = 5, solve: bool = False, maxiter: int = 40,
@@ -156,7 +156,7 @@ def swap_validity_point(contact: str = "none", collision: str = "guarded",
 
 
 FIGURES = ("touching", "cosine", "relative_error", "growth_swapped", "growth_exact")
-def one_step_error(contact: str = "none", collision: str = "guarded",
+def one_step_error(contact: str = "none", collision: str = DEFAULT_COLLISION,
                    stiffness: float = 4.0, dt: float = 1 / 60, amplitude: float = 1.0,
                    speed: float = 1.0, damping: float = 1.0, rows: int = 5,
                    seed: int = 0) -> dict:
@@ -228,7 +228,7 @@ def optimizer_outcome(prob, maxiter: int) -> dict:
     return out
 
 
-DEFAULTS = {"contact": "none", "collision": "guarded", "stiffness": 4.0, "dt": 1 / 60,
+DEFAULTS = {"contact": "none", "collision": DEFAULT_COLLISION, "stiffness": 4.0, "dt": 1 / 60,
             "amplitude": 1.0, "horizon": 1 / 3, "speed": 1.0, "damping": 1.0, "rows": 5,
             "solve": False, "maxiter": 40}  # (and measure="step" for the one-step slice)
 CASES = (("none", "guarded"), ("ground", "guarded"), ("ground", "penalty"),

@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from ..loading import OverrideError, check_overrides
+from ..models import COLLISIONS
 from ..sweep.grid import Point, folder_name, points
 from ..sweep.plan import (Plan, SweepResult, check_grid, check_group_by, run_plan,
                           study_module)
@@ -31,7 +32,7 @@ STUDIES = {
                             ("gap_x", "gap_v")),
     "swap-validity": (swap_validity_point,
                       {"contact": ("none", "ground", "sphere", "capsule", "self"),
-                       "collision": ("guarded", "penalty", "constraint"),
+                       "collision": COLLISIONS,
                        "stiffness": "(0, inf)", "dt": "(0, inf)", "amplitude": "[0, inf)",
                        "horizon": "(0, inf)", "speed": "[0, inf)", "damping": "[0, inf)",
                        "rows": "[2, inf)", "maxiter": "[1, inf)", "seed": "[0, inf)",

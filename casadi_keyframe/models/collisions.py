@@ -1,0 +1,38 @@
+"""How a cloth touches its bodies (``collision=``): which contact laws act on each body.
+
+* ``"guarded"`` (the default): the paper's penalty springs in the contact layer
+  (:class:`~.penalty.BodyPenalty`), and the step's hold (:class:`~.hold.BodyHold`) on the
+  body's surface, so no particle passes through;
+* ``"constraint"``: the hold alone, on the contact layer's surface;
+* ``"penalty"``: the penalty springs alone (the paper's collisions).
+
+The names are what problem files, saved runs and the command line give.
+"""
+from __future__ import annotations
+
+from .hold import BodyHold
+from .penalty import BodyPenalty
+
+# name: (penalty springs?, the hold?, where it holds: 0 m from the surface, or None: the layer)
+LAWS = {"guarded": (True, True, 0.0), "constraint": (False, True, None),
+        "penalty": (True, False, None)}
+COLLISIONS = tuple(LAWS)
+DEFAULT_COLLISION = "guarded"
+
+
+def check_collision(collision: str) -> str:
+    """``collision`` if it is one of :data:`COLLISIONS`; else a ValueError naming them."""
+    if collision not in LAWS:
+        raise ValueError(f"collision must be one of {list(COLLISIONS)} (contact held by the "
+                         f"step, or the paper's penalty springs), got {collision!r}")
+    return collision
+
+
+def collision_families(collision: str, bodies: tuple, n: int, jit: bool | None) -> tuple:
+    """The families through which n particles touch ``bodies`` under ``collision``: each
+    body's penalty springs, then one hold over them all (none without bodies)."""
+    penalty, hold, layer = LAWS[check_collision(collision)]
+    if not bodies:
+        return ()
+    springs = tuple(BodyPenalty(body, n, jit) for body in bodies) if penalty else ()
+    return springs + ((BodyHold(bodies, n, jit, layer),) if hold else ())

@@ -34,7 +34,7 @@ test: $(STAMP) $(DOCS_STAMP)
 # the documentation site into site/, warnings as errors; it never runs a solve (the gallery's
 # pictures and figures are files, docs/gallery.py collects them from results/)
 docs: $(DOCS_STAMP)
-	$(BIN)/python -m mkdocs build --strict --site-dir site
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict --site-dir site
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow

@@ -64,10 +64,19 @@ def keyframe_rows(problem, trajectory) -> list[dict]:
     return rows
 
 
-def strain_limit(problem) -> float | None:
-    """The problem's ``StrainLimit`` (the stretch past which springs cost), if it has one."""
-    limits = [t.limit for t in problem.objective_terms.trajectory_terms if hasattr(t, "limit")]
-    return min(limits) if limits else None
+def physical(problem, trajectory, summary: dict) -> dict | None:
+    """How physical a cloth's result is: the largest stretch and the deepest particle in a
+    body, the problem's limits (``problem.limits``) and whether the motion keeps within
+    them (the problem's own verdict); None for a model that reports no such thing."""
+    report = summary.get("breakdown", {}).get("physical")
+    limits = getattr(problem, "limits", None)
+    if report is None:
+        return None
+    return {"max_stretch": report["max_stretch"],
+            "max_penetration": report.get("max_penetration"),
+            "stretch_limit": getattr(limits, "stretch", None),
+            "depth_limit": getattr(limits, "depth", None),
+            "broken": list(problem.physical_shortfall(trajectory)) if limits else []}
 
 
 def measure(folder: Path, commit: str) -> dict:
@@ -76,7 +85,6 @@ def measure(folder: Path, commit: str) -> dict:
 
     summary = json.loads((folder / "summary.json").read_text())
     run = load_saved(folder, quiet=True)
-    physical = summary.get("breakdown", {}).get("physical", {})
     overrides = summary.get("overrides", {})
     command = " ".join([f"casadi-keyframe solve {summary['problem']}",
                         *(f"--set {k}={v}" for k, v in overrides.items())])
@@ -89,9 +97,7 @@ def measure(folder: Path, commit: str) -> dict:
             "method": summary.get("method"), "gradient": summary.get("gradient"),
             "stages": len(summary.get("stages", [])),
             "keyframes": keyframe_rows(run.problem, run.trajectory),
-            "max_stretch": physical.get("max_stretch"),
-            "strain_limit": strain_limit(run.problem),
-            "max_penetration": physical.get("max_penetration")}
+            "physical": physical(run.problem, run.trajectory, summary)}
 
 
 def collect(name: str, results: Path, commit: str) -> bool:
@@ -133,6 +139,22 @@ def miss_table(rows: list[dict]) -> list[str]:
     return lines
 
 
+def physical_lines(report: dict | None) -> list[str]:
+    """The cloth's stretch and depth against the problem's physical limits, as a line."""
+    if report is None:
+        return []
+    limit = report["stretch_limit"]
+    text = f"Largest spring stretch {report['max_stretch']:.3f}" + (
+        f" (limit {limit:g})" if limit else "")
+    if report["max_penetration"] is not None:
+        depth = report["depth_limit"]
+        text += (f"; deepest particle in a body {report['max_penetration'] * 1e3:.2g} mm"
+                 + (f" (tolerance {depth * 1e3:g} mm)" if depth else ""))
+    verdict = ("**WHOLE**: within its physical limits" if not report["broken"] else
+               "**NOT WHOLE**: " + "; ".join(report["broken"]))
+    return [f"{text}. {verdict}.", ""]
+
+
 def measured_section(name: str, record: dict | None) -> list[str]:
     """The page's "Measured" section: the result with its commit, or why there is none."""
     if record is None:
@@ -152,13 +174,7 @@ def measured_section(name: str, record: dict | None) -> list[str]:
               f"{seconds:.0f} s of wall time, {record['method']} on the "
               f"`{record['gradient']}` gradient.", "", f"> {record['message']}", ""]
     lines += miss_table(record["keyframes"]) + [""]
-    if record["max_stretch"] is not None:
-        limit = record["strain_limit"]
-        lines.append(f"Largest spring stretch {record['max_stretch']:.3f}"
-                     + (f" (the problem's strain limit {limit:g})" if limit else "")
-                     + (f"; deepest particle in a body {record['max_penetration'] * 1000:.2g} mm"
-                        if record.get("max_penetration") is not None else "") + ".")
-        lines.append("")
+    lines += physical_lines(record.get("physical"))
     return lines
 
 
@@ -213,12 +229,12 @@ def index(entries: list[tuple[str, str, dict | None]]) -> str:
                       + (" (placeholder, reduced size)" if record["overrides"] else ""))
             commit = f"`{record['commit']}`"
         lines.append(f"| [{name}]({name}.md) | {lead} | {result} | {commit} |")
-    lines.append("")
+    lines += ["", '<div class="grid cards" markdown>', ""]
     for name, _, _ in entries:
         if (GALLERY / name / "keyframes.png").is_file():
-            lines += [f"[![{name}]({name}/keyframes.png)]({name}.md)", "",
-                      f"*[{name}]({name}.md)*", ""]
-    return "\n".join(lines)
+            lines += [f"-   [![{name}]({name}/keyframes.png)]({name}.md)", "",
+                      f"    [{name}]({name}.md)", ""]
+    return "\n".join(lines + ["</div>", ""])
 
 
 def write_pages() -> list[str]:

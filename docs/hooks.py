@@ -38,7 +38,7 @@ def _help(name: str, parser, sub) -> str:
 def on_page_markdown(markdown, page, config, files):
     if not MARKER.search(markdown):
         return markdown
-    os.environ["COLUMNS"] = "100"  # argparse wraps at the terminal's width: one width here
+    os.environ["COLUMNS"] = "90"  # argparse wraps at the terminal's width: one width here
     parser, sub = _commands()
     missing = [n for n in sub.choices if "commands" in MARKER.findall(markdown)
                and n not in MARKER.findall(markdown)]

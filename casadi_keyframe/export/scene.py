@@ -74,7 +74,7 @@ def targets(problem) -> list[Target]:
     kinds = {"shape": "shape" if surface else "points", "particles": "points",
              "center": "points", "outline": "outline"}
     return [Target(m.label, m.frame, kinds[m.kind], points3(m.points))
-            for m in problem.objective_terms.markers()]
+            for m in problem.objective_terms.markers() if m.kind != "velocity"]
 
 
 @dataclass

@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 
 from ..shapes import Shape
-from ..views import Marker
+from ..views import KeyframeGoal, Marker
 from .terms import StateTerm, particle_indices
 
 
@@ -45,7 +45,11 @@ class RegionTarget(StateTerm):
         return 0.5 * self.weight * ca.sumsqr(ca.fmax(sd + self.margin, 0))
 
     def marker(self):
-        return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx)
+        """The region's outline, judged by the fraction of the agents inside it."""
+        goal = KeyframeGoal({"fraction_inside": self.fill}, self.has_tolerance, self.miss,
+                            self.shortfall)
+        return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx,
+                      goal=goal)
 
     @property
     def has_tolerance(self) -> bool:

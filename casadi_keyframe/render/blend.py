@@ -28,7 +28,8 @@ from matplotlib.ticker import MaxNLocator
 from ..views import BlendView, view_of
 from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, same_scale, save_grid, targets
 from .flock import HIGHLIGHT
-from .frames import mass_centers, select_frames, write_gif
+from .frames import keyframes, mass_centers, select_frames, write_gif
+from .verdicts import say_checks, titled
 
 BLEND = HIGHLIGHT  # orange, as highlighted agents in the flock figures
 LEAD_IN = 0.3  # s of the fall shown before the blend starts
@@ -93,15 +94,20 @@ class BlendPanel(ClothPanel):
                          path=mass_centers(problem.model.masses, xs),
                          terms=targets(problem) if panel == "blend" else ())
         self.problem, self.trajectory, self.panel = problem, trajectory, panel
+        self.markers = problem.objective_terms.markers() if panel == "blend" else []
         self.name = PANELS[panel]
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             axis.set_major_locator(MaxNLocator(4))
 
-    def draw(self, k: int, full_title: bool = True):
+    def draw(self, k: int, full_title: bool = True, *, hold: bool = False):
+        """Show blend frame ``k``; the blend panel says how each keyframe at ``k`` went (with
+        ``hold``, at the latest keyframe frame up to ``k``)."""
         s = shown(self.problem, self.trajectory, self.panel, k)
         self.show(s.model, s.x, s.t, s.color)
         if k >= 0:
             self.show_targets(k)
+        self.dynamic += say_checks(self.ax, self.markers, self.trajectory, k, metres=True,
+                                   hold=hold, large=full_title)
         self.set_title(self.title(k, s.t, full_title), full_title)
 
     def title(self, k: int, t: float, full: bool = True) -> str:
@@ -144,7 +150,7 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
         def draw(i):
             k = int(ks[i])
             for panel in panels:
-                panel.draw(k)
+                panel.draw(k, hold=True)
             stage = (f"blend frame {k} / {problem.steps}" if k >= 0
                      else f"lead-in, {-k * problem.dt:.2f} s before the blend")
             fig.suptitle(f"{name} \u2014 {stage}", fontsize=11, y=0.985)
@@ -158,10 +164,11 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
 
 def snapshot(problem, trajectory, path, frames=None) -> Path:
     """Write a PNG: a row per panel (fall, blend, walk), a column per blend frame
-    (default: the start, two between and the end of the blend)."""
+    (default: the start, two between and the end of the blend, and every keyframe, where
+    the blend panel says whether it was hit)."""
     path, steps = Path(path), problem.steps
-    ks = sorted({int(k) for k in (np.round(np.linspace(0, steps, 4)) if frames is None
-                                 else frames)})
+    ks = sorted({int(k) for k in ([*np.round(np.linspace(0, steps, 4)), *keyframes(problem)]
+                                 if frames is None else frames)})
     if not ks or ks[0] < 0 or ks[-1] > steps:
         raise ValueError(f"snapshot frames must be in 0..{steps}, got {ks}")
     rows, cols, middle = len(PANELS), len(ks), None
@@ -174,7 +181,8 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
                 panel = BlendPanel(ax, problem, trajectory, p, range(steps + 1), box)
                 panel.draw(k, full_title=False)
                 middle = panel if p == "blend" else middle
-        save_grid(fig, path, problem.name, middle, _handles())
+        save_grid(fig, path, titled(problem.name, middle.markers, trajectory, problem), middle,
+                  _handles())
     finally:
         plt.close(fig)
     return path

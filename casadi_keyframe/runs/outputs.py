@@ -9,14 +9,13 @@ from ..interrupts import check
 from .exits import guarded, stopped
 
 def draw(problem, trajectory, result, out, *, animation: bool = True, start=None) -> None:
-    """convergence.png (if ``result`` has a history), keyframes.png, animation.gif and, given
-    the ``start`` trajectory of a cloth's search, start_and_result.png (the two side by
-    side)."""
+    """convergence.png (its start point alone for a search of no iteration), keyframes.png,
+    animation.gif and, given the ``start`` trajectory of a cloth's search,
+    start_and_result.png (the two side by side)."""
     from .. import render
 
     out = Path(out)
-    if getattr(result, "history", None):
-        render.convergence(result, out / "convergence.png")
+    render.convergence(result, out / "convergence.png")
     render.snapshot(problem, trajectory, out / "keyframes.png")
     if start is not None and render.renderer(problem) is render.cloth:
         render.cloth.side_by_side(problem, {"start": start, "result": trajectory},

@@ -217,7 +217,12 @@ def index(entries: list[tuple[str, str, dict | None]]) -> str:
     lines = ["# Gallery", "", "One page per problem shipped in `problems/`: what it is, its "
              "picture, the command that solves it and its measured result with the commit "
              "it came from.  The pictures and figures are files collected from results "
-             "folders by `docs/gallery.py`; building the site never runs a solve.", "",
+             "folders by `docs/gallery.py`; building the site never runs a solve.  To measure "
+             "them again, on the commit to publish:", "", "```sh",
+             "for f in problems/*.py; do p=$(basename $f .py); "
+             "casadi-keyframe solve $p --out results/$p; done",
+             "python docs/gallery.py          # pictures and figures into docs/gallery/", "```",
+             "",
              "| problem | what | result | commit |", "|---|---|---|---|"]
     for name, lead, record in entries:
         if record is None:

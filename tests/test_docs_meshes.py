@@ -1,4 +1,4 @@
-"""The README's "Meshes in, Blender out" section as written: its trimesh lines write the same
+"""The "Meshes in, Blender out" section of docs/guides/meshes-and-blender.md as written: its trimesh lines write the same
 meshes as its one-line writer, and (slow) its commands from a fresh folder solve the 30 x 30
 sheet onto the wave and the fold within 1 cm rms, no spring past 1.3, and export the PC2."""
 import json
@@ -14,18 +14,18 @@ import pytest
 from casadi_keyframe import cli
 from casadi_keyframe.meshes import read_mesh
 
-README = Path(__file__).resolve().parents[1] / "README.md"
+PAGE = Path(__file__).resolve().parents[1] / "docs" / "guides" / "meshes-and-blender.md"
 
 
 def section() -> str:
-    return README.read_text().split("## Meshes in, Blender out")[1].split("\n## ")[0]
+    return PAGE.read_text().split("## Meshes in, Blender out")[1].split("\n## ")[0]
 
 
 def test_the_trimesh_lines_write_the_meshes_of_the_one_line_writer(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "meshes").mkdir()
     code = re.findall(r"```python\n(.*?)```", section(), re.S)[0]
-    exec(compile(code, "README trimesh lines", "exec"), {})
+    exec(compile(code, "the page's trimesh lines", "exec"), {})
     sh = re.findall(r"```sh\n(.*?)```", section(), re.S)[0]
     writer = next(line for line in sh.splitlines() if line.startswith("python -c"))
     reference = tmp_path / "reference"
@@ -38,7 +38,7 @@ def test_the_trimesh_lines_write_the_meshes_of_the_one_line_writer(tmp_path, mon
 
 
 @pytest.mark.slow
-def test_the_readme_walkthrough_hits_both_targets(tmp_path, monkeypatch):
+def test_the_walkthrough_hits_both_targets(tmp_path, monkeypatch):
     """Measured here: both keyframes 1e-16 m off, stretch 1.18, about 30 s."""
     monkeypatch.chdir(tmp_path)
     sh = re.findall(r"```sh\n(.*?)```", section(), re.S)[0].replace("\\\n", " ")

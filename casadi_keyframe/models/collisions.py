@@ -35,4 +35,5 @@ def collision_families(collision: str, bodies: tuple, n: int, jit: bool | None) 
     if not bodies:
         return ()
     springs = tuple(BodyPenalty(body, n, jit) for body in bodies) if penalty else ()
-    return springs + ((BodyHold(bodies, n, jit, layer),) if hold else ())
+    held = BodyHold(bodies, n, jit, layer, penalty=[penalty] * len(bodies))
+    return springs + ((held,) if hold else ())

@@ -114,6 +114,11 @@ class Body:
         for every point here (a mesh gives each point the plane of its closest feature)."""
         return [np.broadcast_to(g, (len(x), np.size(g))) for g in self.geometry(t)]
 
+    @property
+    def moves(self) -> bool:
+        """Whether the body moves: a motion, or a point given as a path."""
+        return self.motion is not None or any(callable(v) for v in vars(self).values())
+
     def placed(self, point, t: float) -> np.ndarray:
         """A body point (fixed or a path) in the world at time t."""
         p = np.asarray(point(t) if callable(point) else point, dtype=float)

@@ -5,7 +5,7 @@ normal ``n`` is prescribed (``P = n n^T``).  With friction (:mod:`.friction`) ea
 also has a mode: ``normal`` (its normal velocity held, as without friction) and ``stick``
 (its tangential velocity held to the body's surface velocity, ``T = I - n n^T``), so
 ``P = stick I + (normal - stick) n n^T``, and ``friction``, the Coulomb impulse a sliding
-particle gets (lagged: a constant of the step).  The prescribed change of velocity is
+particle gets (a function of the step's start state).  The prescribed change of velocity is
 
     z = normal n (c - n . v) + stick T (v_body - v)
 
@@ -28,9 +28,8 @@ class HeldSet:
     particles let go.  ``geometry`` ``(k, g)``: each particle's body geometry at the step's
     start and end, as the hold's kernels took it.  With friction (else None): ``normal`` and
     ``stick`` ``(k,)`` bools, ``velocity`` ``(k, 3)`` the body's surface velocity,
-    ``friction`` ``(k, 3)`` the sliding impulse, ``support`` ``(k,)`` the penalty springs'
-    normal impulse over the step and, after the solve, ``residual`` ``(k, 3)``, the hold's
-    whole impulse."""
+    ``direction`` ``(k, 3)`` where a slide starts, ``friction`` ``(k, 3)`` the sliding
+    impulse and, after the solve, ``residual`` ``(k, 3)``, the hold's whole impulse."""
 
     particles: np.ndarray
     body: np.ndarray
@@ -42,8 +41,8 @@ class HeldSet:
     normal: np.ndarray | None = None
     stick: np.ndarray | None = None
     velocity: np.ndarray | None = None
+    direction: np.ndarray | None = None
     friction: np.ndarray | None = None
-    support: np.ndarray | None = None
     residual: np.ndarray | None = None
 
     @property

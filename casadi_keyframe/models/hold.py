@@ -137,15 +137,20 @@ class HeldBody:
                                   *self._columns(held.geometry[pick], dt, self._flags(held, pick)),
                                   q, held.normals[pick], dx[particles], dv[particles])[0]
 
-    def symbolic(self, X, V, G, dt, flags=None):
-        """The kernel's outputs for every particle in CasADi from the ``3 x n`` X, V and the
-        geometry G: :meth:`parameters` (one column for all) or ``g x n`` (one per particle)."""
-        n = X.shape[1]
+    def symbolic_columns(self, G, n: int) -> list:
+        """The kernels' geometry columns for n particles from G: :meth:`parameters` (one
+        column for all) or ``g x n`` (one per particle)."""
         parts, at = [], 0
         for size in self.sizes:
             block = G[at:at + size, :]
             parts.append(block if block.shape[1] == n else ca.repmat(block, 1, n))
             at += size
+        return parts
+
+    def symbolic(self, X, V, parts, dt, flags=None):
+        """The hold kernel's outputs for every particle in CasADi from the ``3 x n`` X, V and
+        the geometry columns ``parts`` (:meth:`symbolic_columns`)."""
+        n = X.shape[1]
         extra = [] if self.friction <= 0 else flags
         return self.kernels["hold"].map(n)(X, V, *parts, ca.repmat(ca.DM(self.layer), 1, n),
                                            ca.repmat(dt, 1, n), *extra)
@@ -163,15 +168,18 @@ class BodyHold(Interaction):
     holds = True
 
     def __init__(self, bodies, n: int, jit: bool | None = None, layer: float | None = None,
-                 layers=None, penalty=None):
+                 layers=None, penalty=None, masses=None, gravity=(0.0, 0.0, -9.81)):
         self.n = n
         bodies = tuple(bodies)
         if layers is None:
             layers = [b.contact.thickness if layer is None else layer for b in bodies]
         penalty = [False] * len(bodies) if penalty is None else penalty
         self.bodies = tuple(HeldBody(b, h, jit, p) for b, h, p in zip(bodies, layers, penalty))
-        self.coulomb = (Coulomb(self.bodies, n) if any(b.friction > 0 for b in self.bodies)
-                        else None)
+        self.coulomb = None
+        if any(b.friction > 0 for b in self.bodies):
+            if masses is None:
+                raise ValueError("a hold on bodies with friction needs the particles' masses")
+            self.coulomb = Coulomb(self.bodies, masses, gravity, CORRECTION, jit)
 
     def decide(self, step: StepSpan, carried) -> HeldSet | None:
         """Each free particle that would reach a body's layer, on the body it would reach
@@ -198,7 +206,7 @@ class BodyHold(Interaction):
             released = touching & (pulled | leaving)
         held = touching & ~released
         if self.coulomb is not None:
-            return self.coulomb.decide(step, held, body, seen, released, carried)
+            return self.coulomb.decide(step, held, body, seen, released)
         held = np.flatnonzero(held)
         if not held.size:
             return None
@@ -260,15 +268,13 @@ class BodyHold(Interaction):
         return None if found is None else found.solved(residual)
 
     def carry(self, found):
-        """The particles the hold pulled (released at the next step) and those it released
-        (with friction also the sliding ones, :meth:`.friction.Coulomb.carry`)."""
+        """The particles the hold pulled (released at the next step) and those it released."""
         if found is None:
             return None
-        pulled = found.particles[found.impulse < 0]
-        if self.coulomb is not None:
-            pulled = found.particles[(found.impulse < 0) & found.normal]
-            return (pulled, found.released, *self.coulomb.carry(found))
-        return pulled, found.released
+        pulled = found.impulse < 0
+        if found.frictional:
+            pulled &= found.normal
+        return found.particles[pulled], found.released
 
     def decision_parameters(self, found, t, dt):
         """Which particles are held on each body (0/1, body after body), then each body's
@@ -302,6 +308,9 @@ class BodyHold(Interaction):
         for layer, pick, particles in self._by_body(held):
             gx[particles], gv[particles] = layer.vjp(x, v, dt, held, pick, lam[particles],
                                                      q[pick], nu[particles])
+        if self.coulomb is not None:  # the sliding impulses join b: S lam is their multiplier
+            fx, fv = self.coulomb.vjp(x, v, dt, held, held.unheld_part(lam))
+            gx, gv = gx + fx, gv + fv
         return gx, gv
 
     def jvp(self, x, v, t, dt, held, q, dx, dv):
@@ -309,16 +318,19 @@ class BodyHold(Interaction):
         out = np.zeros((self.n, 3))
         for layer, pick, particles in self._by_body(held):
             out[particles] = layer.jvp(x, v, dt, held, pick, q[pick], dx, dv)
+        if self.coulomb is not None:
+            out += held.unheld_part(self.coulomb.jvp(x, v, dt, held, dx, dv))
         return out
 
     def symbolic_held(self, X, V, D, dt):
         """``(normals 3 x n, targets 1 x n)`` of the held particles (zero elsewhere), from
         :meth:`decision_parameters` D; with friction also ``(velocities 3 x n, normal 1 x n,
-        stick 1 x n, friction 3 x n)``."""
+        stick 1 x n, sliding impulses 3 x n)``."""
         n, masks = self.n, D[:len(self.bodies) * self.n]
         at = masks.shape[0]
         flags = None if self.coulomb is None else self.coulomb.symbolic(D, self.decision_size())
         normals, targets, velocity = ca.SX.zeros(3, n), ca.SX.zeros(1, n), ca.SX.zeros(3, n)
+        pushed = ca.SX.zeros(3, n)
         for b, layer in enumerate(self.bodies):
             if layer.body.local:
                 size = sum(layer.sizes) * n
@@ -327,15 +339,20 @@ class BodyHold(Interaction):
                 size = layer.parameters(0.0, 1.0).size
                 G = D[at:at + size]
             at += size
-            out = layer.symbolic(X, V, G, dt, None if flags is None else list(flags[:2]))
+            parts = layer.symbolic_columns(G, n)
+            out = layer.symbolic(X, V, parts, dt, None if flags is None else list(flags[:2]))
             held = ca.reshape(masks[b * n:(b + 1) * n], 1, n)
             normals += ca.repmat(held, 3, 1) * out[1]
             targets += held * out[2]
             if flags is not None:
                 velocity += ca.repmat(held, 3, 1) * out[3]
+                if layer.friction > 0:
+                    columns = parts + [ca.repmat(ca.DM(layer.layer), 1, n), ca.repmat(dt, 1, n)]
+                    pushed += ca.repmat(held, 3, 1) * self.coulomb.symbolic_impulses(
+                        b, X, V, columns, dt, flags)
         if flags is None:
             return normals, targets
-        return normals, targets, velocity, *flags
+        return normals, targets, velocity, flags[0], flags[1], pushed
 
     # no force: the hold acts through the step's solve only
     def forces(self, x, v, t, found):

@@ -3,10 +3,8 @@ gradient refused when it cannot be right.  A route (:mod:`casadi_keyframe.adjoin
 its own facts: its bound, its known limits, the likely cause of a refusal and its fix.
 
 **Growth.**  The backward loop (eq. 5) carries the adjoint ``a_n = (a_x, a_v)`` from the last
-frame to the first, adding each frame's objective gradient ``s_n = dphi/ds_n``.  Its growth
-at frame n is ``|a_n| / max_{m > n} |s_m|`` in the norm ``|(dt a_x, a_v)|`` (a pure number
-for any time step); a pass's growth is the largest over its frames, and its *fastest* step
-is where one backward step grew the adjoint most.
+frame to the first; its growth at frame n is ``|a_n| / max_{m > n} |s_m|``, ``s_m`` the
+objective's gradient at frame m, in the norm ``|(dt a_x, a_v)|`` (a pure number at any dt).
 
 **The bound.**  Past its route's ``bound`` or at a non-finite value a watched pass raises
 :class:`GradientError` at once, naming the route, the frame, the likely cause and the fix:

@@ -33,6 +33,38 @@ def test_lbfgsb_and_ipopt_reach_the_same_objective(race):
         assert r.trajectory.x.shape == (41, 8, 2)
 
 
+def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
+    """The Callbacks multiple shooting's defects go through, on a problem with a known
+    answer: min |x|^2 with x0 + x1 = 1 and x2 - 2 x3 = 1."""
+    import casadi as ca
+    import scipy.sparse as sp
+
+    from casadi_keyframe.optimize.ipopt import search
+
+    def ev(x):
+        return float(x @ x), 2 * x
+
+    ev.interrupted = None
+
+    class Lines:
+        size = 2
+        pattern = ca.Sparsity.triplet(2, 4, [0, 0, 1, 1], [0, 1, 2, 3])
+
+        def values(self, x):
+            return np.array([x[0] + x[1] - 1, x[2] - 2 * x[3] - 1])
+
+        def jacobian(self, x):
+            return sp.csc_matrix([[1.0, 1.0, 0, 0], [0, 0, 1.0, -2.0]])
+
+    seen = []
+    free = (np.full(4, -np.inf), np.full(4, np.inf))
+    status, message, x = search(ev, np.zeros(4), free, 50, 1e-10, {}, seen.append, None,
+                                constraints=Lines())
+    assert status == CONVERGED, message
+    assert seen and all(s.shape == (4,) for s in seen)  # each iterate handed over
+    np.testing.assert_allclose(x, [0.5, 0.5, 0.2, -0.4], atol=1e-8)
+
+
 @pytest.mark.parametrize("method", ["lbfgsb", "ipopt"])
 def test_bounds_are_respected(race, method):
     prob = load_problem("flock_race", agents=8, steps=40)

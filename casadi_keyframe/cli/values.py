@@ -135,7 +135,7 @@ def parse_shooting(segments, items: list[dict], scheduler) -> dict | None:
     """``--segments K``, the ``--shooting`` items (each read as a dict) and ``--scheduler
     ADDRESS`` as multiple shooting's options over the problem file's (None: the file's);
     checked here, so a bad one is refused before the build."""
-    from ..optimize.shooting_search import shooting_options
+    from ..optimize.shooting import shooting_options
 
     out = {} if segments is None else {"segments": segments}
     for item in items:

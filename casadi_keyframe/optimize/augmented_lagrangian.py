@@ -26,7 +26,7 @@ from .evaluator import evaluate_final
 from .goal import check_stop, verdict
 from .multipliers import KeyframeMultipliers
 from .outcome import INTERRUPTED, LIMIT
-from .result import Result, assemble
+from .result import Result, assemble, stage_record
 from .search import solve
 
 
@@ -87,15 +87,14 @@ def _round(problem, k, scale, res) -> dict:
     """Round ``k``'s :class:`~.result.Stage`: its solve's totals and how it ended, with the
     true problem's objective, control cost and misses at its controls."""
     breakdown = problem.breakdown(res.x, res.trajectory)
-    return {"stage": k, "dt": problem.dt, "steps": problem.steps,
-            "particles": problem.model.n, "weight_scale": scale, "nit": res.nit,
-            "nfev": res.nfev, "njev": res.njev, "seconds": res.timings["wall_seconds"],
-            "evaluation_seconds": res.timings["evaluation_seconds"],
-            "failed_simulations": res.timings["failed_simulations"],
-            "fun": breakdown["objective"], "control_cost": breakdown["control_cost"],
-            "misses": breakdown["misses"], "success": res.success, "status": res.status,
-            "message": res.message, "start_objective": res.start["objective"],
-            "start_keyframe_error": res.start["keyframe_error"]}
+    return stage_record(problem, k, nit=res.nit, nfev=res.nfev, njev=res.njev,
+                        fun=breakdown["objective"], status=res.status, message=res.message,
+                        seconds=res.timings["wall_seconds"],
+                        evaluation_seconds=res.timings["evaluation_seconds"],
+                        failed_simulations=res.timings["failed_simulations"],
+                        start=(res.start["objective"], res.start["keyframe_error"]),
+                        weight_scale=scale, control_cost=breakdown["control_cost"],
+                        misses=breakdown["misses"])
 
 
 def _time_up(time_limit, start) -> bool:

@@ -30,8 +30,8 @@ from .goal import GoalReached, check_stop
 from .methods import check_options, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .shooting_search import run_shooting, shooting_options
-from .result import Result, assemble
+from .shooting import run_shooting, shooting_options
+from .result import Result, assemble, stage_record
 from .stages import carry, stage_name, stage_problems
 
 
@@ -88,9 +88,9 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
     same frames, e.g. the true problem of an augmented-Lagrangian round).
 
-    ``shooting`` (a number of segments K, or :class:`~.shooting_search.ShootingOptions`
+    ``shooting`` (a number of segments K, or :class:`~.shooting.ShootingOptions`
     or a dict of them) runs multiple shooting first on each stage
-    (:mod:`.shooting_search`): controls and the states at K - 1 nodes searched together,
+    (:mod:`.shooting.stage`): controls and the states at K - 1 nodes searched together,
     the segments' defects held by multipliers; its controls then start the stage's own
     search (unless ``polish`` is off), which stops at once if the goal is already met.  After
     the first stage the nodes start on the run of the controls carried over (``"guess"``).
@@ -222,14 +222,9 @@ class _Search:
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         status, message = judge(status, message, ev.verdict())
-        return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
-                "particles": problem.model.n,
-                "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
-                "fun": float(ev.best_f),
-                "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
-                "success": status == CONVERGED, "status": status, "message": message,
-                "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
-                "failed_simulations": ev.failures, **ev.health.stage_fields()}
+        return stage_record(problem, stage[0], nit=len(self.history) - first, fun=ev.best_f,
+                            status=status, message=message, seconds=time.perf_counter() - t,
+                            start=ev.start, **ev.counts(), **ev.health.stage_fields())
 
     def _search(self, problem, ev, u0, stage):
         k, count = stage

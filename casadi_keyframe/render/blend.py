@@ -3,17 +3,11 @@
 For a problem with a :class:`..views.BlendView` (``problems/cape_blend.py``): ``animate`` writes
 a GIF and ``snapshot`` a PNG with three panels per time, left the fall source clip, middle
 the blend, right the walk source clip, each with its cape and its character's capsules.
-Blend frame ``k`` (time ``k dt`` after the blend starts) goes with the fall clip's frame
-``t_a / dt + k`` and the walk clip's ``t_b / dt + k`` (:func:`clip_frame`).
-
-The animation opens with a lead-in of :data:`LEAD_IN` s before the blend (negative ``k``;
-shorter if a clip starts sooner, so that both source panels still play along), during
-which the middle panel shows the fall clip itself in the cloth colour: the blend takes
-over from it.  From ``k = 0`` the middle panel's cape is orange (:data:`BLEND`) and the
-walk target, the problem's keyframe, is a red wireframe, faded until the last frame.  Each
-panel keeps its limits over all its frames, about its own centre on the same scale as the
-others (equal aspect, equal lengths across panels).  Each panel is a
-:class:`.cloth.ClothPanel` shown the positions of its clip's frame.
+Blend frame ``k`` goes with each clip's frame at its start time plus ``k dt``
+(:func:`clip_frame`).  The animation opens with a lead-in of :data:`LEAD_IN` s in which the
+middle panel shows the fall clip itself; from ``k = 0`` the blend's cape is orange
+(:data:`BLEND`) and the walk target, the problem's keyframe, a red wireframe.  Every panel
+keeps one scale over all its frames (equal aspect, equal lengths across panels).
 """
 from __future__ import annotations
 

@@ -1,29 +1,12 @@
 r"""A gradient's health at a point, for any route: :func:`gradient_health` and its printed
 form :func:`format_health` (``casadi-keyframe gradcheck``).
 
-What it measures, and why each:
-
-* **backward growth** (:mod:`casadi_keyframe.health`): how much the route's backward pass
-  amplifies what is fed into it; past the bound the optimizer refuses the gradient;
-* **the dot-product test**: the route's gradient against one tangent-linear pass
-  (:meth:`~casadi_keyframe.problem.ControlProblem.directional_derivative`, the exact
-  derivative of the scheme simulated) along a random direction, ``|g.d - J d| / |J d|``:
-  round-off for an exact route, the approximation's size for an approximate one;
-* **central differences** along the gradient and along a random direction at several step
-  sizes: an independent witness that needs no derivative code; where no step size agrees
-  the objective is rougher than its gradient says;
-* **the linearity radius**: the largest step along the gradient (descent) for which the
-  objective stays within 10 % of its linear model ``phi + s g.d``, found by a ladder of
-  steps a factor sqrt(10) apart: what a line search can hope to take;
-* for a route that is not exact, its cosine and relative error against the default exact
-  route (:data:`~casadi_keyframe.adjoints.DEFAULT`).
-
-The verdict is one of ``healthy`` (exact, consistent, differences agree), ``stiff`` (exact
-and consistent, but the objective is linear only over short steps: differences disagree at
-every step tried), ``approximate`` (a route that is not exact, within cosine 0.9 of the
-exact gradient and not refused), ``unreliable`` (refused by the guard, non-finite, or pointing
-elsewhere than the exact gradient) or ``inconsistent`` (an exact route whose adjoint and
-tangent disagree: a bug to report).
+It measures the route's backward growth, the dot-product test against one tangent pass,
+central differences along the gradient and a random direction, the linearity radius (the
+longest step along the gradient whose objective stays within 10 % of its linear model), and
+for a route that is not exact its cosine and error against the exact one; its verdict is
+``healthy``, ``stiff``, ``approximate``, ``unreliable`` or ``inconsistent``.  What each
+measure says and when each verdict is given: ``docs/explanations/gradient_health.md``.
 """
 from __future__ import annotations
 

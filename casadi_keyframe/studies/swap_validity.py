@@ -1,31 +1,14 @@
 r"""Where the paper's swapped adjoint suffices: the map behind ``casadi-keyframe study
 swap-validity`` and the last section of ``notebooks/gradient_accuracy.ipynb``.
 
-One point (:func:`swap_validity_point`) is a 1 m, 1 kg sheet of ``rows x rows`` particles
-hanging from its top corners, swung forward to a keyframe (as the gradient-accuracy study's
-sheet), touching one kind of contact:
-
-* ``none``: nothing;
-* ``ground``: its lower edge resting on the ground (a plane);
-* ``sphere``, ``capsule``: a sphere, or a vertical capsule, pressed 3 cm into its lower half
-  from behind and sliding sideways at ``speed`` m/s (as a cape slides over a moving body);
-* ``self``: the sheet folded into a loop, its bottom corners pinned beside its top ones, so
-  its two layers touch each other (self-contact).
-
-``stiffness`` is ``dt sqrt(k/m)`` at the reference step 1/60 s (k the stretch stiffness per
-spring, m the mean particle mass); shear springs take k/10 and every contact the same k,
-with damping ``c = damping k / 60`` (the cape's recipe, :func:`~.scenes.capes.cape_contacts`,
-at ``damping = 1``).  So a point at another ``dt`` is the same physical sheet, and the row
-gives ``omega_dt = dt sqrt(k/m)`` at its own step.  ``collision`` says how bodies are touched
-(``guarded``, the default, or the paper's ``penalty`` springs alone); self-contact is always
-penalty springs.
-
-At random step forces of ``amplitude`` m/s^2 rms per particle, the point compares the swapped
-gradient with the exact one (cosine, relative error) and records both backward passes'
-growth (:mod:`.health`); with ``solve`` it runs L-BFGS-B from rest with each route (same
-iteration limit) and says whether the swapped one ``reaches`` the exact one's objective
-within 10 %.  :func:`swap_validity` runs the map's slices, :func:`format_swap_validity`
-prints them, :func:`reading` says in sentences where the swap suffices.
+One point (:func:`swap_validity_point`) is a hanging sheet swung to a keyframe, touching one
+kind of contact (:data:`KINDS`: none, the ground, a sliding sphere or capsule, itself), at a
+stiffness ``dt sqrt(k/m)`` and a ``collision``; it compares the swapped gradient with the
+exact one (cosine, relative error, both backward passes' growth) and, with ``solve``, says
+whether L-BFGS-B on the swapped route ``reaches`` the exact route's objective.
+:func:`swap_validity` runs the map's slices, :func:`format_swap_validity` prints them,
+:func:`reading` says in sentences where the swap suffices.  The scenes and their recipe:
+``docs/explanations/swap_validity.md``.
 """
 from __future__ import annotations
 

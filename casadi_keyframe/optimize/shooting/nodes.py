@@ -21,8 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..objectives import StateKeyframe
-from ..state import State
+from ...objectives import StateKeyframe
+from ...state import State
 
 INITS = ("passive", "guess", "target", "blend")
 

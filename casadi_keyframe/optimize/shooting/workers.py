@@ -1,6 +1,6 @@
 """Who sweeps the segments of a multiple-shooting evaluation: this process
 (:class:`Serial`), local worker processes (:class:`LocalPool`, the default with more than
-one worker) or the workers of a Dask cluster (:class:`~.dask_segments.DaskPool`).
+one worker) or the workers of a Dask cluster (:class:`~.dask_pool.DaskPool`).
 
 A runner's ``forward(items)`` runs the segments ``items`` names (segment -> ``(start,
 external, carried)``, ``carried`` what the step before its first one carried) and returns
@@ -19,7 +19,7 @@ import os
 import signal
 import traceback
 
-from ..state import SimulationError
+from ...state import SimulationError
 from .segments import AskedSweeps, SegmentRunner
 
 
@@ -166,7 +166,7 @@ def segment_runner(problem, spans, workers: int = 1, scheduler: str | None = Non
     """The runner for ``workers`` (1: this process) or a Dask ``scheduler`` address (whose
     workers rebuild ``problem`` from its file, or ``origin``'s at its time step)."""
     if scheduler is not None:
-        from .dask_segments import DaskPool
+        from .dask_pool import DaskPool
         return DaskPool(problem, spans, scheduler, workers, origin)
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 1:
         raise ValueError(f"workers must be a whole number >= 1 (1: this process), got "

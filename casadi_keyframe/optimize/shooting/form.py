@@ -26,7 +26,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ..state import State, Trajectory
+from ...state import State, Trajectory
 from .segments import boundaries, same_carry
 
 
@@ -219,7 +219,7 @@ def defect_scales(problem) -> tuple[float, float]:
     """The defects' units ``(sigma_x, sigma_v)``: the tightest position and velocity
     tolerances the problem's keyframes declare (a keyframe's rms miss, a centre's miss), or
     0.01 length units and 0.1 per second where none does."""
-    from ..objectives.tolerances import DEFAULT_POSITION_TOLERANCE, VELOCITY_TIME
+    from ...objectives.tolerances import DEFAULT_POSITION_TOLERANCE, VELOCITY_TIME
 
     found = {0: [], 1: []}
     for term in problem.objective_terms.state_terms:

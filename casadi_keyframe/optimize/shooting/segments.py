@@ -1,5 +1,5 @@
 """The horizon cut into segments, each simulated from its own start state: what multiple
-shooting (:mod:`.shooting`) evaluates, in this process or in workers (:mod:`.workers`).
+shooting (:mod:`.form`) evaluates, in this process or in workers (:mod:`.workers`).
 
 A segment runs the library's own steps through the public loops
 (:func:`~casadi_keyframe.simulate.simulate` and :func:`~casadi_keyframe.simulate.backward`)
@@ -18,8 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..simulate import backward, simulate
-from ..state import State
+from ...simulate import backward, simulate
+from ...state import State
 
 
 def boundaries(steps: int, segments: int) -> list[tuple[int, int]]:

@@ -25,7 +25,7 @@ class SegmentActor:
     """A Dask actor: some segments of the problem a recipe rebuilds."""
 
     def __init__(self, recipe_, spans: dict):
-        from ..loading import build_problem, load_module
+        from ...loading import build_problem, load_module
 
         path, overrides, dt = recipe_
         problem = build_problem(load_module(path), **overrides)
@@ -34,7 +34,7 @@ class SegmentActor:
         self.runner = SegmentRunner(problem.model, problem.integrator, problem.dt, spans)
 
     def run(self, command: str, items: list):
-        from ..state import SimulationError
+        from ...state import SimulationError
 
         try:
             if command == "forward":
@@ -75,7 +75,7 @@ class DaskPool(AskedSweeps):
     def _ask(self, command, per_segment) -> list:
         """``command`` for each segment of ``per_segment`` (a list over all segments, or a
         dict of some): their answers, a list or a dict alike."""
-        from ..state import SimulationError
+        from ...state import SimulationError
 
         some = isinstance(per_segment, dict)
         items = per_segment if some else dict(enumerate(per_segment))

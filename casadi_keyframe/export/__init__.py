@@ -71,8 +71,7 @@ def export(source, fmt: str, *, out=None) -> list[Path]:
     that cannot be written or an unknown format, a FileNotFoundError for a
     folder with no result, an ImportError naming the extra to install when ``usd`` or
     ``html`` lacks its library."""
-    from ..saved import writable_folder
-    from ..saved import load_saved, saved_file
+    from ..saved import load_saved, saved_file, writable_folder
 
     check_library(fmt)
     path = saved_file(source)

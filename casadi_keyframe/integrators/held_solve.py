@@ -15,7 +15,9 @@ particles is the hold's impulse.
 
 Backward (the cotangent ``w`` of dv): ``mu = A_hat^-1 S w`` and ``lam = mu + P (w - A mu)``
 solve ``(S A + P)^T lam = w``; ``mu`` takes the place of the unheld step's multiplier, and
-``lam`` with ``q = (dv - z) - r`` weighs the normals' and targets' derivatives.  Tangent:
+``lam`` with ``q = (dv - z) - r`` weighs the normals' and targets' derivatives.  With
+friction ``P`` also holds sticking particles' tangents, and the sliding ones' lagged
+impulses join b (:mod:`~casadi_keyframe.models.friction`); ``r`` is then the hold's own.  Tangent:
 with ``g`` the derivative of the residual's right side, ``d(dv) = P g + A_hat^-1 S (g - A P g)``.
 """
 from __future__ import annotations
@@ -45,6 +47,9 @@ def held_rhs(held, b, product, z_prescribed, v, free):
     ``z`` of dv (the held directions' on free components, ``z_prescribed`` on the pinned
     and attached ones), all flat."""
     z = np.where(free, held.prescribed(v).ravel(), z_prescribed)
+    pushed = held.pushed(v.shape[0])
+    if pushed is not None:  # sliding particles' friction (lagged: a constant of the step)
+        b = b + pushed.ravel()
     return held.unheld_part(b - product(z)).ravel(), z
 
 
@@ -58,4 +63,4 @@ def held_q(held, dv, v):
     dv = dv.reshape(-1, 3)
     k = held.particles
     z = held.prescribed(v)[k]
-    return dv[k] - z - held.normals * held.impulse[:, None]
+    return dv[k] - z - held.hold_residual()

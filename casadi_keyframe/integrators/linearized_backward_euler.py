@@ -408,8 +408,9 @@ class LinearizedBackwardEuler(Integrator):
         if work is not None:
             work.planned = found
         A, K = step_matrices(model, x, v, dt, t, interactions=found)
+        pushed = None if held is None else held.pushed(model.n)  # friction: no control's
         return ((A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape)
-                - model.forces(x, v, t, found))
+                - model.forces(x, v, t, found) - (0 if pushed is None else pushed / dt))
 
     def decides_per_step(self, model) -> bool:
         """True for a model whose steps decide something the symbolic step takes: which
@@ -471,13 +472,23 @@ class LinearizedBackwardEuler(Integrator):
 
 def _held_system(n, V, held, A, b, prescribed, mass, free):
     """``(A_hat, S (b - A z), z)`` of the symbolic step holding the particles of ``held``
-    (their ``(normals, targets)``, zero where none is held; see :mod:`.held_solve`); z is
+    (their ``(normals, targets)``, zero where none is held, and with friction their body
+    velocities, normal and stick flags and sliding impulses; see :mod:`.held_solve`); z is
     the prescribed part of dv on every component."""
-    normals, targets = held
-    P = ca.diagcat(*[ca.mtimes(normals[:, k], normals[:, k].T) for k in range(n)])
+    normals, targets, *friction = held
+    blocks = [ca.mtimes(normals[:, k], normals[:, k].T) for k in range(n)]
+    along = normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1)
+    if friction:  # P = s I + (a - s) n n^T, z = a n (c - n . v) + s T (v_body - v)
+        velocity, normal, stick, pushed = friction
+        blocks = [stick[k] * ca.SX.eye(3) + (normal[k] - stick[k]) * blocks[k]
+                  for k in range(n)]
+        slip = velocity - V
+        slip = slip - normals * ca.repmat(ca.sum1(normals * slip), 3, 1)
+        along = ca.repmat(normal, 3, 1) * along + ca.repmat(stick, 3, 1) * slip
+        b = b + ca.vec(pushed)
+    P = ca.diagcat(*blocks)
     keep = ca.SX.eye(3 * n) - P
-    held = ca.vec(normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1))
     mask = ca.DM(free.astype(float))
-    z = mask * held + (1 - mask) * prescribed
+    z = mask * ca.vec(along) + (1 - mask) * prescribed
     A_hat = ca.mtimes([keep, A, keep]) + ca.mtimes(ca.diag(ca.DM(mass)), P)
     return [A_hat, ca.mtimes(keep, b - ca.mtimes(A, z)), z]

@@ -121,7 +121,8 @@ class ClothModel(FamilyModel, Model, PhysicalReport, Surface):
                        (SelfPenalty(self_contact, np.stack([springs.i, springs.j], 1), n, jit),))
         set_("families", check_families((
             spring_family, GravityAndDrag(self.masses, params.gravity, params.air_drag),
-            *collision_families(collision, colliders, n, jit), *self_family, *families)))
+            *collision_families(collision, colliders, n, jit, self.masses, params.gravity),
+            *self_family, *families)))
 
     def __setattr__(self, name, value):
         raise AttributeError(f"a ClothModel is immutable: build a new one instead of setting "

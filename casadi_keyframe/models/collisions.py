@@ -2,7 +2,9 @@
 
 * ``"guarded"`` (the default): the paper's penalty springs in the contact layer
   (:class:`~.penalty.BodyPenalty`), and the step's hold (:class:`~.hold.BodyHold`) on the
-  body's surface, so no particle passes through;
+  body's surface, so no particle passes through; on a moving body the hold is on the
+  layer's surface, since the penalty springs see the body at a step's start and a body
+  that moves farther than its layer in a step would otherwise kick the held particles off;
 * ``"constraint"``: the hold alone, on the contact layer's surface;
 * ``"penalty"``: the penalty springs alone (the paper's collisions).
 
@@ -28,11 +30,17 @@ def check_collision(collision: str) -> str:
     return collision
 
 
-def collision_families(collision: str, bodies: tuple, n: int, jit: bool | None) -> tuple:
-    """The families through which n particles touch ``bodies`` under ``collision``: each
-    body's penalty springs, then one hold over them all (none without bodies)."""
+def collision_families(collision: str, bodies: tuple, n: int, jit: bool | None, masses=None,
+                       gravity=(0.0, 0.0, -9.81)) -> tuple:
+    """The families through which n particles (of ``masses``, under ``gravity``: what
+    friction's normal impulse takes) touch ``bodies`` under ``collision``: each body's
+    penalty springs, then one hold over them all (none without bodies)."""
     penalty, hold, layer = LAWS[check_collision(collision)]
     if not bodies:
         return ()
     springs = tuple(BodyPenalty(body, n, jit) for body in bodies) if penalty else ()
-    return springs + ((BodyHold(bodies, n, jit, layer),) if hold else ())
+    layers = [body.contact.thickness if layer is None or body.moves else layer
+              for body in bodies]
+    held = BodyHold(bodies, n, jit, layers=layers, penalty=[penalty] * len(bodies),
+                    masses=masses, gravity=gravity)
+    return springs + ((held,) if hold else ())

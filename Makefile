@@ -3,13 +3,14 @@ PYTHON ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.installed-docs
 
 # make test-blender: Blender 5.0.1 as the bpy module (Python 3.11, about 820 MB) in its own venv
 PYTHON311 ?= python3.11
 BLENDER_VENV := .venv-blender
 BLENDER_STAMP := $(BLENDER_VENV)/.installed
 
-.PHONY: demo test test-slow test-blender blender-addon bench clean
+.PHONY: demo docs test test-slow test-blender blender-addon bench clean
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -19,11 +20,21 @@ $(STAMP): pyproject.toml | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e '.[test]'
 	touch $(STAMP)
 
+# the site's tools (mkdocs-material, mkdocstrings, mkdocs-jupyter): make test builds the site too
+$(DOCS_STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install --quiet -e '.[docs]'
+	touch $(DOCS_STAMP)
+
 demo: $(STAMP)
 	$(BIN)/casadi-keyframe solve cloth_shapes --out results/cloth_shapes --quiet --stop method
 
-test: $(STAMP)
+test: $(STAMP) $(DOCS_STAMP)
 	$(BIN)/python -m pytest -q
+
+# the documentation site into site/, warnings as errors; it never runs a solve (the gallery's
+# pictures and figures are files, docs/gallery.py collects them from results/)
+docs: $(DOCS_STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/python -m mkdocs build --strict --site-dir site
 
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
@@ -49,4 +60,4 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/cloth_gradient.py
 
 clean:
-	rm -rf $(VENV) $(BLENDER_VENV) results dist .pytest_cache
+	rm -rf $(VENV) $(BLENDER_VENV) results dist site .pytest_cache

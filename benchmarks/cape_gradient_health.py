@@ -14,8 +14,9 @@ import functools
 import warnings
 
 from casadi_keyframe.health import GradientRouteWarning
-from casadi_keyframe.health_report import format_health, gradient_health
+from casadi_keyframe.studies.health_report import format_health, gradient_health
 from casadi_keyframe.loading import load_module
+from casadi_keyframe.models import COLLISIONS
 from casadi_keyframe.scenes import capes
 
 
@@ -30,7 +31,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rows", type=int, default=6)
     ap.add_argument("--cols", type=int, default=4)
-    ap.add_argument("--collisions", nargs="+", default=["guarded", "penalty", "constraint"])
+    ap.add_argument("--collisions", nargs="+", default=list(COLLISIONS), choices=COLLISIONS)
     ap.add_argument("--full", action="store_true", help="the whole report (differences, radius)")
     args = ap.parse_args()
     warnings.simplefilter("ignore", GradientRouteWarning)

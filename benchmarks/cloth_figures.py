@@ -27,7 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 
 from casadi_keyframe import solve  # noqa: E402
-from casadi_keyframe.cli import parse_overrides  # noqa: E402
+from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
 from casadi_keyframe.loading import (build_problem, default_resolutions, load_module,  # noqa: E402
                                      solve_defaults)
 from casadi_keyframe.scenes.maths import turn_angle  # noqa: E402

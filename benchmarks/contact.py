@@ -1,5 +1,8 @@
 """Contact that holds, measured: free drops of a sheet onto the ground (flat and tilted 30
-degrees), a sphere and a capsule, per contact model, impact speed and size.
+degrees), a sphere and a capsule, still and moving into the sheet (rising at 2 m/s, a
+capsule swinging up at 3 rad/s), per contact model, impact speed and size; then friction
+against Coulomb's analytic answers (a sheet on a 20 degree slope, a sheet thrown along the
+ground).
 
 For each case it prints the deepest particle inside the body over all frames (mm), the
 largest spring stretch, how many linear solves the steps took (a step is solved again when
@@ -25,10 +28,13 @@ import time  # noqa: E402
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
-from casadi_keyframe.scenes.drops import drop_model, drop_start  # noqa: E402
+from casadi_keyframe.models import COLLISIONS  # noqa: E402
+from casadi_keyframe.scenes.drops import (drop_model, drop_start, ground_throw,  # noqa: E402
+                                          slope_slide)
 from casadi_keyframe.state import SimulationError  # noqa: E402
 
-IMPACTS = [("ground", 0), ("ground", 30), ("sphere", 0), ("capsule", 0)]
+IMPACTS = [("ground", 0), ("ground", 30), ("sphere", 0), ("capsule", 0), ("rising sphere", 0),
+           ("rising capsule", 0), ("swinging capsule", 0)]
 
 
 def drop_problem(rows, body, speed, tilt, collision, dt, duration):
@@ -67,7 +73,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[25, 50])
     ap.add_argument("--speeds", type=float, nargs="+", default=[4.0, 8.0, 12.0])
-    ap.add_argument("--models", nargs="+", default=["penalty", "guarded", "constraint"])
+    ap.add_argument("--models", nargs="+", default=list(COLLISIONS), choices=COLLISIONS)
     ap.add_argument("--duration", type=float, default=0.5)
     ap.add_argument("--dt", type=float, default=1 / 60)
     ap.add_argument("--repeat", type=int, default=1)
@@ -108,6 +114,16 @@ def main():
     print(f"\nno particle deeper than 5 mm, no spring past 1.3x: "
           f"{len(held) - len(bad)} of {len(checks)} drops with a new contact model"
           + ("" if not bad else "; missed: " + "; ".join(f"{c} ({m})" for c, m in bad)))
+
+    print("\nfriction against Coulomb (within 10 %):")
+    for model in [m for m in args.models if m != "penalty"]:
+        for mu in (0.2, 0.5):
+            slid, analytic = slope_slide(mu, collision=model)
+            print(f"  {model:10s} slope 20 deg, mu {mu}: slid {slid:.3f} m in 1 s, "
+                  f"g (sin - mu cos) t^2 / 2 = {analytic:.3f} m")
+        travelled, analytic = ground_throw(0.3, 3.0, collision=model)
+        print(f"  {model:10s} thrown at 3 m/s, mu 0.3: stopped after {travelled:.3f} m, "
+              f"v^2 / (2 mu g) = {analytic:.3f} m")
 
 
 if __name__ == "__main__":

@@ -1,37 +1,16 @@
 r"""Gradient health, the part every evaluation pays for: the backward pass watched, and a
-gradient refused when it cannot be right.
+gradient refused when it cannot be right.  A route (:mod:`casadi_keyframe.adjoints`) brings
+its own facts: its bound, its known limits, the likely cause of a refusal and its fix.
 
 **Growth.**  The backward loop (eq. 5) carries the adjoint ``a_n = (a_x, a_v)`` from the last
-frame to the first, adding each frame's objective gradient ``s_n = dphi/ds_n`` on the way.
-Its *growth* at frame n is ``|a_n| / max_{m > n} |s_m|``: how much larger the adjoint pulled
-back to frame n is than anything fed into it after n.  Norms are ``|(dt a_x, a_v)|``, both
-parts in units of phi per m/s, so the ratio is a pure number for any time step.  A pass's
-growth is the largest over its frames; the step where one backward step grew the adjoint
-most (its *fastest* step) says where it happens.  The exact adjoint of a stable simulation
-grows like the motion's sensitivity (tens to thousands on the shipped problems); the
-paper's swapped adjoint near curved colliders grows by orders of magnitude per step, up to
-overflow, while the simulation itself is fine.
+frame to the first; its growth at frame n is ``|a_n| / max_{m > n} |s_m|``, ``s_m`` the
+objective's gradient at frame m, in the norm ``|(dt a_x, a_v)|`` (a pure number at any dt).
 
-**The bound.**  Past its route's bound (:func:`growth_bound`) or at a non-finite value a
-watched pass raises :class:`GradientError` at once, naming the route, the frame, the likely
-cause and the fix: the optimizer (:class:`~casadi_keyframe.optimize.evaluator.Evaluator`)
-treats it as a failed simulation, so no overflowed gradient ever reaches L-BFGS-B or IPOPT.
-An approximate route is held to :data:`GROWTH_BOUND` (1e8): past it the swapped adjoint has
-left the exact one behind (it diverges near curved colliders).  An exact route is the
-derivative of the simulated map however sensitive that map is, and the route users are sent
-to when another is refused, so it is refused only when not finite; its growth is on record
-(history, ``summary.json``, ``gradcheck``'s verdict).  A growth is a ratio to what the
-objective fed in: at a start that already hits its keyframes to round-off, a landing's large
-guessed forces make it enormous while the gradient itself is tiny.  Routes that run no
-backward loop of their own (CasADi's reverse mode, finite differences) are refused only
-for a non-finite gradient.
-
-**Known limits.**  :func:`route_limits` names where a route is known not to apply (the
-swapped route under penalty springs on curved bodies, or with self-contact): the swapped
-strategy warns once per model (:class:`GradientRouteWarning`).
-
-The full report at a point (dot-product test, finite differences, linearity radius, the
-exact route for comparison) is :mod:`casadi_keyframe.health_report`.
+**The bound.**  Past its route's ``bound`` or at a non-finite value a watched pass raises
+:class:`GradientError` at once, naming the route, the frame, the likely cause and the fix:
+the optimizer treats it as a failed simulation, so no overflowed gradient reaches L-BFGS-B
+or IPOPT.  A route without a backward loop of its own is refused only for a non-finite
+gradient.  The full report at a point is :mod:`casadi_keyframe.studies.health_report`.
 """
 from __future__ import annotations
 
@@ -44,14 +23,7 @@ import numpy as np
 
 from .state import SimulationError
 
-GROWTH_BOUND = 1e8  # an approximate route's backward pass past this fails the evaluation
-APPROXIMATE_ROUTES = ("swapped",)
-
-
-def growth_bound(route: str) -> float:
-    """The growth past which ``route``'s watched backward pass fails the evaluation (an exact
-    route's: none, only a non-finite adjoint)."""
-    return GROWTH_BOUND if route in APPROXIMATE_ROUTES else math.inf
+GROWTH_BOUND = 1e8  # the bound an approximate route's watched backward pass is held to
 
 
 def past_bound(growth: float, bound: float) -> bool:
@@ -62,7 +34,7 @@ def past_bound(growth: float, bound: float) -> bool:
 
 class GradientError(SimulationError):
     """A gradient route's backward pass overflowed or grew past its bound: the
-    evaluation fails (the simulation itself did not).  ``route`` names the route, ``step``
+    evaluation fails (the simulation itself did not).  ``route`` is the route's name, ``step``
     the frame where it was detected, ``growth`` the growth reached (inf if not finite)."""
 
     def __init__(self, message: str, step: int, route: str, growth: float):
@@ -71,7 +43,7 @@ class GradientError(SimulationError):
 
 
 class GradientRouteWarning(UserWarning):
-    """A gradient route is used where it is known to be unreliable (:func:`route_limits`)."""
+    """A gradient route is used where it is known to be unreliable (its ``limits``)."""
 
 
 @dataclass(frozen=True)
@@ -92,17 +64,17 @@ class Growth:
 
 
 class BackwardWatch:
-    """Watches one backward pass (:func:`~casadi_keyframe.simulate.backward` calls it) for the
-    route ``route`` of ``problem``: :meth:`start` with every frame's objective gradient, then
-    :meth:`step` after each backward step.  With ``guard`` it raises :class:`GradientError`
-    past ``bound`` or at a non-finite adjoint; without, it only records (the health report
-    wants the growth of a route that overflows).  Two dot products per step, in Python
-    floats (no floating-point state to save and restore)."""
+    """Watches one backward pass (:func:`~casadi_keyframe.simulate.backward` calls it) of
+    ``route`` (a :class:`~casadi_keyframe.adjoints.Route`) on ``problem``: :meth:`start` with
+    every frame's objective gradient, then :meth:`step` after each backward step.  With
+    ``guard`` it raises :class:`GradientError` past ``bound`` (default: the route's) or at a
+    non-finite adjoint; without, it only records (the health report wants the growth of a
+    route that overflows).  Two dot products per step, in Python floats (no floating-point
+    state to save and restore)."""
 
-    def __init__(self, route: str, problem, *, bound: float | None = None,
-                 guard: bool = True):
+    def __init__(self, route, problem, *, bound: float | None = None, guard: bool = True):
         self.route, self.problem, self.guard = route, problem, guard
-        self.bound = growth_bound(route) if bound is None else bound
+        self.bound = route.bound if bound is None else bound
         self.dt2, self.steps = problem.dt ** 2, problem.steps
         self.sources = None  # |s_m| of every frame
         self.source = 0.0  # the largest |s_m| fed in after the current frame
@@ -134,7 +106,7 @@ class BackwardWatch:
         self.source = max(self.source, self.sources[n])
         self.previous = self._norm(total.x, total.v)
         if self.guard and past_bound(self.growth, self.bound):
-            raise GradientError(self.message(), n, self.route, self.growth)
+            raise GradientError(self.message(), n, self.route.name, self.growth)
 
     def result(self) -> Growth:
         return Growth(float(self.growth), int(self.frame), float(self.fastest),
@@ -145,84 +117,41 @@ class BackwardWatch:
         return refusal(self.route, self.problem, self.result(), self.bound)
 
 
-def refusal(route: str, problem, growth: Growth, bound: float | None = None) -> str:
-    """Why ``route``'s gradient is refused: where its backward pass went past ``bound``, how
-    far, the likely cause and the fix."""
-    bound = growth_bound(route) if bound is None else bound
+def refusal(route, problem, growth: Growth, bound: float | None = None) -> str:
+    """Why ``route``'s gradient is refused: where its backward pass went past ``bound``
+    (default: the route's), how far, the likely cause and the fix."""
+    bound = route.bound if bound is None else bound
     what = ("overflowed (a non-finite adjoint)" if not np.isfinite(growth.growth) else
             f"grew {growth.growth:.3g}-fold (bound {bound:.0e})")
-    return (f"gradient '{route}' refused: its backward pass {what} by frame {growth.frame} "
-            f"of {growth.steps}, growing fastest at step {growth.fastest_step} "
+    return (f"gradient '{route.name}' refused: its backward pass {what} by frame "
+            f"{growth.frame} of {growth.steps}, growing fastest at step {growth.fastest_step} "
             f"(x{growth.fastest:.3g} in one step); the simulation itself is fine. Likely "
-            f"cause: {likely_cause(route, problem.model)}")
-
-
-def likely_cause(route: str, model) -> str:
-    """Why ``route``'s backward pass grows on ``model``, and what to do (a sentence)."""
-    if route == "swapped":
-        limits = route_limits(route, model)
-        where = ("; here: " + "; ".join(limits)) if limits else ""
-        return ("the paper's swapped adjoint updates with the full force Jacobian, whose "
-                "destabilising parts (contact curvature and contact damping on curved "
-                "bodies, compressed springs) its backward recurrence amplifies every step"
-                f"{where}. Fix: use --gradient adjoint (gradient='adjoint', exact, same cost); "
-                "a reduced dt does not help (the growth compounds per step)")
-    if route == "adjoint":
-        return ("the motion itself is this sensitive (a long horizon through many contact "
-                "switches, springs collapsed to almost no length, a simulation near blowing "
-                "up): the exact gradient's linear model holds only for tiny steps. Fix: "
-                "shorten the horizon or the window optimized, start from a better guess, or "
-                "reduce the forces")
-    return "a non-finite value in the gradient. Fix: use --gradient adjoint (exact)"
-
-
-def route_limits(route: str, model) -> list[str]:
-    """Where ``route`` is known not to apply on ``model`` (an empty list: none known): the
-    swapped route under penalty springs on curved bodies (sphere, capsule), whose curvature
-    and damping terms make its backward pass grow without bound, and with self-contact."""
-    if route != "swapped":
-        return []
-    from .models.penalty import BodyPenalty
-    from .models.self_contact import SelfContact
-
-    families = getattr(model, "families", ())
-    curved = sorted({f.body.kind for f in families
-                     if isinstance(f, BodyPenalty) and f.body.kind != "plane"})
-    out = []
-    if curved:
-        out.append(f"penalty contact on curved bodies ({', '.join(curved)}s) can make it "
-                   "overflow")
-    if any(isinstance(f, SelfContact) for f in families):
-        out.append("self-contact makes it inaccurate")
-    return out
+            f"cause: {route.likely_cause(problem.model)}")
 
 
 _WARNED: "weakref.WeakSet" = weakref.WeakSet()
 
 
-def warn_route_limits(route: str, model) -> None:
+def warn_route_limits(route, model) -> None:
     """Warn once per model (:class:`GradientRouteWarning`) if ``route`` is known not to
-    apply to it (:func:`route_limits`)."""
+    apply to it (its ``limits``)."""
     try:
         if model in _WARNED:
             return
         _WARNED.add(model)
     except TypeError:  # a model that cannot be weakly referenced is checked every time
         pass
-    limits = route_limits(route, model)
+    limits = route.limits(model)
     if limits:
-        warnings.warn(f"gradient '{route}' is unreliable on this model: {'; '.join(limits)} "
-                      "(see 'casadi-keyframe study swap-validity'); the evaluation fails if "
-                      "its backward pass overflows. Use gradient='adjoint' (exact, same cost)",
-                      GradientRouteWarning, stacklevel=3)
+        warnings.warn(route.unreliable(limits), GradientRouteWarning, stacklevel=3)
 
 
-def check_finite(route: str, grad, problem) -> None:
-    """Refuse a gradient with a NaN or an infinity (:class:`GradientError`)."""
+def check_finite(route, grad, problem) -> None:
+    """Refuse ``route``'s gradient with a NaN or an infinity (:class:`GradientError`)."""
     if not np.all(np.isfinite(grad)):
-        raise GradientError(f"gradient '{route}' refused: it holds non-finite values. Likely "
-                            f"cause: {likely_cause(route, problem.model)}", problem.steps,
-                            route, np.inf)
+        raise GradientError(f"gradient '{route.name}' refused: it holds non-finite values. "
+                            f"Likely cause: {route.likely_cause(problem.model)}",
+                            problem.steps, route.name, np.inf)
 
 
 class GrowthLog:

@@ -3,23 +3,12 @@
 A kernel is a small SX ``casadi.Function`` whose inputs and outputs are column vectors
 describing ONE interaction (a pair of agents, a spring).  :class:`MappedKernel` lifts it
 over an index list with ``Function.map`` in fixed-size chunks and evaluates each chunk
-through ``Function.buffer`` bound to numpy arrays, so no element-by-element conversion
-happens.
-
-Each mapped chunk function is compiled once per machine, not once per process: its C code
-is compiled with the system C compiler (``gcc -O3``) into a shared library kept in
-:func:`cache_dir` (``$CASADI_KEYFRAME_CACHE``, else ``$XDG_CACHE_HOME/casadi_keyframe/kernels``,
-else ``~/.cache/casadi_keyframe/kernels``), named by a hash of the C code, compiler, flags
-and CasADi version, and every later process loads it from there.  A library is compiled in
-a private folder inside the cache and renamed into place atomically, so concurrent processes
-are safe, a half-written library is never loaded and nothing is written to the temp folder;
-a killed compile leaves a ``*.tmp*`` folder in the cache that a later compile removes.
-Deleting the cache folder is always safe (kernels are recompiled on demand).  With no
-compiler, an unwritable cache folder, a failed compile or ``CASADI_KEYFRAME_JIT=0``,
-CasADi's virtual machine evaluates the kernels with identical results.
-
-Array layout: an input of size k over P interactions is a C-ordered ``(P, k)`` float64
-array, which is exactly the Fortran-ordered ``(k, P)`` matrix the mapped function expects.
+through ``Function.buffer`` bound to numpy arrays (no element-by-element conversion); an
+input of size k over P interactions is a C-ordered ``(P, k)`` array.  Each chunk function is
+compiled once per machine (``gcc -O3``) into a shared library cached in :func:`cache_dir`,
+written atomically; with no compiler, no writable cache or ``CASADI_KEYFRAME_JIT=0``,
+CasADi's virtual machine gives identical results.  The cache's rules:
+``docs/explanations/kernels.md``.
 """
 from __future__ import annotations
 
@@ -260,6 +249,27 @@ def scatter_pairs(values: np.ndarray, i: np.ndarray, j: np.ndarray, n: int) -> n
     return out
 
 
+def stencil_values(a: np.ndarray, stencils: np.ndarray) -> np.ndarray:
+    """``(P, k m)``: row p holds the rows ``a[stencils[p, 0]], a[stencils[p, 1]], ...`` of an
+    ``(n, m)`` array, one after another (a kernel's input over stencils of k particles)."""
+    return np.take(a, stencils, axis=0).reshape(stencils.shape[0], -1)
+
+
+def scatter_stencils(values: np.ndarray, stencils: np.ndarray, n: int) -> np.ndarray:
+    """Add each particle's part of ``values`` (``(P, 3 k)``, as :func:`stencil_values`
+    lays them out) into its row of an ``(n, 3)`` array."""
+    flat, rows = values.reshape(-1, 3), stencils.ravel()
+    return np.stack([np.bincount(rows, flat[:, c], minlength=n) for c in range(3)], axis=1)
+
+
+def stencil_incidence(stencils: np.ndarray, n: int) -> ca.DM:
+    """Sparse ``(P k, n)`` matrix with 1 at ``(p k + a, stencils[p, a])``: with
+    ``reshape(per_stencil_columns, 3, P k)`` on its left, :func:`scatter_stencils` in CasADi."""
+    rows = np.arange(stencils.size)
+    return ca.DM(sp.csc_matrix((np.ones(rows.size), (rows, stencils.ravel())),
+                               shape=(rows.size, n)))
+
+
 def pair_incidence(i: np.ndarray, j: np.ndarray, n: int) -> ca.DM:
     """Sparse ``(P, n)`` matrix with +1 at (p, i[p]) and -1 at (p, j[p]).
 
@@ -276,19 +286,14 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
     symbols ``x``, ``v``, ``params``, as ``{"force", "jac", "df_dx", "vjp", "jvp"}``:
 
     * ``force(x, v, *params) -> f``;
-    * ``jac(...) -> (vec K, vec D)``, row-major 3x3 blocks, ``D = df/dv`` and K the stiffness
-      the implicit step uses: ``stiffness`` when given (a 3x3 expression, e.g. the force
-      Jacobian with its destabilising parts clamped away so the step matrix stays positive
-      definite), else ``d/dx`` of the force at ``v = 0`` (the damping's position derivative
-      is left out, so K stays symmetric);
-    * ``df_dx(...) -> vec J``, the full position derivative ``df/dx`` (damping included, so
-      not symmetric), row-major;
+    * ``jac(...) -> (vec K, vec D)``, row-major: ``D = df/dv`` and K the stiffness the
+      implicit step uses (``stiffness`` when given, e.g. with the destabilising parts clamped
+      away, else ``d/dx`` of the force at ``v = 0``, so K stays symmetric);
+    * ``df_dx(...) -> vec J``, the full ``df/dx`` (damping included), row-major;
     * ``vjp(x, v, *params, lam, w, q, dt) -> (gx, gv)``: the gradients in x and v of
-      ``lam . (dt f + dt^2 K w + dt D q)``, the exact adjoint of a linearized implicit step
-      with this K, contracted per interaction (second derivatives included, no tensor formed);
-    * ``jvp(x, v, *params, w, q, dt, dx, dv) -> dg``: the same function's other side, the
-      derivative of ``g = dt f + dt^2 K w + dt D q`` along ``(dx, dv)`` (the tangent of the
-      linearized step, forward mode).
+      ``lam . (dt f + dt^2 K w + dt D q)``, the exact adjoint of a linearized step,
+      second derivatives contracted per interaction;
+    * ``jvp(x, v, *params, w, q, dt, dx, dv) -> dg``: the same function along ``(dx, dv)``.
     """
     K = (ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x) if stiffness is None
          else stiffness)

@@ -26,11 +26,13 @@ from .state import SimulationError
 
 
 class OverrideError(ValueError):
-    """An override that ``build`` does not take, of the wrong type or out of its range."""
+    """An override that ``build`` does not take, of the wrong type or out of its range
+    (``listed``: ``show`` lists what it takes), or whose value ``build`` itself refuses (a
+    file that cannot be a cloth: ``listed`` False)."""
 
-    def __init__(self, message: str, problem: str):
+    def __init__(self, message: str, problem: str, *, listed: bool = True):
         super().__init__(message)
-        self.problem = problem
+        self.problem, self.listed = problem, listed
 
 
 @dataclass(frozen=True)
@@ -193,8 +195,8 @@ def build_problem(module, **overrides) -> ControlProblem:
     checked = check_overrides(module, overrides)
     try:
         prob = module.build(**checked)
-    except SimulationError:  # a problem whose build simulates (a warm start) and blows up
-        raise
+    except (SimulationError, OverrideError):  # a warm start that blows up; a bad override
+        raise  # that build() itself refuses by the option's name: the user's input, not a bug
     except Exception as err:  # noqa: BLE001 - the user's code: any error, reported by line
         raise ProblemFileError(module.__file__, "in build()", err) from err
     if not isinstance(prob, ControlProblem):

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import copy
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -9,6 +10,7 @@ import numpy as np
 from .controls import Controls, resample_steps
 from .models.base import PhysicalReport
 from .objectives import Objective
+from .objectives.tolerances import PhysicalLimits
 from .simulate import simulate
 from .state import Trajectory
 from .views import View, checked_view
@@ -24,11 +26,16 @@ class ControlProblem:
     is where the problem came from, when it was built from a problem file: an object whose
     ``build(**overrides)`` builds it again with more overrides
     (:class:`~casadi_keyframe.loading.ProblemSource`, see :meth:`at_resolution`).
+    ``inputs`` are the files it was built from (a cloth's mesh, target meshes): a saved run
+    records their content and is read back only while they are unchanged.  ``limits``
+    (:class:`~casadi_keyframe.objectives.tolerances.PhysicalLimits`) say when the motion of
+    a model that reports it (cloth) counts as physical: part of the goal (default limits).
     """
 
     def __init__(self, *, model, integrator, x0, v0, steps: int, dt: float,
                  controls: Controls, objective, external=None, name: str = "problem",
-                 view: View | None = None, guess=None, source=None, scene=None):
+                 view: View | None = None, guess=None, source=None, scene=None, inputs=(),
+                 limits: PhysicalLimits | None = None):
         if not (isinstance(steps, (int, np.integer)) and steps >= 1):
             raise ValueError(f"steps must be a positive integer, got {steps!r}")
         if not (np.isfinite(dt) and dt > 0):
@@ -55,6 +62,12 @@ class ControlProblem:
         self.view = checked_view(view, scene)
         self._guess = None if guess is None else self.controls.check(guess).copy()
         self.source = source
+        self.inputs = tuple(Path(p).expanduser().resolve() for p in inputs)
+        if limits is not None and not isinstance(limits, PhysicalLimits):
+            raise ValueError(f"limits must be PhysicalLimits(stretch=..., depth=...), got "
+                             f"{limits!r}")
+        self.limits = (None if not isinstance(model, PhysicalReport) else
+                       limits or PhysicalLimits())
 
     # -- the simulation ------------------------------------------------------------------
     @property
@@ -136,7 +149,8 @@ class ControlProblem:
         args = dict(model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0,
                     steps=steps, dt=self.dt, controls=self.controls.for_steps(steps),
                     objective=self.objective_terms, external=self.external, name=self.name,
-                    view=self.view, guess=self._guess)
+                    view=self.view, guess=self._guess, inputs=self.inputs,
+                    limits=self.limits)
         return ControlProblem(**{**args, **changes})
 
     def _steps_for(self, dt: float) -> int:
@@ -242,6 +256,13 @@ class ControlProblem:
         if isinstance(self.model, PhysicalReport):
             out["physical"] = self.model.physical_report(traj.x, traj.dt)
         return out
+
+    def physical_shortfall(self, traj: Trajectory) -> list[str]:
+        """What ``traj`` breaks of the problem's :attr:`limits` (torn, sunk), one phrase each;
+        empty for a model without limits."""
+        if self.limits is None:
+            return []
+        return self.limits.shortfall(self.model.physical_report(traj.x, traj.dt))
 
     # -- the control terms, compiled -------------------------------------------------------
     def control_expression(self, U) -> ca.MX:

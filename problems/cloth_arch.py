@@ -13,7 +13,7 @@ direct solve here, so ``SOLVE`` does not ask for it.  Measurements behind these 
 import numpy as np
 
 from casadi_keyframe.controls import StepForces
-from casadi_keyframe.models import ClothModel
+from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION, ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import StateKeyframe, Smoothness, StrainLimit
 from casadi_keyframe.scenes.cloths import bend_into_arch, cloth_problem, weight_support
@@ -23,12 +23,13 @@ SOLVE = {"method": "lbfgsb", "maxiter": 150, "gradient": "adjoint"}
 RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[1, inf)", "dt": "(0, inf)",
           "size": "(0, inf)", "weight": "[0, inf)", "alpha": "[0, inf)",
           "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
-          "collision": ("guarded", "constraint", "penalty")}
+          "collision": COLLISIONS}
 
 
 def build(rows: int = 15, cols: int = 15, steps: int = 60, dt: float = 1 / 60,
           size: float = 1.0, weight: float = 100.0, alpha: float = 1e-4,
-          strain_limit: float = 1.2, strain_weight: float = 1e3, collision: str = "guarded"):
+          strain_limit: float = 1.2, strain_weight: float = 1e3,
+          collision: str = DEFAULT_COLLISION):
     ground = Plane((0.0, 0.0, 0.0))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
                             origin=(0.0, 0.0, ground.contact.thickness), colliders=[ground],

@@ -17,7 +17,7 @@ choices: ``docs/problem_notes.md``.
 import numpy as np
 
 from casadi_keyframe.controls import InitialVelocity
-from casadi_keyframe.models import ClothModel
+from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION, ClothModel
 from casadi_keyframe.models.colliders import Plane
 from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, Smoothness,
                                         StrainLimit)
@@ -30,8 +30,7 @@ RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[2, inf)", "dt": "(0
           "size": "(0, inf)", "height": "(0, inf)", "ring_radius": "(0, inf)",
           "ring_weight": "[0, inf)", "corner_weight": "[0, inf)", "alpha": "[0, inf)",
           "max_speed": "(0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
-          "ring_at": "(0, 1]", "flip_at": "(0, 1]", "collision": ("guarded", "constraint",
-                                                                  "penalty")}
+          "ring_at": "(0, 1]", "flip_at": "(0, 1]", "collision": COLLISIONS}
 
 
 def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
@@ -40,7 +39,7 @@ def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
           ring_radius: float = 0.35, ring_weight: float = 100.0, corner_weight: float = 10.0,
           alpha: float = 0.36, max_speed: float = 8.0, strain_limit: float = 1.2,
           strain_weight: float = 1e3, ring_at: float = 0.445, flip_at: float = 0.806,
-          collision: str = "guarded"):
+          collision: str = DEFAULT_COLLISION):
     ground = Plane((0.0, 0.0, 0.0))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
                             origin=(-size / 2, -size / 2, height), colliders=[ground],

@@ -17,7 +17,7 @@ def pytest_terminal_summary(terminalreporter):
     """The slow suite's table of full-size figures (``make test-slow``), when it ran."""
     import sys
 
-    from casadi_keyframe.report import format_misses
+    from casadi_keyframe.optimize.report import format_misses
     module = sys.modules.get("test_slow_figures") or sys.modules.get("tests.test_slow_figures")
     rows = getattr(module, "TABLE", [])
     if not rows:

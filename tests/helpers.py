@@ -1,7 +1,8 @@
-"""What several test files share: a small flock with every objective term, and a gradient
-route that acts like Ctrl-C.  Imported as ``from helpers import ...`` (pytest puts this folder
+"""What several test files share: a small flock with every objective term, a gradient
+route that acts like Ctrl-C, and the exact routes' agreement with CasADi.  Imported as ``from helpers import ...`` (pytest puts this folder
 on the path)."""
 import numpy as np
+import pytest
 
 from casadi_keyframe import (Adjoint, CenterOfMassKeyframe, ControlProblem, ParticleKeyframe,
                              RegionTarget, Smoothness, StateKeyframe, StepForces)
@@ -41,3 +42,15 @@ class InterruptAfter(Adjoint):
         if self.calls < 0:
             raise KeyboardInterrupt
         return super().__call__(problem, u)
+
+
+def assert_exact_routes(prob, u):
+    """The hand adjoint and the tangent pass agree with CasADi reverse mode at u (to 1e-8);
+    returns ``(g, d)``: the adjoint's gradient and the random direction the tangent took."""
+    f, g = prob.objective_and_gradient(u, "adjoint")
+    f_ref, g_ref = prob.objective_and_gradient(u, "casadi")
+    assert f == pytest.approx(f_ref, rel=1e-10)
+    assert np.linalg.norm(g - g_ref) <= 1e-8 * np.linalg.norm(g_ref)
+    d = np.random.default_rng(1).standard_normal(prob.size)
+    assert prob.directional_derivative(u, d) == pytest.approx(g_ref @ d, rel=1e-8)
+    return g, d

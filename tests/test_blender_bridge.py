@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from casadi_keyframe.cli import build_parser, parse_overrides
+from casadi_keyframe.cli import build_parser
+from casadi_keyframe.cli.values import parse_overrides
 from casadi_keyframe.export.pc2 import read_pc2
 from casadi_keyframe.meshes import read_mesh
 

@@ -43,7 +43,7 @@ def test_the_colliders_move_with_the_animation_and_report_its_velocity():
     assert len(capsules) == len(CAPSULES)
     t = 0.37
     seg = CHARACTER.segments(WALK.pose(t))
-    a, b, radius, va, _ = capsules[1].geometry(t)
+    a, b, radius, va, *_ = capsules[1].geometry(t)
     np.testing.assert_allclose([a, b], seg["torso"], atol=1e-12)
     assert radius[0] == CHARACTER.torso_radius
     assert abs(va[1] - WALK.speed) < 0.3  # the torso travels forward at about walking speed

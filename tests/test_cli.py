@@ -3,7 +3,8 @@ import json
 
 import pytest
 
-from casadi_keyframe.cli import main, parse_overrides
+from casadi_keyframe.cli import main
+from casadi_keyframe.cli.values import parse_overrides
 
 
 def test_list(capsys):
@@ -23,7 +24,7 @@ def test_solve_writes_results_and_pictures(tmp_path, capsys):
     code = main(["solve", "flock_path", "--set", "agents=10", "--set", "steps=40",
                  "--maxiter", "15", "--out", str(out), "--quiet"])
     assert code == 3  # stopped at --maxiter before converging: written, with a hint
-    assert "iteration limit reached (15)" in capsys.readouterr().out
+    assert "iteration limit reached (15 iterations in this stage)" in capsys.readouterr().out
     for name in ("result.npz", "summary.json", "animation.gif", "convergence.png",
                  "keyframes.png", "checkpoint.npz"):
         assert (out / name).stat().st_size > 0, name
@@ -54,7 +55,7 @@ def test_solve_in_augmented_lagrangian_rounds(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "start (passive): objective" in text and "rms_position_error" in text
     assert "round 0: weight x1," in text and "round 1: weight x10," in text
-    assert text.count("iteration limit reached (5)") >= 3  # each round's message, the result's
+    assert text.count("iteration limit reached (5 iterations in this stage)") >= 3  # each round's message, the result's
     assert text.count("physical: largest stretch") == 2  # the start's and the result's
     summary = json.loads((out / "summary.json").read_text())
     physical = summary["breakdown"]["physical"]

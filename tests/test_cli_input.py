@@ -7,8 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from casadi_keyframe import cli, files, load_problem
-from casadi_keyframe.cli import main, parse_overrides
+from casadi_keyframe import cli, load_problem
+from casadi_keyframe.saved import files
+from casadi_keyframe.cli import main
+from casadi_keyframe.cli.values import parse_overrides
 from casadi_keyframe.loading import (OverrideError, check_overrides, list_problems,
                                      load_module, overrides_of)
 
@@ -100,7 +102,7 @@ def test_maxiter_zero_is_refused_not_ignored(capsys):
 def test_an_out_folder_under_a_file_is_refused_before_the_build(tmp_path, capsys, monkeypatch):
     blocker = tmp_path / "a_file"
     blocker.write_text("")
-    monkeypatch.setattr(cli, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
+    monkeypatch.setattr(cli.commands, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
     assert main(["solve", "flock_path", "--out", str(blocker / "run")]) == 2
     err = capsys.readouterr().err
     assert f"cannot write the output folder {blocker / 'run'} (--out): {blocker} is a file" in err
@@ -111,7 +113,7 @@ def test_an_unwritable_out_folder_is_refused_before_the_build(tmp_path, capsys, 
         raise OSError(errno.EROFS, "Read-only file system")
 
     monkeypatch.setattr(files.tempfile, "TemporaryFile", read_only)
-    monkeypatch.setattr(cli, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
+    monkeypatch.setattr(cli.commands, "load_problem", lambda *a, **k: pytest.fail("built the problem"))
     assert main(["solve", "flock_path", "--out", str(tmp_path / "run")]) == 2
     err = capsys.readouterr().err
     assert f"cannot write the output folder {tmp_path / 'run'} (--out): Read-only file system" in err
@@ -205,9 +207,23 @@ def test_solve_records_the_overrides_as_build_got_them(tmp_path):
 
 
 def test_a_hint_gives_the_overrides_as_set_reads_them_back():
-    from casadi_keyframe.report import set_value
+    from casadi_keyframe.runs.report import set_value
 
     given = {"pins": "0,7", "agents": "8", "dt": "0.02", "collision": "guarded"}
     parsed = parse_overrides([f"{k}={v}" for k, v in given.items()])
     assert {k: set_value(v) for k, v in parsed.items()} == given
     assert parse_overrides([f"pins={set_value(parsed['pins'])}"]) == {"pins": parsed["pins"]}
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--shooting", "garbage"], "--shooting expects KEY=VALUE such as init=blend,workers=2"),
+    (["--shooting", "init=foo", "--segments", "2"], "--shooting: shooting init must be one of"),
+    (["--homotopy", "garbage"], "--homotopy expects KEY=VALUE such as contact=3"),
+    (["--homotopy", "agents=0"], "--homotopy: flock_path: agents must be"),
+    (["--shooting", "workers=2"], "--shooting workers (or --scheduler) set multiple shooting's "
+                                  "options, but this run has none: give --segments K"),
+])
+def test_each_option_names_itself_and_what_it_needs(args, said, capsys, tmp_path):
+    code = main(["solve", "flock_path", "--set", "agents=4", "--set", "steps=10", "--quiet",
+                 "--out", str(tmp_path), *args])
+    assert code == 2 and said in capsys.readouterr().err

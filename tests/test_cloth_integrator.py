@@ -11,7 +11,7 @@ from casadi_keyframe.models.base import ForceJacobians, Model
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
-from casadi_keyframe.studies import relative_error_and_cosine
+from casadi_keyframe.studies.accuracy import relative_error_and_cosine
 from casadi_keyframe.state import State
 
 
@@ -145,7 +145,7 @@ def test_hand_exact_adjoint_equals_casadi_with_moving_contacts_and_attachments(c
     u = 0.1 * np.random.default_rng(0).standard_normal(prob.size)
     traj = prob.simulate(u)
     touching = [np.abs(model.forces(x, v, n / 30, role="contact")).max() > 0.1
-                or (r.contacts is not None and r.contacts.count > 0)
+                or (r.held is not None and r.held.count > 0)
                 for n, (x, v, r) in enumerate(zip(traj.x, traj.v, traj.records))]
     assert sum(touching) >= 6  # in contact for half the steps
     f_hand, g_hand = prob.objective_and_gradient(u, "adjoint")
@@ -200,9 +200,9 @@ def test_force_for_is_the_inverse_of_a_step(solver):
     force = integrator.force_for(model, x, v, v1, 4, dt, work)
     end, record = integrator.step(model, State(x, v), force, 4, dt, work)
     x_end, v_end = end.x, end.v
-    held = record.contacts  # their normal velocities are the step's, not v1's
+    held = record.held  # their normal velocities are the step's, not v1's
     assert held is not None and held.count >= 3
-    v1 = held.tangential_part(v1) + held.normal_part(v + held.prescribed(v))
+    v1 = held.unheld_part(v1) + held.held_part(v + held.prescribed(v))
     free = model.free_mask().reshape(x.shape)
     assert not free.all() and np.abs(force).max() > 1.0
     np.testing.assert_allclose(v_end[free], v1[free], atol=1e-8)

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from casadi_keyframe.cli import main
-from casadi_keyframe.files import FileDamaged, read_json, read_npz
-from casadi_keyframe.io import read_run
+from casadi_keyframe.saved import FileDamaged, read_json, read_npz
+from casadi_keyframe.saved import read_run
 
 SMALL = ["flock_path", "--set", "agents=4", "--set", "steps=10"]
 

@@ -62,12 +62,15 @@ def test_keyframe_panels_colour_the_distance_and_draw_targets_at_their_frame(she
     fig = kept["fig"]
     panels = [ax for ax in fig.axes if ax.name == "3d"]
     titles = [ax.get_title() for ax in panels]
-    assert titles[0].startswith("frame 0 /") and "keyframe" not in titles[0]
-    assert "keyframe: rms" in titles[1] and "mm off" in titles[1]
+    assert titles[0].startswith("frame 0 /") and titles[1].startswith("frame 4 /")
+    said = [[t.get_text() for t in ax.texts] for ax in panels]
+    assert said[0] == []  # frame 0 has no keyframe: nothing to judge, no target drawn
+    assert len(said[1]) == 1 and "StateKeyframe@4" in said[1][0]
+    assert "rms miss" in said[1][0] and "mm (tol" in said[1][0]
     wireframes = [[c for c in ax.collections if isinstance(c, Poly3DCollection)
                    and len(c.get_facecolor()) == 0] for ax in panels]
     assert wireframes[0] == [] and len(wireframes[1]) == 1  # no target at frame 0
-    assert all(len(ax.texts) == 0 for ax in panels)  # no "target at frame" in a snapshot
+    assert not any("target at frame" in t for s in said for t in s)  # not in a snapshot
     faces = len(prob.model.faces)
     cloth = [next(c for c in ax.collections if isinstance(c, Poly3DCollection)
                   and len(c.get_facecolor()) == faces) for ax in panels]
@@ -85,10 +88,14 @@ def test_the_animation_labels_a_target_drawn_before_its_frame(sheet):
     prob, traj = sheet
     fig = matplotlib.pyplot.figure()
     panel = render_cloth.TrajectoryPanel(fig.add_subplot(projection="3d"), prob, traj)
-    panel.draw(1)
+    panel.draw(1, hold=True)
     assert [t.get_text() for t in panel.ax.texts] == ["target at frame 4"]
-    panel.draw(4)
-    assert len(panel.ax.texts) == 0 and "keyframe: rms" in panel.ax.get_title()
+    panel.draw(4, hold=True)
+    texts = [t.get_text() for t in panel.ax.texts]
+    assert len(texts) == 1 and "StateKeyframe@4" in texts[0]
+    panel.draw(5, hold=True)  # the verdict stays until the next keyframe
+    texts = [t.get_text() for t in panel.ax.texts]
+    assert "target at frame 6" in texts and any("StateKeyframe@4" in t for t in texts)
     matplotlib.pyplot.close(fig)
 
 

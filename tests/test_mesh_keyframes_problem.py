@@ -48,8 +48,45 @@ def test_bad_input_exits_2_naming_the_option(files, capsys, case, option, words)
             "group": [cloth, wave, "pin_group=top"]}[case]
     assert main(bad(files, *sets)) == 2
     err = capsys.readouterr().err
-    assert f"mesh_keyframes: {option}: " in err
+    error = [line for line in err.splitlines() if not line.startswith("note: ")]
+    assert len(error) == 1 and error[0].startswith(f"error: mesh_keyframes: {option}: "), err
     assert words.replace("FOLD", files["fold"]) in err, err
+    assert "problem file" not in err and "show mesh_keyframes" not in err, err
+
+
+def test_the_cloth_file_given_as_a_target_is_refused(files, capsys):
+    assert main(bad(files, f"cloth={files['sheet']}", f"keyframes=10:{files['sheet']}")) == 2
+    assert "keyframes: frame 10's target" in capsys.readouterr().err
+
+
+def test_a_run_stands_alone_and_refuses_changed_inputs(files, tmp_path, capsys, monkeypatch):
+    """Solved from relative paths, a run renders and exports from another folder; once a
+    target file is edited, render, export and --resume refuse it by the file's name."""
+    import shutil
+
+    work = tmp_path / "work"
+    (work / "meshes").mkdir(parents=True)
+    for name in ("sheet", "wave"):
+        shutil.copy(files[name], work / "meshes" / f"{name}.obj")
+    monkeypatch.chdir(work)
+    sets = ["--set", "cloth=meshes/sheet.obj", "--set", "keyframes=8:meshes/wave.obj",
+            "--set", "steps=8"]
+    assert main(["solve", "mesh_keyframes", *sets, "--maxiter", "1", "--out", "run", "--quiet",
+                 "--no-animation", "--no-viewer"]) in (0, 1, 3)
+    summary = json.loads((work / "run" / "summary.json").read_text())
+    assert set(summary["inputs"]) == {str(work / "meshes" / f"{n}.obj") for n in ("sheet", "wave")}
+    monkeypatch.chdir(tmp_path)
+    assert main(["render", str(work / "run"), "--no-animation"]) == 0
+    assert main(["export", str(work / "run"), "--format", "pc2"]) == 0
+    with open(work / "meshes" / "wave.obj", "a") as f:
+        f.write("# edited\n")
+    capsys.readouterr()
+    assert main(["render", str(work / "run"), "--no-animation"]) == 2
+    assert f"{work / 'meshes' / 'wave.obj'}, which has changed since" in capsys.readouterr().err
+    monkeypatch.chdir(work)
+    assert main(["solve", "mesh_keyframes", *sets, "--maxiter", "1", "--out", "again",
+                 "--resume", "run", "--quiet", "--no-animation", "--no-viewer"]) == 2
+    assert "which has changed since" in capsys.readouterr().err
 
 
 def test_show_documents_every_override(capsys):

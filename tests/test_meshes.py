@@ -66,12 +66,15 @@ def test_usd_mesh_with_a_transform_and_a_point_subset(tmp_path):
 FAN = "v 0 0 0\nv 1 0 0\nv 1 0 -1\nv 0 0 -1\nv 0.5 1 -0.5\n"
 
 
-@pytest.mark.parametrize("text, message", [
-    (FAN + "f 1 2 3\nf 1 2 4\nf 1 2 5\n", "non-manifold: 1 edge.*vertices 0 and 1, in 3"),
-    (FAN + "f 1 2 3\nf 1 3 3\nf 1 3 4\nf 3 4 5\n", "repeat a vertex"),
-    (FAN + "f 1 2 3\nf 1 3 4\n", "belong to no face.*vertex 4"),
-    (FAN + "v 2 0 0\nf 1 2 3\nf 1 3 4\nf 2 3 5\nf 1 2 6\n", "no area.*\\[0, 1, 5\\]"),
-    (FAN + "f 1 2 3\nf 1 3 4\nf 3 4 9\n", "cannot be read as OBJ.*8"),
+@pytest.mark.parametrize("text, message", [  # vertices and faces numbered as OBJ counts them
+    (FAN + "f 1 2 3\nf 1 2 4\nf 1 2 5\n", "non-manifold: 1 edge.*vertices 1 and 2, in 3"),
+    (FAN + "f 1 2 3\nf 1 3 3\nf 1 3 4\nf 3 4 5\n", "repeat a vertex.*face 2 \\(vertices 1 3 3"),
+    (FAN + "f 1 2 3\nf 1 3 4\n", "belong to no face.*vertex 5"),
+    (FAN + "v 2 0 0\nf 1 2 3\nf 1 3 4\nf 2 3 5\nf 1 2 6\n", "no area.*face 4 \\(vertices 1 2 6"),
+    (FAN + "f 1 2 3\nf 1 3 4\nf 3 4 9\n", "line 8: face 3 uses vertex 9, but the file has 5 "
+                                          "vertices \\(1..5\\)"),
+    (FAN + "f 0 2 3\nf 1 3 4\n", "line 6: face 1 uses vertex 0, but OBJ numbers vertices from 1"),
+    (FAN + "f 1 2 -9\n", "line 6: face 1 uses vertex -9, but only 5 vertices come before it"),
 ])
 def test_bad_meshes_are_refused_by_name(tmp_path, text, message):
     with pytest.raises(MeshError, match=message) as err:

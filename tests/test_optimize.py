@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import Adjoint, SimulationError, load_problem, solve
-from casadi_keyframe.io import Checkpoint, read_run
+from casadi_keyframe.saved import Checkpoint, read_run
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
 
 from helpers import InterruptAfter
@@ -31,6 +31,38 @@ def test_lbfgsb_and_ipopt_reach_the_same_objective(race):
         assert {"objective", "keyframe_error", "control_norm", "seconds"} <= set(r.history[0])
         assert r.fun == pytest.approx(race.objective(r.x), rel=1e-12)
         assert r.trajectory.x.shape == (41, 8, 2)
+
+
+def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
+    """The Callbacks multiple shooting's defects go through, on a problem with a known
+    answer: min |x|^2 with x0 + x1 = 1 and x2 - 2 x3 = 1."""
+    import casadi as ca
+    import scipy.sparse as sp
+
+    from casadi_keyframe.optimize.ipopt import search
+
+    def ev(x):
+        return float(x @ x), 2 * x
+
+    ev.interrupted = None
+
+    class Lines:
+        size = 2
+        pattern = ca.Sparsity.triplet(2, 4, [0, 0, 1, 1], [0, 1, 2, 3])
+
+        def values(self, x):
+            return np.array([x[0] + x[1] - 1, x[2] - 2 * x[3] - 1])
+
+        def jacobian(self, x):
+            return sp.csc_matrix([[1.0, 1.0, 0, 0], [0, 0, 1.0, -2.0]])
+
+    seen = []
+    free = (np.full(4, -np.inf), np.full(4, np.inf))
+    status, message, x = search(ev, np.zeros(4), free, 50, 1e-10, {}, seen.append, None,
+                                constraints=Lines())
+    assert status == CONVERGED, message
+    assert seen and all(s.shape == (4,) for s in seen)  # each iterate handed over
+    np.testing.assert_allclose(x, [0.5, 0.5, 0.2, -0.4], atol=1e-8)
 
 
 @pytest.mark.parametrize("method", ["lbfgsb", "ipopt"])
@@ -180,7 +212,7 @@ def test_the_status_says_how_the_search_ended(race):
     for method in ("lbfgsb", "ipopt"):
         r = solve(race, method, maxiter=3, quiet=True)
         assert r.status == LIMIT and not r.success and r.nit == 3
-        assert r.message.startswith("iteration limit reached (3) before converging")
+        assert r.message.startswith("iteration limit reached (3 iterations in this stage) before converging")
         assert r.summary()["status"] == LIMIT and r.summary()["status_name"] == "limit reached"
 
 
@@ -267,8 +299,10 @@ def test_a_line_search_failure_is_converged_only_when_the_goal_is_met(monkeypatc
     loose = load_problem("flock_path", agents=6, steps=20, tolerance=100.0)
     r = solve(loose, maxiter=50, quiet=True, stop="method")  # met, but run the method
     assert len(starts) == 2 and r.status == CONVERGED and r.success
-    assert r.message.startswith("converged: every keyframe within its tolerance; then line "
-                                "search failed: no step along the steepest descent")
+    assert r.message.startswith("converged: every keyframe within its tolerance (then the "
+                                "method stopped: line search failed: no step along the "
+                                "steepest descent")
+    assert "inaccurate" not in r.message  # the gradient is not in question where it converged
     starts.clear()
     monkeypatch.setattr(lbfgsb, "minimize", scripted([0, 0]))
     r = solve(prob, maxiter=50, quiet=True)
@@ -296,8 +330,26 @@ def test_a_line_search_failure_off_the_goal_exits_1_and_still_writes_its_best_po
     assert said.startswith("flock_path: line search failed") and "converged" not in said
     assert "still missed: CenterOfMass@2: position miss 3.17 (tolerance 0.15)" in said
     assert said.endswith("CenterOfMass@20: position miss 32.1 (tolerance 0.15)")
+    hints = [line for line in out.splitlines() if "hint:" in line]
+    assert "--rounds N" in hints[0] and "--segments K" in hints[0] and "--method ipopt" in hints[0]
+    assert "gradcheck" in hints[1] and "--gradient" not in hints[1]  # already the exact route
     run = read_run(tmp_path / "result.npz")
     assert run["u"].size == load_problem("flock_path", agents=6, steps=20).size
+
+
+def test_advice_never_suggests_an_option_in_use(capsys):
+    from types import SimpleNamespace
+
+    from casadi_keyframe.runs.report import hint
+
+    failed = SimpleNamespace(status=FAILED, message="search failed: ...; still missed: x")
+    spec = SimpleNamespace(rounds={"rounds": 3}, shooting={"segments": 4}, method="ipopt",
+                           gradient="swapped", overrides={}, problem_arg="p", out="o")
+    hint(failed, spec)
+    assert capsys.readouterr().out == ""  # every remedy is in use, the gradient not in question
+    failed.message += "; the gradient may be inaccurate"
+    hint(failed, spec)
+    assert "--gradient adjoint is exact" in capsys.readouterr().out
 
 
 def test_a_search_stops_once_the_goal_is_met_and_a_miss_is_never_a_success(race):

@@ -5,7 +5,8 @@ import errno
 import numpy as np
 import pytest
 
-from casadi_keyframe import files, load_problem, saved, solve
+from casadi_keyframe import load_problem, solve
+from casadi_keyframe.saved import files, folder
 from casadi_keyframe.cli import main
 from casadi_keyframe.export import export
 
@@ -26,7 +27,7 @@ def _read_only(monkeypatch):
 
 
 def _never_read(monkeypatch):
-    monkeypatch.setattr(saved, "read_run", lambda *a: pytest.fail("read the result first"))
+    monkeypatch.setattr(folder, "read_run", lambda *a: pytest.fail("read the result first"))
 
 
 def test_export_out_under_a_file_is_refused_before_reading(run, tmp_path, capsys, monkeypatch):

@@ -125,7 +125,7 @@ def test_an_interrupt_on_a_coarse_mesh_keeps_its_best_on_the_fine_one():
     prob = toss(6)
     r = solve(prob, gradient=InterruptAfter(5), maxiter=50, quiet=True,
               resolutions=[prob.at_resolution(rows=3, cols=3)])
-    assert "stage 0 of 0..1 (9 particles" in r.message and "interrupted" in r.message
+    assert "in stage 0 (9 particles" in r.message and "interrupted" in r.message
     assert r.x.size == prob.size and r.trajectory.x.shape[1] == 36
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from test_augmented_lagrangian import swing
 
-from casadi_keyframe.io import save_result
+from casadi_keyframe.saved import save_result
 from casadi_keyframe.optimize import lower_effort, solve, solve_augmented
 from casadi_keyframe.optimize.result import (HistoryRecord, Result, Stage, Timings,
                                              history_record)

@@ -10,8 +10,8 @@ import pytest
 
 from casadi_keyframe import adjoints
 from casadi_keyframe.cli import main
-from casadi_keyframe.io import atomic_path, read_run
-from casadi_keyframe.run import exit_code
+from casadi_keyframe.saved import atomic_path, read_run
+from casadi_keyframe.runs import exit_code
 
 SMALL = ["flock_path", "--set", "agents=6", "--set", "steps=20", "--set", "tolerance=2"]
 
@@ -26,13 +26,21 @@ def start_solve(out, *extra):
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
 
-def wait_for(path, proc, timeout=60.0):
+def wait_for(path, proc, timeout=60.0, after_iteration=False):
+    """Until ``path`` exists (with ``after_iteration``, a checkpoint of iteration 1 or later)."""
     end = time.monotonic() + timeout
-    while not path.exists():
+    while not path.exists() or (after_iteration and _iterations(path) < 1):
         if proc.poll() is not None or time.monotonic() > end:
             proc.kill()
             pytest.fail(f"{path.name} never appeared:\n{proc.communicate()[0]}")
         time.sleep(0.02)
+
+
+def _iterations(path) -> int:
+    try:
+        return int(np.load(path)["nit"])
+    except (OSError, ValueError, KeyError, EOFError):  # being replaced right now
+        return -1
 
 
 def test_exit_codes_follow_the_status():
@@ -77,7 +85,8 @@ def test_a_signal_writes_the_best_result_and_render_and_resume_use_it(method, si
 def test_a_second_ctrl_c_stops_at_once_and_leaves_whole_files(tmp_path):
     out = tmp_path / "run"
     proc = start_solve(out, "--gradient", "fd", "--maxiter", "500")
-    wait_for(out / "checkpoint.npz", proc)
+    wait_for(out / "checkpoint.npz", proc)  # the start's, written before the first iteration
+    wait_for(out / "checkpoint.npz", proc, after_iteration=True)  # inside the search now
     proc.send_signal(signal.SIGINT)
     time.sleep(0.15)  # the first waits for the evaluation under way (about 0.5 s)
     proc.send_signal(signal.SIGINT)
@@ -124,7 +133,7 @@ def test_the_iteration_limit_exits_3_and_resume_goes_on(tmp_path, capsys):
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--maxiter", "3", "--quiet",
                  "--no-animation"]) == 3
     text = capsys.readouterr().out
-    assert "iteration limit reached (3)" in text and f"--resume {tmp_path}" in text
+    assert "iteration limit reached (3 iterations in this stage)" in text and f"--resume {tmp_path}" in text
     assert "--method lbfgsb --gradient adjoint --out" in text  # resumed the same way
     first = json.loads((tmp_path / "summary.json").read_text())
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--resume",
@@ -203,7 +212,7 @@ def test_atomic_files_are_whole_or_absent(tmp_path):
 
 
 def test_misses_say_what_their_rms_is_over():
-    from casadi_keyframe.report import format_misses
+    from casadi_keyframe.optimize.report import format_misses
 
     line = format_misses([{"term": "StateKeyframe@60", "particles": 416,
                            "rms_position_error": 0.01}, {"term": "RegionTarget@50",

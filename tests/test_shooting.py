@@ -10,11 +10,13 @@ from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, Smoothness, S
                              StepForces, StrainLimit)
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.optimize import solve
+from casadi_keyframe.optimize.evaluator import Evaluator
 from casadi_keyframe.optimize.multipliers import Multipliers
-from casadi_keyframe.optimize.segments import boundaries
 from casadi_keyframe.optimize.shooting import Shooting
-from casadi_keyframe.optimize.shooting_nodes import initial_nodes
-from casadi_keyframe.optimize.workers import LocalPool, Serial
+from casadi_keyframe.optimize.shooting.merit import ShootingMerit
+from casadi_keyframe.optimize.shooting.nodes import initial_nodes
+from casadi_keyframe.optimize.shooting.segments import boundaries
+from casadi_keyframe.optimize.shooting.workers import LocalPool, Serial
 from casadi_keyframe.scenes.sheets import hanging_sheet
 from casadi_keyframe.state import State
 
@@ -225,8 +227,10 @@ def test_solve_with_shooting_reports_each_part_and_judges_by_the_controls_own_ru
                    shooting={"segments": 3, "init": "blend", "rounds": 2})
     shooting, polish = result.stages
     assert shooting["segments"] == 3 and "multiple shooting, 3 segments" in shooting["message"]
-    assert "segments" not in polish and polish["stage"] == shooting["stage"] == 0
+    assert "segments" not in polish and (shooting["stage"], polish["stage"]) == (0, 1)
     assert result.nit == shooting["nit"] + polish["nit"] == len(result.history)
+    assert [h["stage"] for h in result.history] == [0] * shooting["nit"] + [1] * polish["nit"]
+    assert result.fun == polish["fun"]  # one story: the last stage's objective is the result's
     records = [h for h in result.history if "defect" in h]
     assert len(records) == shooting["nit"] and records[-1]["defect"] < records[0]["defect"]
     # the result is the problem's own: its controls simulated from the start
@@ -237,10 +241,27 @@ def test_solve_with_shooting_reports_each_part_and_judges_by_the_controls_own_ru
         solve(prob, shooting={"segments": 3, "nodes": "blend"})
 
 
+def test_the_ipopt_formulation_holds_the_defects_as_constraints_and_reports_its_iterates():
+    """IPOPT with the defects as equality constraints (their sparse Jacobian by backward
+    sweeps): the defects stay a fraction of the tolerance while the objective falls, and
+    the stage ends on IPOPT's last iterate, the one each record described last."""
+    prob = sheet_problem(ground=False)
+    result = solve(prob, maxiter=15, quiet=True, stop="method",
+                   shooting={"segments": 3, "init": "blend", "formulation": "ipopt",
+                             "polish": False})
+    (stage,) = result.stages
+    records = [h for h in result.history if "defect" in h]
+    assert "3 segments, 1 rounds" in stage["message"] and "IPOPT" in stage["message"]
+    assert len(records) == stage["nit"] == 15 and {h["round"] for h in records} == {0}
+    assert records[-1]["objective"] < 0.5 * records[0]["objective"]
+    assert stage["defect"] < 0.1 and stage["defect"] == pytest.approx(records[-1]["defect"])
+    assert stage["fun"] == pytest.approx(records[-1]["objective"], rel=1e-12)
+
+
 def test_segments_on_a_dask_cluster_give_the_same_numbers():
     distributed = pytest.importorskip("distributed")
     from casadi_keyframe import load_problem
-    from casadi_keyframe.optimize.dask_segments import DaskPool
+    from casadi_keyframe.optimize.shooting.dask_pool import DaskPool
 
     prob = load_problem("cloth_shapes", rows=3, cols=3, steps=12)
     shooting, z, mult = random_point(prob, 3, np.random.default_rng(2))
@@ -261,11 +282,10 @@ def test_a_new_round_evaluates_its_own_merit_at_the_point_the_last_one_ended():
     """The multipliers move between rounds, so the memo of the last point is stale: a round
     that started from it with the old merit's value and gradient failed its first line
     search (seen: every other round of the cape's 1 iteration)."""
-    from casadi_keyframe.optimize.shooting_search import ShootingEvaluator
-
     prob = sheet_problem()
     shooting, z, mult = random_point(prob, 3, np.random.default_rng(4))
-    ev = ShootingEvaluator(shooting, Serial(prob, shooting.spans), mult)
+    merit = ShootingMerit(prob, shooting, Serial(prob, shooting.spans), mult)
+    ev = Evaluator(prob, None, None, merit=merit, report="best", failed_best=False)
     before = ev(z)[0]
     c = ev.last_info["defects"]
     mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},

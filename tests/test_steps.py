@@ -62,11 +62,11 @@ SYSTEMS = {
 def test_the_cloth_scene_holds_contacts_where_the_steps_are_checked():
     prob = cloth_problem(LinearizedBackwardEuler("direct"), collision="constraint")
     traj, _ = state_in_contact(prob)
-    held = [r.contacts.count if r.contacts is not None else 0 for r in traj.records]
-    assert held[5] >= 4  # the checked step holds contacts
+    held = [r.held.count if r.held is not None else 0 for r in traj.records]
+    assert held[5] >= 4  # the checked step holds particles
     penalty = cloth_problem(LinearizedBackwardEuler("direct"), collision="penalty")
     traj, _ = state_in_contact(penalty)
-    assert all(r.contacts is None for r in traj.records)
+    assert all(r.held is None for r in traj.records)
 
 
 def state_in_contact(prob, n=5, seed=0):

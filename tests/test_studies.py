@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from casadi_keyframe import studies
+from casadi_keyframe.studies import accuracy as studies
 from casadi_keyframe.cli import main
 from casadi_keyframe.scenes.sheets import contact_problem
 

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 
 from casadi_keyframe.cli import main
-from casadi_keyframe.studies import fitted_order
-from casadi_keyframe.swap_validity import (KINDS, format_swap_validity, map_points,
+from casadi_keyframe.studies.accuracy import fitted_order
+from casadi_keyframe.studies.swap_validity import (KINDS, format_swap_validity, map_points,
                                            one_step_error, sheet_problem,
                                            swap_validity_point)
 
@@ -75,7 +75,7 @@ def test_the_study_runs_a_grid_of_it_on_the_sweep_runner(tmp_path):
 
 
 def test_a_map_of_slices_runs_each_point_once_on_the_runner(tmp_path):
-    from casadi_keyframe.sweep.studies import study_points
+    from casadi_keyframe.studies.sweeps import study_points
 
     tiny = {**map_points(quick=True)["dt"][0], "rows": 3, "horizon": 0.1, "dt": 1 / 60}
     points = [tiny, {**tiny, "stiffness": 2.0}, dict(tiny)]  # the last repeats the first

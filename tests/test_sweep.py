@@ -15,9 +15,10 @@ import pytest
 pytest.importorskip("distributed", reason="the sweep needs dask[distributed] (the test extra "
                                           "installs it)")
 
-from casadi_keyframe.cli import main, parse_grid  # noqa: E402
+from casadi_keyframe.cli import main  # noqa: E402
+from casadi_keyframe.cli.values import parse_grid  # noqa: E402
 from casadi_keyframe.loading import load_module  # noqa: E402
-from casadi_keyframe.run import run_solve, solve_run  # noqa: E402
+from casadi_keyframe.runs import run_solve, solve_run  # noqa: E402
 from casadi_keyframe.sweep import sweep  # noqa: E402
 from casadi_keyframe.sweep.grid import folder_name, points, start_controls  # noqa: E402
 
@@ -234,7 +235,7 @@ def test_the_table_is_csv_and_parquet_with_the_same_rows(tmp_path):
 
 
 def test_a_study_grid_runs_through_the_same_runner(tmp_path, capsys):
-    from casadi_keyframe.studies import one_step_gap
+    from casadi_keyframe.studies.accuracy import one_step_gap
 
     out = tmp_path / "study"
     assert main(["study", "integrator-accuracy", "--grid", "dt=1/30,1/60", "--out", str(out),

@@ -1,5 +1,6 @@
 """Typed views: a problem takes only a View, and a loose dict or the old scene= keyword is
-refused with a message that says what to pass instead."""
+refused with a message that says what to pass instead; a keyframe's marker says how the
+goal judges it."""
 import dataclasses
 
 import numpy as np
@@ -8,7 +9,9 @@ import pytest
 from casadi_keyframe import CenterOfMassKeyframe, ControlProblem, StepForces
 from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel, FlockParams
-from casadi_keyframe.views import ClothView, FlockView, Ring, view_of
+from casadi_keyframe.objectives import RegionTarget
+from casadi_keyframe.shapes import square
+from casadi_keyframe.views import ClothView, FlockView, KeyframeGoal, Marker, Ring, view_of
 
 
 def _problem(**kw):
@@ -46,3 +49,22 @@ def test_views_are_frozen_checked_and_defaulted():
     assert view_of(prob, FlockView) == FlockView()  # none given: the defaults
     with pytest.raises(TypeError, match="needs a ClothView.*a FlockView"):
         view_of(_problem(view=FlockView()), ClothView)
+
+
+def test_a_marker_carries_how_the_goal_judges_its_keyframe():
+    """A marker's check is the term's own miss and shortfall; a keyframe that checks
+    nothing (fill 0, tolerance inf) is neither hit nor missed."""
+    prob = _problem()
+    traj = prob.simulate()
+    term = prob.objective_terms.state_terms[0]
+    check = term.marker().check(traj)
+    assert check.met is (term.shortfall(traj) is None)
+    assert [(m.key, m.value, m.tolerance) for m in check.misses] == [
+        ("position_error", term.miss(traj)["position_error"], term.within[0])]
+    free = RegionTarget(4, square((0, 0), 1), fill=0).bind(prob.model, prob.steps)
+    loose = CenterOfMassKeyframe(4, x=[9.0, 9.0], tolerance=np.inf).bind(prob.model, 4)
+    assert [t.marker().check(traj).verdict for t in (free, loose)] == ["no tolerance"] * 2
+    assert loose.marker().position_tolerance is None
+    assert Marker("m", 1, "center", [0.0, 0.0]).check(traj) is None  # no goal: says nothing
+    with pytest.raises(ValueError, match="keyed by"):
+        KeyframeGoal({"distance": 1.0}, True, term.miss, term.shortfall)

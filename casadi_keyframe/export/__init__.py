@@ -1,57 +1,67 @@
-"""Results where animators and researchers work: USD, PC2 point caches, OBJ sequences and a
-self-contained HTML viewer (``casadi-keyframe export RESULT_DIR --format ...``).
+"""Results where animators and researchers work: USD, PC2 point caches, OBJ sequences, the
+self-contained HTML viewer and Alembic (``casadi-keyframe export RESULT_DIR --format ...``).
 
 :func:`export` reads a results folder once (:mod:`..saved`), turns it into plain arrays
-(:mod:`.scene`) and hands them to one writer per format:
-
-========  =================================================  ===========================
-format    files (in the results folder, or ``out``)           needs
-========  =================================================  ===========================
-``usd``   ``NAME.usd``: one stage, see :mod:`.usd`             ``casadi_keyframe[usd]``
-``pc2``   ``NAME.pc2`` + ``NAME_rest.obj`` (:mod:`.pc2`)       nothing
-``obj``   ``obj/NAME_0000.obj`` ... one per frame (:mod:`.obj`) nothing
-``html``  ``viewer.html``: the interactive viewer (:mod:`.viewer`)  ``casadi_keyframe[viewer]``
-``abc``   ``NAME.abc``: Alembic, cloth only (:mod:`.alembic`)  Blender (``bpy`` or a binary)
-========  =================================================  ===========================
+(:mod:`.scene`) and hands them to the format's writer in :data:`FORMATS`, the one table of
+formats: what each writes, what it needs, its writer and the check of its library.
 """
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
+from . import alembic, obj, pc2, usd, viewer
 from .scene import Scene, scene_of
 
-FORMATS = ("usd", "pc2", "obj", "html", "abc")
-VIEWER = "viewer.html"
+@dataclass(frozen=True)
+class Format:
+    """One export format: ``write(scene, folder) -> [paths]``, ``check()`` (an ImportError
+    naming what to install when its library is missing), the ``files`` it writes and what
+    it ``needs``."""
 
-__all__ = ["FORMATS", "Scene", "check_library", "export", "export_scene", "scene_of",
-           "write_outputs"]
+    write: Callable
+    check: Callable
+    files: str
+    needs: str = "nothing"
 
 
-def check_format(fmt: str) -> str:
-    """``fmt`` if it is one of :data:`FORMATS`, else a ValueError listing them."""
+def _nothing() -> None:
+    """A format that needs no library."""
+
+
+FORMATS = {
+    "usd": Format(usd.write_stage, usd.pxr_modules, "NAME.usd, one stage",
+                  "casadi_keyframe[usd]"),
+    "pc2": Format(pc2.write_cache, _nothing, "NAME.pc2 and its rest mesh NAME_rest.obj "
+                  "(Blender's Mesh Cache modifier)"),
+    "obj": Format(obj.write_frames, _nothing, "obj/NAME_0000.obj ... one per frame"),
+    "html": Format(viewer.write_page, viewer.plotly_module, "viewer.html, the interactive "
+                   "viewer", "casadi_keyframe[viewer]"),
+    "abc": Format(alembic.write_file, alembic.find_blender, "NAME.abc, Alembic of a cloth",
+                  "Blender: the bpy module or a blender binary"),
+}
+
+
+def check_format(fmt: str) -> Format:
+    """The :data:`FORMATS` entry of ``fmt``, else a ValueError listing them."""
     if fmt not in FORMATS:
         raise ValueError(f"unknown export format {fmt!r}: choose one of {', '.join(FORMATS)}")
-    return fmt
+    return FORMATS[fmt]
+
+
+def format_help() -> str:
+    """Each format, what it writes and what it needs: the command line's help."""
+    return "; ".join(f"{name}: {f.files}" + ("" if f.needs == "nothing" else
+                                             f" (needs {f.needs})")
+                     for name, f in FORMATS.items())
 
 
 def export_scene(scene: Scene, fmt: str, out) -> list[Path]:
     """Write ``scene`` in format ``fmt`` into the folder ``out``; the files written."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    if check_format(fmt) == "usd":
-        from .usd import write_usd
-        return [write_usd(scene, out / f"{scene.name}.usd")]
-    if fmt == "pc2":
-        from .pc2 import write_cache
-        return write_cache(scene, out)
-    if fmt == "obj":
-        from .obj import write_sequence
-        return write_sequence(scene, out / "obj")
-    if fmt == "abc":
-        from .alembic import write_alembic
-        return [write_alembic(scene, out / f"{scene.name}.abc")]
-    from .viewer import write_viewer
-    return [write_viewer(scene, out / VIEWER)]
+    return check_format(fmt).write(scene, out)
 
 
 def export(source, fmt: str, *, out=None) -> list[Path]:
@@ -61,8 +71,7 @@ def export(source, fmt: str, *, out=None) -> list[Path]:
     that cannot be written or an unknown format, a FileNotFoundError for a
     folder with no result, an ImportError naming the extra to install when ``usd`` or
     ``html`` lacks its library."""
-    from ..files import writable_folder
-    from ..saved import load_saved, saved_file
+    from ..saved import load_saved, saved_file, writable_folder
 
     check_library(fmt)
     path = saved_file(source)
@@ -79,15 +88,7 @@ def export(source, fmt: str, *, out=None) -> list[Path]:
 def check_library(fmt: str) -> None:
     """A ValueError for an unknown ``fmt``, an ImportError naming the extra to install if
     it needs a library that is missing: checked before a result is read or a solve starts."""
-    if check_format(fmt) == "usd":
-        from .usd import pxr_modules
-        pxr_modules()
-    elif fmt == "html":
-        from .viewer import plotly_module
-        plotly_module()
-    elif fmt == "abc":
-        from .alembic import find_blender
-        find_blender()
+    check_format(fmt).check()
 
 
 def write_outputs(problem, trajectory, out, formats=(), *, viewer: bool = True) -> list[Path]:

@@ -19,7 +19,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-from ..io import atomic_path
+from ..saved import atomic_path
 from .pc2 import write_cache
 
 SCRIPT = Path(__file__).with_name("blender_alembic_script.py")
@@ -75,3 +75,8 @@ def write_alembic(scene, path, *, timeout: float = 600.0) -> Path:
                                    f"(exit code {run.returncode}): " + " | ".join(tail))
             shutil.move(str(out), str(target))
     return Path(path)
+
+
+def write_file(scene, folder) -> list[Path]:
+    """``NAME.abc`` in ``folder`` (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return [write_alembic(scene, Path(folder) / f"{scene.name}.abc")]

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..interrupts import check
-from ..io import atomic_path
+from ..saved import atomic_path
 
 
 def obj_text(vertices, faces=None, *, comment: str = "") -> str:
@@ -47,6 +47,11 @@ def write_sequence(scene, folder) -> list[Path]:
         paths.append(write_obj(folder / f"{scene.name}_{n:0{width}d}.obj", scene.positions[n],
                                scene.faces, comment=about))
     return paths
+
+
+def write_frames(scene, folder) -> list[Path]:
+    """``folder/obj/NAME_0000.obj`` ... (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return write_sequence(scene, Path(folder) / "obj")
 
 
 def read_obj(path) -> tuple[np.ndarray, np.ndarray]:

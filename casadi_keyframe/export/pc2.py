@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
+from ..saved import atomic_path
 from .obj import write_obj
 
 MAGIC = b"POINTCACHE2\0"

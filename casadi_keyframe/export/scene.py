@@ -13,7 +13,7 @@ import numpy as np
 
 from ..geometry import body_geometry, moves
 from ..models.base import PhysicalReport, Surface
-from ..report import format_misses
+from ..optimize.report import format_misses
 from ..views import BlendView, ClothView, FlockView
 
 
@@ -74,7 +74,7 @@ def targets(problem) -> list[Target]:
     kinds = {"shape": "shape" if surface else "points", "particles": "points",
              "center": "points", "outline": "outline"}
     return [Target(m.label, m.frame, kinds[m.kind], points3(m.points))
-            for m in problem.objective_terms.markers()]
+            for m in problem.objective_terms.markers() if m.kind != "velocity"]
 
 
 @dataclass

@@ -1,18 +1,13 @@
 """One USD stage per result (needs ``usd-core``: ``pip install casadi_keyframe[usd]``).
 
-``/Result`` (the default prim) holds the particles, a cloth as a time-sampled
-``UsdGeom.Mesh`` (faces once, points per frame) or a flock as a time-sampled ``UsdGeom.PointInstancer``
-(positions, orientations along the velocity, velocities and ``ids`` per agent; two cone
-prototypes pointing along +x, ``Agent`` and, for the view's highlighted agents, a larger
-orange ``Highlighted``); ``Colliders`` (``Sphere``, ``Capsule``, planes as a quad ``Mesh``;
-moving ones with a time-sampled transform); ``Targets``, one prim per keyframe target (a
-whole-cloth shape as a mesh, particle and centre-of-mass targets as points, a region's outline
-as a closed curve), and the view's ``Ring``, so that each can be hidden on its own; and for
-a blend, ``Clips/fall`` and ``Clips/walk``, the source clips' capes and characters over the
-blend's frames, in their own world positions.
-
-Time code n is frame n; ``timeCodesPerSecond`` and ``framesPerSecond`` are ``1 / dt``,
-``metersPerUnit`` is 1 and the up axis is z, as the problems are built.
+``/Result`` (the default prim) holds the particles: a cloth as a time-sampled
+``UsdGeom.Mesh`` (faces once, points per frame), a flock as a time-sampled
+``UsdGeom.PointInstancer`` (positions, orientations along the velocity, ids; ``Agent`` and
+``Highlighted`` cone prototypes); ``Colliders`` (moving ones with a time-sampled transform);
+``Targets``, one prim per keyframe target, and the view's ``Ring``, each hideable on its
+own; for a blend, ``Clips/fall`` and ``Clips/walk`` in their own world positions.  Time code
+n is frame n at ``1 / dt`` codes per second, ``metersPerUnit`` 1, z up, as the problems are
+built.
 """
 from __future__ import annotations
 
@@ -23,7 +18,7 @@ import numpy as np
 
 from ..geometry import basis, circle, plane_patch
 from ..interrupts import check
-from ..io import atomic_path
+from ..saved import atomic_path
 
 INSTALL = "pip install casadi_keyframe[usd]"
 CLOTH, CLIP, HIGHLIGHT, AGENT, TARGET, BODY, RING = (
@@ -290,3 +285,8 @@ def validate(path) -> list[str]:
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
     errors = UsdValidation.ValidationContext(validators).Validate(Usd.Stage.Open(str(path)))
     return [e.GetErrorAsString() for e in errors]
+
+
+def write_stage(scene, folder) -> list[Path]:
+    """``NAME.usd`` in ``folder`` (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return [write_usd(scene, Path(folder) / f"{scene.name}.usd")]

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_path
+from ..saved import atomic_path
 from . import traces as tr
 
 INSTALL = "pip install casadi_keyframe[viewer]"
@@ -228,3 +228,8 @@ def write_viewer(scene, path) -> Path:
     with atomic_path(path) as tmp:
         tmp.write_text(html, encoding="utf-8")
     return Path(path)
+
+
+def write_page(scene, folder) -> list[Path]:
+    """``viewer.html`` in ``folder`` (the :data:`~casadi_keyframe.export.FORMATS` writer)."""
+    return [write_viewer(scene, Path(folder) / "viewer.html")]

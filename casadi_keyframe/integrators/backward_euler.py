@@ -38,7 +38,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..linear import ModifiedPCG, SolveError, SolveInfo, SparseLU
-from ..models.base import ContactConstraints, ForceJacobians
+from ..models.base import ForceJacobians, StepHold
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 from .linearized_backward_euler import step_matrices
@@ -88,12 +88,13 @@ class BackwardEuler(Integrator):
 
     def check_model(self, model) -> None:
         """As every scheme's, and contact must be the paper's penalty springs: a step that
-        holds contacts (``collision="constraint"``) is the linearized scheme's."""
+        holds particles (``collision="guarded"`` or ``"constraint"``) is the linearized
+        scheme's."""
         super().check_model(model)
-        if isinstance(model, ContactConstraints) and model.constraint_families:
+        if isinstance(model, StepHold) and model.holding:
             raise ValueError("full backward Euler steps penalty contact only: build the cloth "
                              "with collision='penalty', or step it with "
-                             "LinearizedBackwardEuler, which holds contacts")
+                             "LinearizedBackwardEuler, which holds particles on bodies")
 
     def init(self, model) -> Workspace:
         self.check_model(model)

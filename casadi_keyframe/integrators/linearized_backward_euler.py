@@ -22,8 +22,8 @@ from frame n+1 to frame n is
 
     w      = a_v(n+1) + dt a_x(n+1)                   (the cotangent of v+)
     A^T mu = w,   A = M - dt D - dt^2 K  at frame n+1  (mu = 0 on pinned and attached
-                                                        components; the contacts forward
-                                                        step n+1 holds project w and A)
+                                                        components; the set forward
+                                                        step n+1 holds projects w and A)
     dphi/de_n = dt mu
     a_v(n) = M mu                       + dphi/dv_n
     a_x(n) = a_x(n+1) + dt J^T mu       + dphi/dx_n,   J = df/dx at frame n+1, all of it
@@ -33,7 +33,7 @@ paper's adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal mas
 right).  The two deviations from a literal reading, and why:
 
 * **n+1 indexing.**  The matrix at frame n+1 is what differentiating eq. (9) gives, and it
-  is the very matrix forward step n+1 factorised (same state, same contacts held), so the
+  is the very matrix forward step n+1 factorised (same state, same particles held), so the
   backward pass reuses that factor and costs about one forward pass.
 * **K in A, J in the update.**  A holds the model's clamped stiffness K (compressed springs'
   transverse term and contact curvature left out, damping's position derivative left out),
@@ -81,15 +81,13 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..linear import SolveError, SolveInfo, System, linear_solver
-from ..models.base import BlockJacobians, ContactConstraints, ForceJacobians
+from ..models.base import BlockJacobians, ForceJacobians, StepHold
 from ..models.blocks import GrowingPattern, SparseJacobian
-from ..models.contact_constraint import Contacts
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
+from .held_solve import adjoint_multiplier, held_q, held_rhs, projected_matrix
 
 MAX_REVISIONS = 6  # a step solved again at most this often when its end shows it chose wrong
-from .contact_filter import (adjoint_multiplier, constrained_rhs, contact_q, impulses,
-                             projected_matrix)
 
 
 def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):
@@ -102,22 +100,23 @@ def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):
 
 @dataclass(frozen=True)
 class LinearizedStep:
-    """What a linearized step keeps: the interactions at its start state (self-contact
-    pairs), how its linear solve went, within the integrator's memory budget the prepared
-    step matrix (``factor``, e.g. its Cholesky factor) for the derivative passes, and the
-    contacts it held (:class:`~casadi_keyframe.models.contact_constraint.Contacts`, None
-    if none) and how many times it was solved (more than once when it was revised)."""
+    """What a linearized step keeps: what it decided (``decisions``: what the forces act
+    over at its start, self-contact pairs, springs taken taut, the held set), how its linear
+    solve went, within the integrator's memory budget the prepared step matrix (``factor``,
+    e.g. its Cholesky factor) for the derivative passes, the set its hold held
+    (:class:`~casadi_keyframe.models.hold.HeldSet`, None if none) and how many times it was
+    solved (more than once when it was revised)."""
 
-    interactions: object
+    decisions: object
     solve: SolveInfo
     factor: object = None
-    contacts: object = None
+    held: object = None
     solves: int = 1
 
 
 @dataclass(frozen=True)
 class StepSystem:
-    """A step's matrix as the linear solver sees it (``matrix``: A, or with contacts held the
+    """A step's matrix as the linear solver sees it (``matrix``: A, or with a held set the
     projected ``S A S + M P``), the product ``product(y) = A y`` of the step matrix itself
     (flat), and its stiffness ``K`` and, when asked, ``df_dx``, each with a ``matvec``."""
 
@@ -129,16 +128,16 @@ class StepSystem:
 
 class StepWorkspace(Workspace):
     """A pass's :class:`Workspace` plus the pattern its step matrices are gathered into, the
-    bytes of factorisations its records keep and the last step's contacts (a contact that
-    pulled is released at the next step)."""
+    bytes of factorisations its records keep and what the last step carried to the next
+    (the model's ``carried_decisions``: a particle the hold pulled is released, springs
+    taken taut stay taut)."""
 
     def __init__(self, plan, pattern: GrowingPattern):
         super().__init__(plan)
         self.pattern = pattern
         self.kept_bytes = 0
-        self.previous = None  # the last step's contacts
-        self.last_found = None  # and what it decided beyond them (springs taken taut)
-        self.planned = None  # what the next step starts from, when an inverse step chose it
+        self.carried = None  # what the last step carried
+        self.planned = None  # what the next step decides, when an inverse step chose it
 
 
 class LinearizedBackwardEuler(Integrator):
@@ -181,22 +180,12 @@ class LinearizedBackwardEuler(Integrator):
         return StepWorkspace(self.plan(model), pattern)
 
     def carry(self, model, record):
-        """The contacts the step held that pulled and the particles it released (the next
-        step releases them), and the springs it took taut."""
-        held = record.contacts
-        contacts = None if held is None else (held.particles[held.impulse < 0],
-                                              held.released)
-        return contacts, model.carried_decisions(record.interactions)
+        """What the step carried to the next (the model's ``carried_decisions``: the
+        particles its hold pulled and released, the springs it took taut)."""
+        return model.carried_decisions(record.decisions)
 
     def resume(self, work, carried) -> None:
-        if carried is None:
-            return
-        contacts, work.last_found = carried
-        if contacts is not None:
-            pulled, released = contacts
-            k = pulled.size
-            work.previous = Contacts(pulled, np.zeros(k, int), np.zeros((k, 3)), np.zeros(k),
-                                     impulse=-np.ones(k), released=released)
+        work.carried = carried
 
     def plan(self, model):
         """The linear solver's plan for ``model``, made at the first pass and kept while the
@@ -214,10 +203,10 @@ class LinearizedBackwardEuler(Integrator):
                 record.factor.release()
 
     def step_system(self, model, x, v, t, dt, work, with_df_dx=False, interactions=None,
-                    contacts=None) -> StepSystem:
+                    held=None) -> StepSystem:
         """The :class:`StepSystem` at (x, v, t): K and df/dx the model's
         :class:`~casadi_keyframe.models.blocks.Blocks`, A's free block gathered into the
-        pass's pattern (projected when ``contacts`` are held); or, for a model with sparse
+        pass's pattern (projected with a ``held`` set); or, for a model with sparse
         ``jacobians`` only, those matrices."""
         if work.pattern is None:
             A, *jacobians = step_matrices(model, x, v, dt, t, with_df_dx, interactions)
@@ -228,19 +217,16 @@ class LinearizedBackwardEuler(Integrator):
         data = pattern.values(A)
         product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
         solved = product
-        if contacts is not None:
-            data, solved = projected_matrix(pattern.pattern, data, product, contacts,
-                                            model.masses)
+        if held is not None:
+            data, solved = projected_matrix(pattern.pattern, data, product, held, model.masses)
         block = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
                               shape=(pattern.pattern.size,) * 2)
         return StepSystem(System(block, solved, solved, pattern.pattern), product, K, *df_dx)
 
-    def _contacts(self, model, x, v, t, dt, previous):
-        """The contacts a step holds, or None (a model without them, or none touching)."""
-        if not isinstance(model, ContactConstraints):
-            return None
-        held = model.contacts(x, v, t, dt, previous)
-        return held if held.count else None
+    @staticmethod
+    def _held(model, decisions):
+        """The set a step's ``decisions`` hold, or None (a model that holds nothing)."""
+        return model.held(decisions) if isinstance(model, StepHold) else None
 
     def _factor(self, work, system, n: int, keep: bool = False, what: str = "step"):
         try:
@@ -254,15 +240,14 @@ class LinearizedBackwardEuler(Integrator):
         work = self.init(model) if work is None else work
         x, v, t = state.x, state.v, n * dt
         if work.planned is not None:  # decided by force_for for this very step
-            (found, held), work.planned = work.planned, None
+            found, work.planned = work.planned, None
         else:
-            found = model.carried_interactions(work.last_found, x)
-            held = self._contacts(model, x, v, t, dt, work.previous)
+            found = model.step_decisions(x, v, t, dt, work.carried)
         f = (model.forces(x, v, t, found) + external).ravel()
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
         for revision in range(MAX_REVISIONS + 1):
-            system = self.step_system(model, x, v, t, dt, work, interactions=found,
-                                      contacts=held)
+            held = self._held(model, found)
+            system = self.step_system(model, x, v, t, dt, work, interactions=found, held=held)
             b = dt * (f + dt * system.K.matvec(v).ravel())
             factor, keep = self._step_factor_kept(work, system, n)
             try:
@@ -270,25 +255,25 @@ class LinearizedBackwardEuler(Integrator):
                     dv, info = factor.solve(b, z, x0=work.warm)
                     work.warm = dv
                 else:
-                    rhs, zc = constrained_rhs(held, b, system.product, z, v, work.plan.free)
+                    rhs, zc = held_rhs(held, b, system.product, z, v, work.plan.free)
                     y, info = factor.solve(rhs, x0=work.warm)
                     work.warm, dv = y, zc + y
-                    held = held.with_impulse(impulses(held, system.product(dv) - b))
+                    found = model.solved_decisions(found, system.product(dv) - b)
             except SolveError as err:
                 raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
             x1 = x + dt * (v + dv.reshape(v.shape))
-            revised = self._revised(model, found, held, x, v, t, dt, x1)
+            revised = model.revised_decisions(found, x, v, t, dt, x1)
             if revised is None or revision == MAX_REVISIONS:
                 break
-            found, held = revised  # the step chose wrong: solve it again with the revision
+            found = revised  # the step chose wrong: solve it again with the revision
             if keep:
                 factor.release()
         work.kept_bytes += factor.nbytes if keep else 0
-        work.previous, work.last_found = held, found
+        work.carried = model.carried_decisions(found)
         v1 = v + dv.reshape(v.shape)
         model.check_state(x1, v1, n + 1)
-        return State(x1, v1), LinearizedStep(found, info, factor if keep else None, held,
-                                             revision + 1)
+        return State(x1, v1), LinearizedStep(found, info, factor if keep else None,
+                                             self._held(model, found), revision + 1)
 
     def _step_factor_kept(self, work, system, n):
         """The step matrix's factorisation and whether the pass keeps it for the derivative
@@ -300,42 +285,28 @@ class LinearizedBackwardEuler(Integrator):
             keep = False  # known only now for the first factor of a pattern
         return factor, keep
 
-    def _revised(self, model, found, held, x, v, t, dt, x1):
-        """``(found, held)`` revised after a step that ended at x1 (springs it should have
-        taken taut, particles it should have held), or None if the step stands."""
-        if not (isinstance(model, ContactConstraints) and model.constraint_families):
-            return None  # the paper's penalty springs alone: its step, as it was
-        more, touching = model.review_contacts(held, x, v, t, dt, x1)
-        # springs only where the cloth touches a body, where a stop within a step stretches
-        # them: taking springs taut elsewhere makes a keyframe objective rough for nothing
-        touching = touching or held is not None
-        taut = model.revised_interactions(found, x, x1) if touching else None
-        if taut is None and more is None:
-            return None
-        return (found if taut is None else taut), (held if more is None else more)
-
     def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
         """The exact backward step of the linearized scheme (module docstring)."""
         work = self.init(model) if work is None else work
         shape, t = start.x.shape, n * dt
         free = free_components(model, shape).ravel()
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
-        held, x, v, dv = record.contacts, start.x, start.v, end.v - start.v
+        held, x, v, dv = record.held, start.x, start.v, end.v - start.v
         factor, system = self._step_factor(model, start, t, dt, work, record, n)
         w = av + dt * ax
         if held is None:
             lam = self._derivative_solve(work, factor, w, n, transpose=True)
-        else:  # the filter's multipliers (see contact_filter)
-            lam = self._derivative_solve(work, factor, held.tangential_part(w).ravel(), n,
+        else:  # the held solve's multipliers (see held_solve)
+            lam = self._derivative_solve(work, factor, held.unheld_part(w).ravel(), n,
                                          transpose=True)
         bx, bv = model.linearization_vjp(x, v, t, lam.reshape(shape), end.v, dv, dt,
-                                         interactions=record.interactions)
+                                         interactions=record.decisions)
         ax = ax + bx.ravel()
         av = w + bv.ravel() + dt * dt * system.K.matvec(lam, transpose=True).ravel()
         if held is not None:  # the normals' and targets' derivatives
             full = adjoint_multiplier(held, lam, w, system.product).reshape(shape)
-            cx, cv = model.contact_vjp(x, v, t, dt, held, full, contact_q(held, dv, v),
-                                       held.normal_part(full))
+            cx, cv = model.hold_vjp(x, v, t, dt, held, full, held_q(held, dv, v),
+                                    held.held_part(full))
             ax, av = ax + cx.ravel(), av + cv.ravel()
         ax, av = free * ax, free * av
         return State(ax.reshape(shape), av.reshape(shape)), (dt * lam).reshape(shape)
@@ -349,17 +320,17 @@ class LinearizedBackwardEuler(Integrator):
         factor, system = self._step_factor(model, start, t, dt, work, record, n)
         rhs = (dt * np.asarray(d_external).ravel() + dt * dt * system.K.matvec(dv).ravel()
                + model.linearization_jvp(start.x, start.v, t, end.v, end.v - start.v, dt, dx,
-                                         dv, interactions=record.interactions).ravel())
-        held = record.contacts
+                                         dv, interactions=record.decisions).ravel())
+        held = record.held
         if held is None:
             ddv = self._derivative_solve(work, factor, rhs, n, transpose=False)
-        else:  # the filter's tangent (see contact_filter)
-            q = contact_q(held, end.v - start.v, start.v)
-            rhs = (held.tangential_part(rhs).ravel()
-                   + model.contact_jvp(start.x, start.v, t, dt, held, q, dx, dv).ravel())
-            normal = held.normal_part(rhs).ravel()
+        else:  # the held solve's tangent (see held_solve)
+            q = held_q(held, end.v - start.v, start.v)
+            rhs = (held.unheld_part(rhs).ravel()
+                   + model.hold_jvp(start.x, start.v, t, dt, held, q, dx, dv).ravel())
+            normal = held.held_part(rhs).ravel()
             ddv = normal + self._derivative_solve(
-                work, factor, held.tangential_part(rhs - system.product(normal)).ravel(), n,
+                work, factor, held.unheld_part(rhs - system.product(normal)).ravel(), n,
                 transpose=False)
         dv1 = free * (dv + ddv.reshape(shape))
         return State(free * (dx + dt * dv1), dv1)
@@ -372,8 +343,8 @@ class LinearizedBackwardEuler(Integrator):
         free = free_components(model, shape).ravel()
         ax, av = free * cotangent.x.ravel(), free * cotangent.v.ravel()
         later = work.records[n + 1] if n + 1 < len(work.records) else None  # step n+1's A
-        found = model.interactions(end.x) if later is None else later.interactions
-        held = None if later is None else later.contacts
+        found = model.interactions(end.x) if later is None else later.decisions
+        held = None if later is None else later.held
         if (later is not None and later.factor is not None and later.factor.usable
                 and work.pattern is not None):
             df_dx = model.force_jacobian_blocks(end.x, end.v, t, found)
@@ -383,8 +354,8 @@ class LinearizedBackwardEuler(Integrator):
             df_dx = system.df_dx
             factor = self._factor(work, system.matrix, n, what="derivative of step")
         w = av + dt * ax
-        if held is not None:  # step n+1's contacts, projected as its matrix is
-            w = held.tangential_part(w).ravel()
+        if held is not None:  # step n+1's held set, projected as its matrix is
+            w = held.unheld_part(w).ravel()
         mu = self._derivative_solve(work, factor, w, n, transpose=True)
         ax = free * (ax + dt * df_dx.matvec(mu, transpose=True).ravel())
         av = free * (mass_diagonal(model) * mu)
@@ -394,14 +365,14 @@ class LinearizedBackwardEuler(Integrator):
         """Step n's prepared matrix (kept by the forward pass, or made again) and its
         :class:`StepSystem` (its K and the step matrix's product)."""
         if record.factor is not None and record.factor.usable and work.pattern is not None:
-            K, D = model.jacobian_blocks(start.x, start.v, t, interactions=record.interactions)
+            K, D = model.jacobian_blocks(start.x, start.v, t, interactions=record.decisions)
             product = None
-            if record.contacts is not None:  # the filter needs A y
+            if record.held is not None:  # the held solve needs A y
                 A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
                 product = lambda y: A.matvec(y).ravel()  # noqa: E731
             return record.factor, StepSystem(None, product, K)
         system = self.step_system(model, start.x, start.v, t, dt, work,
-                                  interactions=record.interactions, contacts=record.contacts)
+                                  interactions=record.decisions, held=record.held)
         return self._factor(work, system.matrix, n, what="derivative of step"), system
 
     def _derivative_solve(self, work, factor, b, n: int, transpose: bool):
@@ -419,51 +390,45 @@ class LinearizedBackwardEuler(Integrator):
         ``(x, v)`` at step ``n`` ends with velocities ``v1`` (so positions ``x + dt v1``).
         Exact for the free particles; the constrained ones follow their prescribed motion
         whatever the force (``v1`` there is ignored), and so do the normal velocities of the
-        contacts the step holds.  With the pass's ``work``, the step it is for starts from
-        the decisions this one made (contacts held, springs taut), so it lands exactly."""
+        particles the step holds.  With the pass's ``work``, the step it is for starts from
+        the decisions this one made (particles held, springs taut), so it lands exactly."""
         t = n * dt
-        last, previous = (None, None) if work is None else (work.last_found, work.previous)
-        found = model.carried_interactions(last, x)
-        held = self._contacts(model, x, v, t, dt, previous)
+        found = model.step_decisions(x, v, t, dt, None if work is None else work.carried)
         prescribed = model.prescribed_velocity(x, t, dt)
         for _ in range(MAX_REVISIONS + 1):  # the decisions the step will stand by at x1
+            held = self._held(model, found)
             dv = np.where(model.free_mask(), (v1 - v).ravel(), (prescribed - v).ravel())
             if held is not None:
-                dv = (held.tangential_part(dv) + held.prescribed(v)).ravel()
-            revised = self._revised(model, found, held, x, v, t, dt,
-                                    x + dt * (v + dv.reshape(v.shape)))
+                dv = (held.unheld_part(dv) + held.prescribed(v)).ravel()
+            revised = model.revised_decisions(found, x, v, t, dt,
+                                              x + dt * (v + dv.reshape(v.shape)))
             if revised is None:
                 break
-            found, held = revised
+            found = revised
         if work is not None:
-            work.planned = (found, held)
+            work.planned = found
         A, K = step_matrices(model, x, v, dt, t, interactions=found)
+        pushed = None if held is None else held.pushed(model.n)  # friction: no control's
         return ((A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape)
-                - model.forces(x, v, t, found))
+                - model.forces(x, v, t, found) - (0 if pushed is None else pushed / dt))
 
     def decides_per_step(self, model) -> bool:
         """True for a model whose steps decide something the symbolic step takes: which
-        contacts to hold, which springs to take taut."""
-        return ((isinstance(model, ContactConstraints) and bool(model.constraint_families))
-                or model.decision_parameters().size > 0)
+        particles to hold, which springs to take taut."""
+        return model.decision_parameters().size > 0
 
     @staticmethod
     def step_parameters(model, t: float, dt: float, record=None) -> np.ndarray:
         """The symbolic step's S for the step from t: the scene then, attachment targets at
-        t + dt, for a model that holds contacts which ones the step ``record`` held, and what
-        else the step decided (springs it took taut)."""
-        parts = [model.scene_parameters(t), model.constraint_targets(t + dt)]
-        if isinstance(model, ContactConstraints) and model.constraint_families:
-            held = None if record is None else record.contacts
-            parts.append(np.zeros(len(model.constraint_families) * model.n) if held is None
-                         else model.contact_masks(held))
-            parts.append(model.contact_parameters(t, dt))
-        parts.append(model.decision_parameters(None if record is None else record.interactions))
-        return np.concatenate(parts)
+        t + dt, and what the step ``record`` decided (springs it took taut, the particles it
+        held and the bodies over the step: the model's ``decision_parameters``)."""
+        decided = model.decision_parameters(None if record is None else record.decisions, t, dt)
+        return np.concatenate([model.scene_parameters(t), model.constraint_targets(t + dt),
+                               decided])
 
     def symbolic_step(self, model) -> ca.Function:
         """``(X, V, E, dt, S) -> (X+, V+)``: the linearized step in CasADi, for exact reverse
-        mode; S from :meth:`step_parameters` (with the contacts the numeric step held).
+        mode; S from :meth:`step_parameters` (with what the numeric step decided).
 
         K and D come from the model's :meth:`symbolic_jacobians` (the same kernels as the
         numeric step), so second derivatives of the forces enter through them; the linear
@@ -488,19 +453,16 @@ class LinearizedBackwardEuler(Integrator):
         fi, ci = np.flatnonzero(free).tolist(), np.flatnonzero(~free).tolist()
         Xm, Vm, Em = (ca.MX.sym(s, d, n) for s in "XVE")
         dtm, Sm = ca.MX.sym("dt"), ca.MX.sym("S", n_s)
-        n_held = n_s - n_scene - n_targets - n_decided  # masks and the held bodies
-        if not n_held:  # no contacts held by the step
+        held = model.symbolic_hold(X, V, decided, dt) if isinstance(model, StepHold) else None
+        if held is None:  # nothing held by the step
             system = ca.Function("lbe_system", [X, V, E, dt, S], [A, b, prescribed])
             Am, bm, dvm = system(Xm, Vm, Em, dtm, Sm)
             dv = dvm
             rhs = bm[fi] - (ca.mtimes(Am[fi, ci], dvm[ci]) if ci else 0)
             dv[fi] = ca.solve(Am[fi, fi], rhs, "ldl")
         else:
-            n_masks = len(model.constraint_families) * n
-            masks = S[n_scene + n_targets:n_scene + n_targets + n_masks]
-            bodies = S[n_scene + n_targets + n_masks:n_scene + n_targets + n_held]
             system = ca.Function("lbe_system", [X, V, E, dt, S], _held_system(
-                model, X, V, bodies, dt, masks, A, b, prescribed, mass, free))
+                model.n, V, held, A, b, prescribed, mass, free))
             Am, rhs, dvm = system(Xm, Vm, Em, dtm, Sm)
             dv = dvm
             dv[fi] = dvm[fi] + ca.solve(Am[fi, fi], rhs[fi], "ldl")
@@ -508,15 +470,25 @@ class LinearizedBackwardEuler(Integrator):
         return ca.Function("lbe_step", [Xm, Vm, Em, dtm, Sm], [Xm + dtm * v_next, v_next])
 
 
-def _held_system(model, X, V, bodies, dt, masks, A, b, prescribed, mass, free):
-    """``(A_hat, S (b - A z), z)`` of the symbolic step with the contacts ``masks`` held on
-    the ``bodies`` (their geometry over the step, see :mod:`.contact_filter`); z is the
-    prescribed part of dv on every component."""
-    normals, targets = model.symbolic_contacts(X, V, bodies, dt, masks)
-    P = ca.diagcat(*[ca.mtimes(normals[:, k], normals[:, k].T) for k in range(model.n)])
-    keep = ca.SX.eye(3 * model.n) - P
-    held = ca.vec(normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1))
+def _held_system(n, V, held, A, b, prescribed, mass, free):
+    """``(A_hat, S (b - A z), z)`` of the symbolic step holding the particles of ``held``
+    (their ``(normals, targets)``, zero where none is held, and with friction their body
+    velocities, normal and stick flags and sliding impulses; see :mod:`.held_solve`); z is
+    the prescribed part of dv on every component."""
+    normals, targets, *friction = held
+    blocks = [ca.mtimes(normals[:, k], normals[:, k].T) for k in range(n)]
+    along = normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1)
+    if friction:  # P = s I + (a - s) n n^T, z = a n (c - n . v) + s T (v_body - v)
+        velocity, normal, stick, pushed = friction
+        blocks = [stick[k] * ca.SX.eye(3) + (normal[k] - stick[k]) * blocks[k]
+                  for k in range(n)]
+        slip = velocity - V
+        slip = slip - normals * ca.repmat(ca.sum1(normals * slip), 3, 1)
+        along = ca.repmat(normal, 3, 1) * along + ca.repmat(stick, 3, 1) * slip
+        b = b + ca.vec(pushed)
+    P = ca.diagcat(*blocks)
+    keep = ca.SX.eye(3 * n) - P
     mask = ca.DM(free.astype(float))
-    z = mask * held + (1 - mask) * prescribed
+    z = mask * ca.vec(along) + (1 - mask) * prescribed
     A_hat = ca.mtimes([keep, A, keep]) + ca.mtimes(ca.diag(ca.DM(mass)), P)
     return [A_hat, ca.mtimes(keep, b - ca.mtimes(A, z)), z]

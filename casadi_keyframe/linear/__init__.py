@@ -1,21 +1,14 @@
 """Linear solvers for the implicit step ``A dv = b`` with some components held fixed, as
 objects in the manner of lineax.
 
-A solver object holds settings only.  ``solver.init(free)`` gives a plan, which holds the
-state (the free and constrained components; a factorisation's pattern analyses, kept per
-pattern) for as many passes as its owner keeps it; ``plan.factor(A, keep=False)`` prepares
-one matrix (a factorisation, or CG's preconditioner; ``A`` a :class:`System` or a scipy
-matrix); the result solves ``A x = b`` and ``A^T x = b`` and reports a :class:`SolveInfo`
-with every solution, so the adjoint pass can reuse what the forward pass built.  ``nbytes``
-on a prepared matrix says what keeping it costs; ``release()`` gives a kept one's analysis
-back to its plan once it is no longer needed.
+A solver holds settings only; ``solver.init(free)`` gives a plan that keeps the state
+(pattern analyses per pattern) and ``plan.factor(A, keep=False)`` prepares one matrix, which
+solves ``A x = b`` and ``A^T x = b`` (the adjoint reuses what the forward pass built).
 
-* :class:`SparseCholesky` ("cholmod"): CHOLMOD's supernodal Cholesky (needs cvxopt); SPD A.
-* :class:`SparseLU` ("direct"): scipy's SuperLU; SPD A, or any non-singular A with
-  ``symmetric=False``.
-* :class:`ModifiedPCG` ("cg"): Baraff-Witkin's modified PCG with a Jacobi preconditioner;
-  SPD A; memory for the matrix only.
-* :class:`Auto` ("auto"): one of those three by the system's size and what is installed.
+* :class:`SparseCholesky` ("cholmod"): CHOLMOD's supernodal Cholesky (cvxopt); SPD A.
+* :class:`SparseLU` ("direct"): scipy's SuperLU; SPD, or any non-singular A.
+* :class:`ModifiedPCG` ("cg"): Baraff-Witkin's modified PCG, Jacobi preconditioned; SPD A.
+* :class:`Auto` ("auto"): one of those by the system's size and what is installed.
 """
 from __future__ import annotations
 

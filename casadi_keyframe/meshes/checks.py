@@ -31,64 +31,97 @@ def triangulate(polygons) -> tuple[np.ndarray, int]:
     return np.array(triangles, dtype=np.intp).reshape(-1, 3), split
 
 
-def check_mesh(vertices, polygons, *, source=None, groups=None) -> Mesh:
+def check_mesh(vertices, polygons, *, source=None, groups=None, first: int = 0,
+               face_of=None) -> Mesh:
     """The :class:`Mesh` of ``vertices`` ``(n, 3)`` and ``polygons`` (triangles or larger),
-    checked as the module docstring says; ``source`` names the file in messages."""
+    checked as the module docstring says; ``source`` names the file in messages, which
+    number vertices and faces as the file does, from ``first`` (OBJ counts from 1);
+    ``face_of`` gives each polygon's face number in the file (0-based), where a reader
+    split the file's faces before (default: the polygons are the file's faces)."""
     where = str(source) if source is not None else "mesh"
+    numbers = Numbering(first)
     v = np.asarray(vertices, dtype=float)
     if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
         raise MeshError(f"{where}: needs at least 3 vertices with x, y, z; got an array of "
                         f"shape {v.shape}")
     if not np.all(np.isfinite(v)):
-        raise MeshError(f"{where}: a vertex has a NaN or infinite coordinate "
-                        f"(vertex {int(np.flatnonzero(~np.isfinite(v).all(1))[0])})")
+        raise MeshError(f"{where}: a vertex has a NaN or infinite coordinate (vertex "
+                        f"{numbers.vertex(np.flatnonzero(~np.isfinite(v).all(1))[0])})")
     polygons = list(polygons)
     if not polygons:
         raise MeshError(f"{where}: has no faces; a cloth needs a surface (export the faces, "
                         f"not only the points)")
     faces, split = triangulate(polygons)
-    if faces.min() < 0 or faces.max() >= len(v):
-        raise MeshError(f"{where}: a face refers to vertex {int(faces.max())}, but the mesh "
-                        f"has {len(v)} vertices (0..{len(v) - 1})")
-    _check_degenerate(v, faces, where)
-    _check_used(v, faces, where)
-    _check_manifold(faces, where)
+    owner = np.repeat(np.arange(len(polygons)) if face_of is None else np.asarray(face_of),
+                      [max(len(p) - 2, 0) for p in polygons])
+    outside = np.flatnonzero((faces < 0) | (faces >= len(v)))
+    if outside.size:
+        k = outside[0] // 3
+        raise MeshError(f"{where}: face {numbers.face(owner[k])} refers to vertex "
+                        f"{numbers.vertex(faces.flat[outside[0]])}, but the file has {len(v)} "
+                        f"vertices ({numbers.span(len(v))})")
+    _check_degenerate(v, faces, where, numbers.faces_of(owner, faces))
+    _check_used(v, faces, where, numbers)
+    _check_manifold(faces, where, numbers)
     notices = ((f"{where}: {split} of {len(polygons)} faces had more than 3 corners and were "
                 f"split into triangles from their first corner",) if split else ())
     return Mesh(v, faces, dict(groups or {}), source, notices)
 
 
-def _check_degenerate(v, faces, where):
+class Numbering:
+    """Vertex and face numbers as a file counts them, from ``first`` (0, or 1 for OBJ)."""
+
+    def __init__(self, first: int = 0):
+        self.first = int(first)
+
+    def vertex(self, i) -> int:
+        return int(i) + self.first
+
+    def face(self, k) -> int:
+        return int(k) + self.first
+
+    def span(self, n: int) -> str:
+        return f"{self.first}..{n - 1 + self.first}"
+
+    def faces_of(self, owner, faces):
+        """``describe(k)``: triangle k as its file face's number and corner vertex numbers."""
+        def describe(k) -> str:
+            corners = " ".join(str(self.vertex(i)) for i in faces[k])
+            return f"face {self.face(owner[k])} (vertices {corners})"
+        return describe
+
+
+def _check_degenerate(v, faces, where, describe):
     repeated = np.flatnonzero((faces[:, 0] == faces[:, 1]) | (faces[:, 1] == faces[:, 2])
                               | (faces[:, 0] == faces[:, 2]))
     if repeated.size:
-        raise MeshError(f"{where}: {repeated.size} face(s) repeat a vertex (first: triangle "
-                        f"{faces[repeated[0]].tolist()}); merge or remove them (Blender: "
+        raise MeshError(f"{where}: {repeated.size} face(s) repeat a vertex (first: "
+                        f"{describe(repeated[0])}); merge or remove them (Blender: "
                         f"Mesh > Clean Up > Degenerate Dissolve)")
     area = 0.5 * np.linalg.norm(np.cross(v[faces[:, 1]] - v[faces[:, 0]],
                                          v[faces[:, 2]] - v[faces[:, 0]]), axis=1)
     flat = np.flatnonzero(area <= DEGENERATE_AREA * max(area.mean(), 1e-300))
     if flat.size:
-        raise MeshError(f"{where}: {flat.size} face(s) have no area (first: triangle "
-                        f"{faces[flat[0]].tolist()}, corners on one line); remove them "
+        raise MeshError(f"{where}: {flat.size} face(s) have no area (first: "
+                        f"{describe(flat[0])}, corners on one line); remove them "
                         f"(Blender: Mesh > Clean Up > Degenerate Dissolve)")
 
 
-def _check_used(v, faces, where):
+def _check_used(v, faces, where, numbers):
     unused = np.setdiff1d(np.arange(len(v)), faces.ravel())
     if unused.size:
         raise MeshError(f"{where}: {unused.size} vertex/vertices belong to no face (first: "
-                        f"vertex {int(unused[0])}); a cloth particle needs a face to get a "
+                        f"vertex {numbers.vertex(unused[0])}); a cloth particle needs a face to get a "
                         f"mass: delete loose vertices (Blender: Mesh > Clean Up > Delete "
                         f"Loose)")
 
 
-def _check_manifold(faces, where):
+def _check_manifold(faces, where, numbers):
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), 1)
     unique, counts = np.unique(edges, axis=0, return_counts=True)
     crowded = np.flatnonzero(counts > 2)
     if crowded.size:
-        a, b = unique[crowded[0]].tolist()
+        a, b = (numbers.vertex(i) for i in unique[crowded[0]])
         raise MeshError(f"{where}: non-manifold: {crowded.size} edge(s) are shared by more "
                         f"than two faces (first: the edge between vertices {a} and {b}, in "
                         f"{int(counts[crowded[0]])} faces); a cloth is a surface whose edges "

@@ -37,8 +37,9 @@ def read_mesh(path) -> Mesh:
         raise MeshError(f"{path}: no such file" if not path.exists()
                         else f"{path}: is a folder, not a mesh file")
     reader = {"OBJ": _read_obj, "PLY": _read_ply, "USD": _read_usd}[kind]
-    vertices, polygons, groups, notices = reader(path)
-    mesh = check_mesh(vertices, polygons, source=path, groups=groups)
+    vertices, polygons, groups, notices, *numbering = reader(path)
+    mesh = check_mesh(vertices, polygons, source=path, groups=groups,
+                      **(numbering[0] if numbering else {}))
     if notices:
         mesh = Mesh(mesh.vertices, mesh.faces, mesh.groups, mesh.source,
                     tuple(notices) + mesh.notices)
@@ -74,18 +75,43 @@ def _read_obj(path: Path):
     except UnicodeDecodeError:
         raise MeshError(f"{path}: cannot be read as OBJ: it is not a text file (an OBJ is "
                         f"text: export it again as Wavefront OBJ)") from None
+    sizes, count = _obj_faces(path)
     loaded = _trimesh(path, "OBJ")
-    sizes, count = [], 0
-    with open(path, errors="replace") as f:  # polygon sizes and vertex count, for the checks
-        for line in f:
-            if line.startswith("v "):
-                count += 1
-            elif line.startswith("f "):
-                sizes.append(len(line.split()) - 1)
     if len(loaded.vertices) != count:
         raise MeshError(f"{path}: {count} 'v' lines but {len(loaded.vertices)} vertices read; "
                         f"the vertex order could not be kept (one object per file, please)")
-    return np.asarray(loaded.vertices, float), np.asarray(loaded.faces), {}, _quads(path, sizes)
+    numbering = {"first": 1, "face_of": np.repeat(np.arange(len(sizes)),
+                                                  [max(k - 2, 1) for k in sizes])}
+    return (np.asarray(loaded.vertices, float), np.asarray(loaded.faces), {},
+            _quads(path, sizes), numbering)
+
+
+def _obj_faces(path: Path) -> tuple[list[int], int]:
+    """``(each face's corner count, the vertex count)`` of an OBJ file, every face's vertex
+    numbers checked as the file writes them (from 1, or negative: counted back)."""
+    sizes, count, faces = [], 0, []
+    with open(path, errors="replace") as f:
+        for number, line in enumerate(f, 1):
+            if line.startswith("v "):
+                count += 1
+            elif line.startswith("f "):
+                corners = [c.split("/")[0] for c in line.split()[1:]]
+                sizes.append(len(corners))
+                faces.append((number, len(sizes), count, corners))
+    for number, face, seen, corners in faces:
+        for corner in corners:
+            try:
+                i = int(corner)
+            except ValueError:
+                raise MeshError(f"{path}: line {number}: face {face} has the corner "
+                                f"{corner!r}, not a vertex number") from None
+            if i == 0 or i > count or -i > seen:
+                why = ("OBJ numbers vertices from 1" if i == 0 else
+                       f"the file has {count} vertices (1..{count})" if i > 0 else
+                       f"only {seen} vertices come before it")
+                raise MeshError(f"{path}: line {number}: face {face} uses vertex {i}, but "
+                                f"{why}; export the mesh again")
+    return sizes, count
 
 
 def _quads(path, sizes) -> list[str]:

@@ -1,14 +1,16 @@
 """What a system is: immutable models whose forces are interaction families of CasADi kernels
 (the contract: :mod:`.base`; the families: :mod:`.interaction`)."""
 from .base import (BlockJacobians, ForceDerivatives, ForceJacobians, Model, PhysicalReport,
-                   Surface)
+                   StepHold, Surface)
 from .cloth import ClothModel, ClothParams
 from .colliders import Capsule, Contact, Plane, Sphere
+from .collisions import COLLISIONS, DEFAULT_COLLISION
 from .constraints import Attachment
 from .flock import FlockModel, FlockParams, wander_forces
-from .interaction import Interaction, PairInteraction, ParticleInteraction
+from .interaction import Interaction, PairInteraction, ParticleInteraction, StencilInteraction
 
-__all__ = ["Attachment", "BlockJacobians", "Capsule", "ClothModel", "ClothParams", "Contact",
-           "FlockModel", "FlockParams", "ForceDerivatives", "ForceJacobians", "Interaction",
-           "Model", "PairInteraction", "ParticleInteraction", "PhysicalReport", "Plane",
-           "Sphere", "Surface", "wander_forces"]
+__all__ = ["Attachment", "BlockJacobians", "COLLISIONS", "Capsule", "ClothModel", "ClothParams",
+           "Contact", "DEFAULT_COLLISION", "FlockModel", "FlockParams", "ForceDerivatives",
+           "ForceJacobians", "Interaction", "Model", "PairInteraction", "ParticleInteraction",
+           "PhysicalReport", "Plane", "Sphere", "StencilInteraction", "StepHold", "Surface",
+           "wander_forces"]

@@ -18,8 +18,8 @@ Capabilities:
   contractions, for implicit schemes (cloth);
 * :class:`BlockJacobians`: the same Jacobians as 3x3 blocks and a fixed step pattern, so a
   sparse Cholesky analyses a step matrix once;
-* :class:`ContactConstraints`: contacts held inside the implicit step (prescribed normal
-  velocities) and the derivatives of their normals and targets;
+* :class:`StepHold`: particles the implicit step holds on bodies (prescribed normal
+  velocities: the hold) and the derivatives of their normals and targets;
 * :class:`PhysicalReport`: whether frames stay physical (stretch, penetration);
 * :class:`Surface`: a rest mesh, for rendering and export.
 """
@@ -132,36 +132,41 @@ class ForceJacobians(abc.ABC):
 
     @abc.abstractmethod
     def symbolic_jacobians(self, X, V, S=None, decisions=None):
-        """``(K, D)`` as sparse CasADi expressions (the same K as :meth:`jacobians`, with the
-        step's ``decisions``: :meth:`decision_parameters`)."""
+        """``(K, D)`` as sparse CasADi expressions (the same K as :meth:`jacobians`, given
+        the step's ``decisions`` as :meth:`decision_parameters`)."""
 
-    def carried_decisions(self, found):
-        """The part of a step's decisions ``found`` that :meth:`carried_interactions` takes
-        to the next step (None: nothing; what it recomputes from x is left out)."""
-        return None
-
-    def carried_interactions(self, last, x):
-        """What a step at x starts from (:meth:`Model.interactions`), given what the last
-        step decided (``last``, its record's, None at the first step): a cloth keeps the
-        springs it took taut while they stay stretched."""
+    # what a step decides beyond the state (each family's ``found``: the springs a step
+    # takes taut, the particles its hold holds), revised within the step and carried on
+    def step_decisions(self, x, v, t: float, dt: float, carried=None):
+        """What a step from (x, v) at t decides at its start, after a step that left
+        ``carried`` (:meth:`carried_decisions`, None at a run's start): here, what the
+        forces at x act over (:meth:`Model.interactions`)."""
         return self.interactions(x)
 
-    def revised_interactions(self, found, x0, x1):
-        """``found`` (:meth:`Model.interactions` plus what a step decided) revised after a
-        step from x0 ended at x1, when the end shows the linearization chose wrong (a cloth:
-        springs to take taut); None if it stands (here, always)."""
+    def solved_decisions(self, decisions, residual):
+        """``decisions`` given the solved step's residual ``A dv - b`` (flat)."""
+        return decisions
+
+    def revised_decisions(self, decisions, x, v, t: float, dt: float, x1):
+        """``decisions`` revised after the step from (x, v) at t ended at x1, when the end
+        shows it chose wrong; None if they stand (here, always)."""
         return None
 
-    def decision_parameters(self, found=None) -> np.ndarray:
-        """What a step decided beyond the state, as the flat inputs of
+    def carried_decisions(self, decisions):
+        """What the next step takes from a step's ``decisions`` (None: nothing)."""
+        return None
+
+    def decision_parameters(self, decisions=None, t: float = 0.0, dt: float = 1.0) -> np.ndarray:
+        """A step's ``decisions`` (None: nothing beyond the state) as the flat inputs of
         :meth:`symbolic_jacobians` (none here)."""
         return np.zeros(0)
 
 
 class BlockJacobians(ForceJacobians):
     """:class:`ForceJacobians` also given as 3x3 blocks (:class:`~.blocks.Blocks`) over fixed
-    pairs followed by the state's extra pairs, with the fixed pairs' pattern restricted to the
-    free components (:attr:`step_pattern`), so each step matrix is gathered into one pattern."""
+    pairs followed by the state's extra pairs, and fixed stencils, with the fixed structure's
+    pattern restricted to the free components (:attr:`step_pattern`), so each step matrix is
+    gathered into one pattern."""
 
     @abc.abstractmethod
     def jacobian_blocks(self, x, v, t: float = 0.0, with_df_dx: bool = False,
@@ -175,51 +180,37 @@ class BlockJacobians(ForceJacobians):
     @property
     @abc.abstractmethod
     def step_pattern(self):
-        """The fixed pairs' :class:`~.blocks.BlockPattern` over the free components."""
+        """The fixed structure's :class:`~.blocks.BlockPattern` over the free components."""
 
 
-class ContactConstraints(abc.ABC):
-    """Contacts an implicit step holds by prescribing the contact particles' velocity along a
-    body's normal (:mod:`~.contact_constraint`): which particles touch a body at a state, the
-    derivative contractions of the normals and targets for the exact adjoint and tangent,
-    and the same in CasADi given which contacts are held."""
+class StepHold(abc.ABC):
+    """Particles an implicit step holds on bodies by prescribing their velocity along the
+    body's normal (the hold, :mod:`~.hold`): the held set among a step's decisions, the
+    derivative contractions of its normals and targets for the exact adjoint and tangent,
+    and the same in CasADi."""
 
     @property
     @abc.abstractmethod
-    def constraint_families(self) -> tuple:
-        """The families whose contacts the step holds (none: the model holds no contact)."""
+    def holding(self) -> bool:
+        """Whether the model's steps may hold particles at all."""
 
     @abc.abstractmethod
-    def contacts(self, x, v, t: float, dt: float, previous=None):
-        """The :class:`~.contact_constraint.Contacts` a step from (x, v) at t holds
-        (``previous``: the last step's, for releasing contacts that pulled)."""
+    def held(self, decisions):
+        """The :class:`~.hold.HeldSet` among a step's ``decisions`` (None: nothing held)."""
 
     @abc.abstractmethod
-    def contact_vjp(self, x, v, t: float, dt: float, contacts, lam, q, nu):
+    def hold_vjp(self, x, v, t: float, dt: float, held, lam, q, nu):
         """``(gx, gv)``: gradients of ``sum_k -lam_k . n_k (n_k . q_k) + nu_k . z_k``."""
 
     @abc.abstractmethod
-    def contact_jvp(self, x, v, t: float, dt: float, contacts, q, dx, dv):
-        """The derivative of ``-n_k (n_k . q_k) + nbar_k (nbar_k . z_k)`` along ``(dx, dv)``."""
+    def hold_jvp(self, x, v, t: float, dt: float, held, q, dx, dv):
+        """The derivative of ``-n (n . q) + nbar (nbar . z)`` along ``(dx, dv)``."""
 
     @abc.abstractmethod
-    def review_contacts(self, held, x, v, t: float, dt: float, x1):
-        """``(revised, touching)`` after a step that ended at x1: ``held`` plus the particles
-        it ended inside a body without holding them (None if there are none), and whether a
-        particle ended in a body's contact layer."""
-
-    @abc.abstractmethod
-    def contact_masks(self, contacts) -> np.ndarray:
-        """Which contacts are held, as the symbolic step's flat 0/1 parameters."""
-
-    @abc.abstractmethod
-    def contact_parameters(self, t: float, dt: float) -> np.ndarray:
-        """The held bodies' geometry for the step from t (the symbolic step's input)."""
-
-    @abc.abstractmethod
-    def symbolic_contacts(self, X, V, G, dt, masks):
-        """``(normals 3 x n, targets 1 x n)`` of the held contacts (zero elsewhere), the
-        bodies' geometry G from :meth:`contact_parameters`."""
+    def symbolic_hold(self, X, V, decided, dt):
+        """``(normals 3 x n, targets 1 x n)`` of the held particles (zero elsewhere), the
+        decisions ``decided`` as :meth:`~ForceJacobians.decision_parameters` gives them;
+        None for a model that holds nothing."""
 
 
 class PhysicalReport(abc.ABC):

@@ -1,13 +1,17 @@
-"""Block-sparse Jacobians of pairwise forces: 3x3 blocks per pair and per particle, their
-products with vectors, and the fixed sparsity pattern they are gathered into.
+"""Block-sparse Jacobians of interaction laws: 3x3 blocks per pair, per particle and per
+stencil of k particles, their products with vectors, and the fixed sparsity pattern they are
+gathered into.
 
 A pair law acting on ``d = x_j - x_i`` with force ``+F`` on i and ``-F`` on j has the Jacobian
 block ``B = dF/dd`` at (i,j) and (j,i) and ``-B`` at (i,i) and (j,j); a particle's own forces
-(drag, colliders) give a diagonal block.  :class:`Blocks` holds one Jacobian that way;
-:class:`BlockPattern` is the structure of such a matrix for a fixed list of pairs, with the
-gather that turns blocks into CSC values in one sparse product, optionally restricted to the
-free (unconstrained) components, so a matrix assembled every step keeps one pattern and a
-sparse factorisation can analyse it once.
+(drag, colliders) give a diagonal block; a law on a stencil of k particles (a hinge's four)
+gives its whole ``3k x 3k`` Jacobian, row-major, its block (a, b) at the particles
+``(stencil[a], stencil[b])``.  :class:`Blocks` holds one Jacobian that way;
+:class:`BlockPattern` is the structure of such a matrix for fixed pairs and stencils, with
+the gather that turns blocks into CSC values in one sparse product, optionally restricted to
+the free (unconstrained) components, so a matrix assembled every step keeps one pattern and a
+sparse factorisation can analyse it once.  Pairs stay a compact special case (9 numbers for
+four blocks).
 """
 from __future__ import annotations
 
@@ -17,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from ..kernels import scatter_pairs
+from ..kernels import scatter_pairs, scatter_stencils, stencil_values
 
 
 @dataclass(frozen=True)
@@ -29,6 +33,7 @@ class Blocks:
     j: np.ndarray
     pairs: np.ndarray
     particles: np.ndarray
+    stencils: tuple = ()  # (stencils (P, k), blocks (P, 9 k^2)) per law on k particles
 
     @property
     def n(self) -> int:
@@ -40,17 +45,30 @@ class Blocks:
         spec = "pba,pb->pa" if transpose else "pab,pb->pa"
         pairs = np.einsum(spec, self.pairs.reshape(-1, 3, 3), y[self.j] - y[self.i])
         out = np.einsum(spec.replace("p", "k"), self.particles.reshape(-1, 3, 3), y)
-        return out + scatter_pairs(pairs, self.i, self.j, self.n)
+        out = out + scatter_pairs(pairs, self.i, self.j, self.n)
+        for stencils, blocks in self.stencils:
+            m = 3 * stencils.shape[1]
+            local = np.einsum(spec, blocks.reshape(-1, m, m), stencil_values(y, stencils))
+            out += scatter_stencils(local, stencils, self.n)
+        return out
 
     def scaled_sum(self, others, weights, diagonal=None) -> "Blocks":
         """``w0 self + w1 others[0] + ...`` plus ``diagonal`` (``(n,)``, times the identity
-        in each particle block); every term over the same pairs."""
+        in each particle block); every term over the same pairs and stencils."""
         pairs, particles = weights[0] * self.pairs, weights[0] * self.particles
+        stencils = [weights[0] * b for _, b in self.stencils]
         for blocks, w in zip(others, weights[1:]):
             pairs, particles = pairs + w * blocks.pairs, particles + w * blocks.particles
+            stencils = [s + w * b for s, (_, b) in zip(stencils, blocks.stencils)]
         if diagonal is not None:
             particles = particles + np.outer(diagonal, np.eye(3).ravel())
-        return Blocks(self.i, self.j, pairs, particles)
+        return Blocks(self.i, self.j, pairs, particles,
+                      tuple((idx, b) for (idx, _), b in zip(self.stencils, stencils)))
+
+    @property
+    def stencil_blocks(self) -> tuple:
+        """The stencils' blocks alone, in :meth:`BlockPattern.values`' order."""
+        return tuple(b for _, b in self.stencils)
 
 
 @dataclass(frozen=True)
@@ -66,16 +84,18 @@ class SparseJacobian:
 
 
 class BlockPattern:
-    """The CSC structure of a matrix of :class:`Blocks` over fixed pairs ``(i, j)`` of n
-    particles, restricted to the components where ``free`` (flat, ``3n``) is True (all by
-    default; the rows and columns of the others are dropped) and, unless ``particle_blocks``
-    is False, with every particle's diagonal block.  ``values(pairs, particles)``
-    gives the CSC data in that structure by one product with ``gather``, so every matrix
-    with these pairs shares ``indices`` and ``indptr``."""
+    """The CSC structure of a matrix of :class:`Blocks` over fixed pairs ``(i, j)`` and
+    ``stencils`` (a tuple of ``(P, k)`` index arrays) of n particles, restricted to the
+    components where ``free`` (flat, ``3n``) is True (all by default; the rows and columns
+    of the others are dropped) and, unless ``particle_blocks`` is False, with every
+    particle's diagonal block.  ``values(pairs, particles, stencils)`` gives the CSC data in
+    that structure by one product with ``gather``, so every matrix with these pairs and
+    stencils shares ``indices`` and ``indptr``."""
 
     def __init__(self, i: np.ndarray, j: np.ndarray, n: int, free: np.ndarray | None = None,
-                 particle_blocks: bool = True):
+                 particle_blocks: bool = True, stencils: tuple = ()):
         self.i, self.j, self.n = np.asarray(i, np.intp), np.asarray(j, np.intp), n
+        self.stencils = tuple(np.asarray(s, np.intp) for s in stencils)
         k = np.arange(n if particle_blocks else 0)
         bi = np.concatenate([self.i, self.i, self.j, self.j, k])
         bj = np.concatenate([self.i, self.j, self.i, self.j, k])
@@ -85,6 +105,13 @@ class BlockPattern:
         source = np.concatenate([np.tile(np.arange(9 * P), 4), 9 * P + np.arange(9 * k.size)])
         sign = np.concatenate([-np.ones(9 * P), np.ones(18 * P), -np.ones(9 * P),
                                np.ones(9 * k.size)])
+        width = 9 * (P + k.size)
+        for stencil in self.stencils:
+            r, c, size = _stencil_entries(stencil)
+            rows, cols = np.concatenate([rows, r]), np.concatenate([cols, c])
+            source = np.concatenate([source, width + np.arange(size)])
+            sign = np.concatenate([sign, np.ones(size)])
+            width += size
         free = np.ones(3 * n, bool) if free is None else np.asarray(free, bool)
         keep = free[rows] & free[cols]
         number = np.cumsum(free) - 1  # a free component's index among the free ones
@@ -95,8 +122,7 @@ class BlockPattern:
         self.indptr = np.concatenate([[0], np.cumsum(np.bincount(keys // self.size,
                                                                  minlength=self.size))])
         self.indptr = self.indptr.astype(np.int32)
-        self.gather = sp.csr_matrix((sign, (slot.ravel(), source)),
-                                    shape=(keys.size, 9 * P + 9 * k.size))
+        self.gather = sp.csr_matrix((sign, (slot.ravel(), source)), shape=(keys.size, width))
         self.free = free
         self.has_particle_blocks = particle_blocks
 
@@ -109,8 +135,11 @@ class BlockPattern:
         """Every 3x3 block of the pattern between two free particles: the particles ``(I,
         J)`` and the positions ``(B, 9)`` of its entries (row-major) in the CSC data."""
         k = np.arange(self.n) if self.has_particle_blocks else np.zeros(0, np.intp)
-        keys = np.unique(np.concatenate([self.i * self.n + self.j, self.j * self.n + self.i,
-                                         k * self.n + k]))
+        linked = [self.i * self.n + self.j, self.j * self.n + self.i, k * self.n + k]
+        for stencil in self.stencils:
+            linked += [stencil[:, a] * self.n + stencil[:, b]
+                       for a in range(stencil.shape[1]) for b in range(stencil.shape[1])]
+        keys = np.unique(np.concatenate(linked))
         I, J = np.divmod(keys, self.n)
         whole = self.free.reshape(self.n, 3).all(axis=1)
         I, J = I[whole[I] & whole[J]], J[whole[I] & whole[J]]
@@ -142,17 +171,31 @@ class BlockPattern:
         out[slots] = B.reshape(-1, 9)
         return out
 
-    def values(self, pairs: np.ndarray, particles: np.ndarray | None = None) -> np.ndarray:
-        """CSC data of the matrix with ``(P, 9)`` pair blocks and ``(n, 9)`` particle blocks
-        (none for a pattern built without ``particle_blocks``)."""
-        if particles is None:
-            return self.gather @ pairs.ravel()
-        return self.gather @ np.concatenate([pairs.ravel(), particles.ravel()])
+    def values(self, pairs: np.ndarray, particles: np.ndarray | None = None,
+               stencils: tuple = ()) -> np.ndarray:
+        """CSC data of the matrix with ``(P, 9)`` pair blocks, ``(n, 9)`` particle blocks
+        (none for a pattern built without ``particle_blocks``) and each stencil law's
+        ``(P_s, 9 k^2)`` blocks, in the order of the pattern's ``stencils``."""
+        parts = [pairs.ravel()] + ([] if particles is None else [particles.ravel()])
+        parts += [b.ravel() for b in stencils]
+        return self.gather @ (parts[0] if len(parts) == 1 else np.concatenate(parts))
 
-    def matrix(self, pairs: np.ndarray, particles: np.ndarray | None = None) -> sp.csc_matrix:
+    def matrix(self, pairs: np.ndarray, particles: np.ndarray | None = None,
+               stencils: tuple = ()) -> sp.csc_matrix:
         """The matrix itself (the free block when the pattern is restricted)."""
-        return sp.csc_matrix((self.values(pairs, particles), self.indices.copy(),
+        return sp.csc_matrix((self.values(pairs, particles, stencils), self.indices.copy(),
                               self.indptr.copy()), shape=(self.size, self.size))
+
+
+def _stencil_entries(stencils: np.ndarray):
+    """``(rows, cols, count)`` of every entry of the row-major ``3k x 3k`` blocks of
+    ``(P, k)`` stencils, stencil after stencil, in the ``3n x 3n`` matrix."""
+    P, k = stencils.shape
+    m = 3 * k
+    r, c = np.divmod(np.arange(m * m), m)
+    rows = (3 * stencils[:, r // 3] + r % 3).ravel()
+    cols = (3 * stencils[:, c // 3] + c % 3).ravel()
+    return rows, cols, P * m * m
 
 
 def pair_block_matrices(i: np.ndarray, j: np.ndarray, n: int, *blocks: np.ndarray) -> list:
@@ -164,8 +207,9 @@ def pair_block_matrices(i: np.ndarray, j: np.ndarray, n: int, *blocks: np.ndarra
 
 
 class GrowingPattern:
-    """The pattern of one pass's step matrices: a fixed pattern (the springs', restricted to
-    the free components) plus every extra pair (self-contact) met so far.  It grows when a
+    """The pattern of one pass's step matrices: a fixed pattern (the fixed pairs' and
+    stencils', restricted to the free components) plus every extra pair (self-contact) met
+    so far.  It grows when a
     matrix has a pair it lacks and never shrinks within the pass, so a factorisation
     re-analyses only when contact spreads; each growth makes a new :class:`BlockPattern`
     (its identity is the structure key)."""
@@ -185,9 +229,10 @@ class GrowingPattern:
             self.extra = np.union1d(self.extra, keys)
             i, j = np.divmod(self.extra, n)
             self.pattern = BlockPattern(np.concatenate([fixed.i, i]),
-                                        np.concatenate([fixed.j, j]), n, fixed.free)
+                                        np.concatenate([fixed.j, j]), n, fixed.free,
+                                        stencils=fixed.stencils)
             self.growths += 1
         pairs = np.zeros((S + self.extra.size, 9))
         pairs[:S] = blocks.pairs[:S]
         pairs[S + np.searchsorted(self.extra, keys)] = blocks.pairs[S:]
-        return self.pattern.values(pairs, blocks.particles)
+        return self.pattern.values(pairs, blocks.particles, blocks.stencil_blocks)

@@ -1,12 +1,17 @@
-r"""Analytic bodies a cloth collides with: :class:`Plane`, :class:`Sphere`, :class:`Capsule`
-(a segment swept by a sphere), and :class:`Contact`, the parameters of touching one.
+r"""Bodies a cloth collides with: :class:`Plane`, :class:`Sphere`, :class:`Capsule` (a segment
+swept by a sphere), triangle meshes (:class:`MeshBody`), and :class:`Contact`, the parameters
+of touching one.
 
 A body is geometry only: its signed distance ``phi`` (negative inside), outward unit normal
 and surface velocity at a point, as CasADi expressions (:meth:`Body.surface`) of the point
-and the body's geometry at time t (:meth:`Body.geometry`).  Any point given may be a function
-of time ``t -> (3,)`` so the body moves along a path; its velocity is the central difference
-of that path.  How contact acts is an interaction family's job: the paper's stiff repulsive
-springs are :class:`~.penalty.BodyPenalty`.
+and the body's geometry at time t (:meth:`Body.geometry`).  A body moves in two ways, which
+combine: any point given may be a function of time ``t -> (3,)`` (a path), and ``motion``,
+a function ``t -> (R, p)``, carries the body's own coordinates to the world's
+(``world = R local + p``), so it turns as well.  Velocities are central differences of the
+paths and of the motion; the surface velocity at a point includes the rotation
+(``v + omega x (x - c)``).  How contact acts is an interaction family's job: the paper's
+stiff repulsive springs are :class:`~.penalty.BodyPenalty`, the step's hold
+:class:`~.hold.BodyHold`.
 """
 from __future__ import annotations
 
@@ -18,20 +23,24 @@ import numpy as np
 
 from ..kernels import MappedKernel
 
+STEP = 1e-5  # s: the central differences' half step
+
 
 @dataclass(frozen=True)
 class Contact:
     """How a body (or the cloth itself) is touched: ``stiffness`` N/m, ``damping`` N s/m,
-    ``thickness`` m (the gap kept to the surface) and ``width`` m (the penetration over which
-    the penalty stiffness ramps up, see :func:`~.penalty.penalty_law`)."""
+    ``thickness`` m (the gap kept to the surface), ``width`` m (the penetration over which
+    the penalty stiffness ramps up, see :func:`~.penalty.penalty_law`) and ``friction``, the
+    Coulomb coefficient mu (0: frictionless; see :mod:`.friction`)."""
 
     stiffness: float = 2000.0
     damping: float = 1.0
     thickness: float = 0.01
     width: float = 0.005
+    friction: float = 0.0
 
     def __post_init__(self):
-        for name in ("stiffness", "damping", "thickness", "width"):
+        for name in ("stiffness", "damping", "thickness", "width", "friction"):
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"Contact.{name} must be non-negative and finite, got {value}")
@@ -56,31 +65,40 @@ def _point(value, name: str):
     return a
 
 
-def _at(point, t: float, h: float = 1e-5):
-    """Position and velocity of a fixed or moving point at time t."""
-    if not callable(point):
-        return point, np.zeros(3)
-    p = np.asarray(point(t), dtype=float)
-    return p, (np.asarray(point(t + h), float) - np.asarray(point(t - h), float)) / (2 * h)
+def _motion(motion):
+    """``motion`` (None, or ``t -> (R, p)`` with R a rotation), validated at t = 0."""
+    if motion is None:
+        return None
+    if not callable(motion):
+        raise ValueError(f"a body's motion must be a function t -> (R, p), got {motion!r}")
+    R, p = (np.asarray(a, dtype=float) for a in motion(0.0))
+    if (R.shape != (3, 3) or p.shape != (3,) or not np.all(np.isfinite(R))
+            or not np.allclose(R @ R.T, np.eye(3), atol=1e-8) or np.linalg.det(R) <= 0):
+        raise ValueError("a body's motion(t) must return (R, p): a 3 x 3 rotation and 3 finite "
+                         "numbers (world = R local + p)")
+    return motion
 
 
 class Body:
-    """A rigid analytic collider; subclasses give the geometry and its signed distance.
+    """A rigid collider; subclasses give the geometry and its signed distance.
 
     ``kind`` names the shape; ``GEOMETRY`` names the geometry inputs and their sizes, in the
-    order of :meth:`geometry`; ``contact`` is how the body is touched (:class:`Contact`).
+    order of :meth:`geometry`; ``contact`` is how the body is touched (:class:`Contact`);
+    ``motion`` (None: still) turns and moves the body (module docstring).
     """
 
     kind = "body"
     GEOMETRY: dict = {}
+    local = False  # True: the geometry differs per point (a mesh: its closest feature's plane)
 
-    def __init__(self, contact: Contact | None):
+    def __init__(self, contact: Contact | None, motion=None):
         self.contact = Contact() if contact is None else contact
+        self.motion = _motion(motion)
 
     @staticmethod
     def surface(x, **geometry):
         """``(phi, normal, v_body)`` at the point x as CasADi expressions of x and the
-        geometry symbols named in :attr:`GEOMETRY`."""
+        geometry symbols named in :attr:`GEOMETRY` (v_body: the surface's velocity there)."""
         raise NotImplementedError
 
     def geometry(self, t: float) -> list[np.ndarray]:
@@ -91,85 +109,133 @@ class Body:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
         return np.concatenate([np.ravel(g) for g in self.geometry(t)])
 
+    def local_geometry(self, x: np.ndarray, t: float) -> list[np.ndarray]:
+        """The geometry at time t as one row per point of ``x`` ``(n, 3)``: the same row
+        for every point here (a mesh gives each point the plane of its closest feature)."""
+        return [np.broadcast_to(g, (len(x), np.size(g))) for g in self.geometry(t)]
 
-def _plane_surface(x, point, normal, velocity):
+    @property
+    def moves(self) -> bool:
+        """Whether the body moves: a motion, or a point given as a path."""
+        return self.motion is not None or any(callable(v) for v in vars(self).values())
+
+    def placed(self, point, t: float) -> np.ndarray:
+        """A body point (fixed or a path) in the world at time t."""
+        p = np.asarray(point(t) if callable(point) else point, dtype=float)
+        if self.motion is None:
+            return p
+        R, c = self.motion(t)
+        return np.asarray(R, float) @ p + np.asarray(c, float)
+
+    def turned(self, direction, t: float) -> np.ndarray:
+        """A body direction in the world at time t."""
+        d = np.asarray(direction, dtype=float)
+        return d if self.motion is None else np.asarray(self.motion(t)[0], float) @ d
+
+    def moving(self, point, t: float):
+        """``(position, velocity)`` of a body point in the world at time t."""
+        p = self.placed(point, t)
+        if self.motion is None and not callable(point):
+            return p, np.zeros(3)
+        return p, (self.placed(point, t + STEP) - self.placed(point, t - STEP)) / (2 * STEP)
+
+    def spin(self, t: float) -> np.ndarray:
+        """The angular velocity (rad/s, world) of the body's motion at time t."""
+        if self.motion is None:
+            return np.zeros(3)
+        R0, R1 = (np.asarray(self.motion(t + s)[0], float) for s in (-STEP, STEP))
+        W = (R1 - R0) / (2 * STEP) @ np.asarray(self.motion(t)[0], float).T
+        return 0.5 * np.array([W[2, 1] - W[1, 2], W[0, 2] - W[2, 0], W[1, 0] - W[0, 1]])
+
+
+def _spun(omega, x, centre):
+    return ca.cross(omega, x - centre)
+
+
+def _plane_surface(x, point, normal, velocity, omega):
     unit = normal / ca.norm_2(normal)
-    return ca.dot(x - point, unit), unit, velocity
+    return ca.dot(x - point, unit), unit, velocity + _spun(omega, x, point)
 
 
 class Plane(Body):
     """The half-space above a plane through ``point`` with upward ``normal`` (e.g. the ground)."""
 
     kind = "plane"
-    GEOMETRY = {"point": 3, "normal": 3, "velocity": 3}
+    GEOMETRY = {"point": 3, "normal": 3, "velocity": 3, "omega": 3}
     surface = staticmethod(_plane_surface)
 
-    def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), contact=None):
-        super().__init__(contact)
+    def __init__(self, point=(0.0, 0.0, 0.0), normal=(0.0, 0.0, 1.0), contact=None, motion=None):
+        super().__init__(contact, motion)
         self.point = _point(point, "Plane point")
         self.normal = np.asarray(normal, dtype=float)
         if self.normal.shape != (3,) or not np.isfinite(self.normal).all() or not self.normal.any():
             raise ValueError(f"Plane normal must be 3 finite numbers, not all zero, got {normal!r}"
-                             " (a plane may move through its point, not turn)")
+                             " (a plane turns by its motion)")
 
     def geometry(self, t):
-        p, vp = _at(self.point, t)
-        return [p, self.normal, vp]
+        p, vp = self.moving(self.point, t)
+        return [p, self.turned(self.normal, t), vp, self.spin(t)]
 
 
-def _sphere_surface(x, center, radius, velocity):
+def _sphere_surface(x, center, radius, velocity, omega):
     d = x - center
     r = ca.sqrt(ca.dot(d, d) + 1e-12)
-    return r - radius, d / r, velocity
+    return r - radius, d / r, velocity + _spun(omega, x, center)
 
 
 class Sphere(Body):
     """A ball of ``radius`` about ``center`` (fixed, or a function of time)."""
 
     kind = "sphere"
-    GEOMETRY = {"center": 3, "radius": 1, "velocity": 3}
+    GEOMETRY = {"center": 3, "radius": 1, "velocity": 3, "omega": 3}
     surface = staticmethod(_sphere_surface)
 
-    def __init__(self, center, radius: float, contact=None):
-        super().__init__(contact)
+    def __init__(self, center, radius: float, contact=None, motion=None):
+        super().__init__(contact, motion)
         self.center = _point(center, "Sphere center")
         if not (np.isfinite(radius) and radius > 0):
             raise ValueError(f"Sphere radius must be positive, got {radius}")
         self.radius = float(radius)
 
     def geometry(self, t):
-        c, vc = _at(self.center, t)
-        return [c, np.array([self.radius]), vc]
+        c, vc = self.moving(self.center, t)
+        return [c, np.array([self.radius]), vc, self.spin(t)]
 
 
-def _capsule_surface(x, a, b, radius, va, vb):
+def _capsule_surface(x, a, b, radius, va, vb, omega):
     ab = b - a
     s = ca.fmin(ca.fmax(ca.dot(x - a, ab) / (ca.dot(ab, ab) + 1e-12), 0), 1)
-    d = x - (a + s * ab)
+    axis = a + s * ab
+    d = x - axis
     r = ca.sqrt(ca.dot(d, d) + 1e-12)
-    return r - radius, d / r, (1 - s) * va + s * vb
+    return r - radius, d / r, (1 - s) * va + s * vb + _spun(omega, x, axis)
 
 
 class Capsule(Body):
-    """The points within ``radius`` of segment ``a``-``b`` (ends fixed or functions of time)."""
+    """The points within ``radius`` of segment ``a``-``b`` (ends fixed or functions of time).
+
+    Its spin is the ends' (``ab x (vb - va) / |ab|^2``) plus its motion's about the axis."""
 
     kind = "capsule"
-    GEOMETRY = {"a": 3, "b": 3, "radius": 1, "va": 3, "vb": 3}
+    GEOMETRY = {"a": 3, "b": 3, "radius": 1, "va": 3, "vb": 3, "omega": 3}
     surface = staticmethod(_capsule_surface)
 
-    def __init__(self, a, b, radius: float, contact=None):
-        super().__init__(contact)
+    def __init__(self, a, b, radius: float, contact=None, motion=None):
+        super().__init__(contact, motion)
         self.a, self.b = _point(a, "Capsule end a"), _point(b, "Capsule end b")
         if not (np.isfinite(radius) and radius > 0):
             raise ValueError(f"Capsule radius must be positive, got {radius}")
         self.radius = float(radius)
 
     def geometry(self, t):
-        (a, va), (b, vb) = _at(self.a, t), _at(self.b, t)
-        return [a, b, np.array([self.radius]), va, vb]
+        (a, va), (b, vb) = self.moving(self.a, t), self.moving(self.b, t)
+        ab = b - a
+        length2 = max(float(ab @ ab), 1e-12)
+        roll = ab * (self.spin(t) @ ab) / length2
+        return [a, b, np.array([self.radius]), va, vb, np.cross(ab, vb - va) / length2 + roll]
 
     def endpoints(self, t: float):
-        return _at(self.a, t)[0], _at(self.b, t)[0]
+        return self.placed(self.a, t), self.placed(self.b, t)
 
 
 @functools.lru_cache(maxsize=None)
@@ -183,5 +249,5 @@ def _distance_kernel(body_type: type) -> MappedKernel:
 def signed_distances(body: Body, x: np.ndarray, t: float) -> np.ndarray:
     """Every point's signed distance to ``body``'s surface at time t (negative inside), for
     ``x`` of shape ``(n, 3)``: the one measure of how deep a particle is in a body."""
-    columns = [np.broadcast_to(g, (len(x), np.size(g))) for g in body.geometry(t)]
-    return _distance_kernel(type(body))(np.asarray(x, float), *columns)[0].ravel()
+    x = np.asarray(x, float)
+    return _distance_kernel(type(body))(x, *body.local_geometry(x, t))[0].ravel()

@@ -1,37 +1,37 @@
 r"""An interaction family: one force law acting over many interactions of a particle system
-(the springs, one collider's contacts, self-contact, gravity and drag), as a unit.
+(the springs, a dihedral bending, one body's penalty contact, the step's hold, self-contact,
+gravity and drag), as a unit.
 
-A family gives, at positions and velocities ``x, v`` (``(n, 3)``) at time t, everything an
-implicit step and its exact derivatives need, and the same in CasADi for the reference route:
+A family gives, at ``x, v`` (``(n, 3)``) at time t, what an implicit step and its exact
+derivatives need, and the same in CasADi: :meth:`~Interaction.forces`;
+:meth:`~Interaction.blocks`, its Jacobians as 3x3 blocks ("jac": the step's stiffness K and
+damping D; "df_dx": the full J); :meth:`~Interaction.linearization_vjp` and ``_jvp``, the
+second derivatives contracted per interaction (:func:`~..kernels.interaction_kernels`); and
+:meth:`~Interaction.symbolic_forces`, ``symbolic_blocks`` of ``3 x n`` X, V and its scene
+parameters (:meth:`~Interaction.parameters`).
 
-* :meth:`~Interaction.forces`: its force on every particle, ``(n, 3)``;
-* :meth:`~Interaction.blocks`: its Jacobians as 3x3 blocks per pair and per particle, for
-  the kernels named (``"jac"``: the step's stiffness K and damping D; ``"df_dx"``: the full
-  position derivative J);
-* :meth:`~Interaction.linearization_vjp` and :meth:`~Interaction.linearization_jvp`: the
-  second derivatives the exact adjoint and tangent of a linearized step need, contracted per
-  interaction (see :func:`~casadi_keyframe.kernels.interaction_kernels`);
-* :meth:`~Interaction.symbolic_forces` and :meth:`~Interaction.symbolic_blocks`: the same
-  force and blocks as CasADi expressions of ``3 x n`` matrices X, V and the family's scene
-  parameters (:meth:`~Interaction.parameters`).
+What a family acts over or decides per step is its ``found``, given back to every method:
+what :meth:`find` sees at x (self-contact's pairs), or what a step decides (:meth:`decide`),
+learns from its solve (:meth:`solved`), revises at its end (:meth:`stops`, :meth:`revise`),
+carries to the next (:meth:`carry`) and gives the symbolic step
+(:meth:`decision_parameters`): the springs taken taut, the particles the hold holds.
 
-What a family acts over may depend on the state (self-contact's pairs): :meth:`find` gives it
-once per state and every other method takes it back as ``found``, so one step searches once.
-
-Two shapes of family cover the cloth's laws, after jax-md's split of a per-pair law and its
-lifting over pairs: a :class:`PairInteraction` lifts a kernel of ``d = x_j - x_i`` over pairs
-(force ``+f`` on i and ``-f`` on j, so it sums to zero), a :class:`ParticleInteraction` a
-kernel of one particle's ``x, v`` over every particle.  A new force law is one file with one
-such class; the model lists it once.
+Three shapes of family, after jax-md's split of a law and its lifting: a
+:class:`PairInteraction` lifts a kernel of ``d = x_j - x_i`` over pairs (``+f`` on i, ``-f``
+on j), a :class:`ParticleInteraction` a kernel of one particle over every particle, a
+:class:`StencilInteraction` a kernel of k particles over fixed stencils.  A new force law
+is one file with one such class, given to a model as one list entry.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel, pair_difference, pair_incidence, scatter_pairs
+from ..kernels import (MappedKernel, pair_difference, pair_incidence, scatter_pairs,
+                       scatter_stencils, stencil_incidence, stencil_values)
+from .colliders import signed_distances
 
 KERNELS = ("force", "jac", "df_dx", "vjp", "jvp")  # every family's, see interaction_kernels
 OUTPUTS = {"jac": 2, "df_dx": 1}  # blocks per kernel: (K, D) and J
@@ -40,23 +40,50 @@ OUTPUTS = {"jac": 2, "df_dx": 1}  # blocks per kernel: (K, D) and J
 @dataclass(frozen=True)
 class FamilyBlocks:
     """One family's Jacobian blocks for the kernels asked (in order, ``(K, D)`` for "jac",
-    ``J`` for "df_dx"): ``pairs`` ``(P, 9)`` arrays over the pairs ``(i, j)`` and
-    ``particles`` ``(n, 9)`` arrays on the diagonal, either None when the family has none."""
+    ``J`` for "df_dx"): ``pairs`` ``(P, 9)`` arrays over the pairs ``(i, j)``, ``particles``
+    ``(n, 9)`` arrays on the diagonal, ``stencil_blocks`` ``(P, 9 k^2)`` arrays over the
+    ``(P, k)`` ``stencil``; each None when the family has none."""
 
     i: np.ndarray | None = None
     j: np.ndarray | None = None
     pairs: tuple | None = None
     particles: tuple | None = None
+    stencil: np.ndarray | None = None
+    stencil_blocks: tuple | None = None
+
+
+@dataclass(frozen=True)
+class StepSpan:
+    """A step as a family's decisions see it: from ``(x, v)`` at ``t`` over ``dt``; ``free``
+    ``(n,)`` the particles without prescribed motion; ``x1`` where it ended (None at its
+    start).  :meth:`distances` keeps each body's signed distances at x1 for the families
+    that ask."""
+
+    x: np.ndarray
+    v: np.ndarray
+    t: float
+    dt: float
+    free: np.ndarray
+    x1: np.ndarray | None = None
+    _distances: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def distances(self, body) -> np.ndarray:
+        """Every particle's signed distance to ``body`` at the step's end (x1, t + dt)."""
+        if id(body) not in self._distances:
+            self._distances[id(body)] = signed_distances(body, self.x1, self.t + self.dt)
+        return self._distances[id(body)]
 
 
 class Interaction:
     """Base of a family (module docstring); subclasses give the numeric and symbolic forms.
 
     ``name`` says what the family is; ``role`` what kind of force it is: "internal" (sums to
-    zero: springs), "external" (gravity, drag) or "contact" (colliders, self-contact)."""
+    zero: springs, bending), "external" (gravity, drag) or "contact" (bodies, self-contact);
+    ``holds`` whether its decision is a set the step's solve holds (:mod:`.hold`)."""
 
     name = "interaction"
     role = "external"
+    holds = False
 
     def find(self, x: np.ndarray):
         """What the family acts over at positions x beyond its fixed structure (None: fixed)."""
@@ -66,14 +93,46 @@ class Interaction:
         """The family's time-dependent inputs at time t as one flat vector (the symbolic S)."""
         return np.zeros(0)
 
-    def decisions(self, found) -> np.ndarray:
-        """What a step decided for this family (``found``) as the flat inputs its symbolic
-        Jacobian blocks take (none here: see the springs' taut flags)."""
+    def structure(self) -> tuple:
+        """``((i, j), stencils)``: the pairs and the ``(P, k)`` stencils its blocks occupy
+        at every state (a step matrix's fixed pattern), each None if none."""
+        return None, None
+
+    # -- what a step decides for the family and carries to the next ----------------------
+    def decide(self, step: StepSpan, carried):
+        """The family's ``found`` for a step starting at ``step`` after one that left
+        ``carried`` (:meth:`carry`; None at a run's start): here, :meth:`find`."""
+        return self.find(step.x)
+
+    def stops(self, found, end: StepSpan) -> bool:
+        """Whether the family stopped particles within the step that ended at ``end.x1``
+        (the hold does): what a stop may break is then revised (:meth:`revise`)."""
+        return False
+
+    def revise(self, found, end: StepSpan, stopped: bool):
+        """``found`` revised after the step ended at ``end.x1`` when the end shows it chose
+        wrong (``stopped``: some family stopped particles), None if it stands (here)."""
+        return None
+
+    def solved(self, found, residual: np.ndarray):
+        """``found`` given the solved step's residual ``A dv - b`` (flat; the hold's
+        impulses): here, unchanged."""
+        return found
+
+    def carry(self, found):
+        """What the next step takes from this one's ``found``: plain arrays, tuples and None,
+        equal exactly when it decides the same (None here: nothing)."""
+        return None
+
+    def decision_parameters(self, found, t: float, dt: float) -> np.ndarray:
+        """What a step from t decided (``found``, None: nothing) as the flat inputs of its
+        symbolic forms (none here: see the springs' taut flags, the hold's held set)."""
         return np.zeros(0)
 
     def decision_size(self) -> int:
-        return self.decisions(None).size
+        return self.decision_parameters(None, 0.0, 1.0).size
 
+    # -- the law -------------------------------------------------------------------------
     def forces(self, x, v, t: float, found) -> np.ndarray | None:
         """Its force on every particle, ``(n, 3)`` (None: none acts now)."""
         raise NotImplementedError
@@ -100,9 +159,9 @@ class Interaction:
         raise NotImplementedError
 
     def symbolic_blocks(self, X, V, S, decisions=None) -> FamilyBlocks:
-        """``(K, D)`` blocks as CasADi columns: ``pairs`` ``9 x P``, ``particles`` ``9 x n``
-        (row-major blocks; every pair of the family, for small systems), given what the step
-        decided (:meth:`decisions`; None: nothing)."""
+        """``(K, D)`` blocks as CasADi columns: ``pairs`` ``9 x P``, ``particles`` ``9 x n``,
+        ``stencil_blocks`` ``9 k^2 x P`` (row-major; every pair of the family, for small
+        systems), given what the step decided (:meth:`decision_parameters`; None: nothing)."""
         raise NotImplementedError
 
 
@@ -110,9 +169,9 @@ class PairInteraction(Interaction):
     """A law of two particles, ``(d = x_j - x_i, dv = v_j - v_i, *params) -> f_i``, lifted
     over pairs: ``+f`` on i, ``-f`` on j.  Subclasses give :meth:`pairs` and
     :meth:`pair_parameters` (per-pair columns) and :meth:`all_pairs` (the symbolic route's
-    pairs)."""
+    pairs, and the fixed ones' pattern)."""
 
-    fixed_pairs = True  # the same pairs at every state (springs); False: found per state
+    fixed_pairs = True  # pairs(found) is all_pairs() at every state (springs); False: found
 
     def __init__(self, kernels: dict, n: int, jit: bool | None):
         self.kernels, self.n = kernels, n
@@ -133,6 +192,9 @@ class PairInteraction(Interaction):
 
     def all_pairs(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
+
+    def structure(self):
+        return (self.all_pairs() if self.fixed_pairs else None), None
 
     def _inputs(self, x, v, i, j, found):
         return [pair_difference(x, i, j), pair_difference(v, i, j),
@@ -231,3 +293,67 @@ class ParticleInteraction(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S)))
+
+
+class StencilInteraction(Interaction):
+    """A law of k particles, ``(x, v, *params) -> f`` with x, v and f the ``3k`` stacked
+    positions, velocities and forces of a stencil's particles, lifted over fixed stencils
+    ``(P, k)`` (a hinge's four particles); its Jacobian blocks are the whole ``3k x 3k``
+    matrices.  Subclasses give :meth:`stencil_parameters` (per-stencil rows)."""
+
+    def __init__(self, kernels: dict, stencils: np.ndarray, n: int, jit: bool | None):
+        self.kernels, self.n = kernels, n
+        self.stencils = np.asarray(stencils, np.intp)
+        self.stencils.flags.writeable = False
+        self.mapped = {k: MappedKernel(kernels[k], jit=jit) for k in KERNELS}
+
+    def stencil_parameters(self) -> list:
+        """The kernels' inputs after ``x, v``, ``(P, m)`` each."""
+        raise NotImplementedError
+
+    def structure(self):
+        return None, self.stencils
+
+    def _inputs(self, x, v):
+        return [stencil_values(x, self.stencils), stencil_values(v, self.stencils),
+                *self.stencil_parameters()]
+
+    def forces(self, x, v, t, found):
+        (f,) = self.mapped["force"](*self._inputs(x, v))
+        return scatter_stencils(f, self.stencils, self.n)
+
+    def blocks(self, x, v, t, kinds, found):
+        inputs = self._inputs(x, v)
+        return FamilyBlocks(stencil=self.stencils, stencil_blocks=tuple(
+            b for k in kinds for b in self.mapped[k](*inputs)))
+
+    def linearization_vjp(self, x, v, t, lam, w, q, dt, found):
+        vectors = [stencil_values(a, self.stencils) for a in (lam, w, q)]
+        gx, gv = self.mapped["vjp"](*self._inputs(x, v), *vectors,
+                                    np.full((self.stencils.shape[0], 1), dt))
+        return (scatter_stencils(gx, self.stencils, self.n),
+                scatter_stencils(gv, self.stencils, self.n))
+
+    def linearization_jvp(self, x, v, t, w, q, dt, dx, dv, found):
+        vectors = [stencil_values(a, self.stencils) for a in (w, q)]
+        deltas = [stencil_values(a, self.stencils) for a in (dx, dv)]
+        (dg,) = self.mapped["jvp"](*self._inputs(x, v), *vectors,
+                                   np.full((self.stencils.shape[0], 1), dt), *deltas)
+        return scatter_stencils(dg, self.stencils, self.n)
+
+    def _symbolic(self, kind, X, V):
+        P, k = self.stencils.shape
+        columns = self.stencils.ravel().tolist()
+        stacked = [ca.reshape(A[:, columns], 3 * k, P) for A in (X, V)]
+        params = [ca.DM(np.asarray(a).T) for a in self.stencil_parameters()]
+        out = self.kernels[kind].map(P)(*stacked, *params)
+        return list(out) if isinstance(out, (list, tuple)) else [out]
+
+    def symbolic_forces(self, X, V, S):
+        (f,) = self._symbolic("force", X, V)
+        return ca.mtimes(ca.reshape(f, 3, self.stencils.size),
+                         stencil_incidence(self.stencils, self.n))
+
+    def symbolic_blocks(self, X, V, S, decisions=None):
+        return FamilyBlocks(stencil=self.stencils,
+                            stencil_blocks=tuple(self._symbolic("jac", X, V)))

@@ -176,32 +176,40 @@ class ChoiKoSprings(PairInteraction):
         taut = ca.DM(self._slack.T) if decisions is None else ca.reshape(decisions, 1, i.size)
         return rows + [taut]
 
-    def decisions(self, found):
+    def decision_parameters(self, found, t, dt):
+        """The taut flags (0/1 per spring) the symbolic blocks take."""
         return np.zeros(self.springs.i.size) if found is None else found.astype(float)
 
-    def revised(self, found, x0, x1):
-        """``found`` with the springs that end beyond ``1 + TAUT_MARGIN`` times their rest
-        length at ``x1`` having got longer by that much over the step from ``x0`` (smooth
-        motion changes a spring's length slowly; a step that missed a stop does not), and the
-        stretched springs that share a particle with one, taken taut; None if none changes."""
+    def decide(self, step, carried):
+        """The springs a step at x keeps taut from the last (``carried``, its taut flags):
+        those still stretched past their rest length (None if none)."""
+        if carried is None:
+            return None
+        kept = carried & (self.springs.stretch(step.x) > 1)
+        return kept if kept.any() else None
+
+    def carry(self, found):
+        return found
+
+    def revise(self, found, end, stopped):
+        """Where a step stopped particles (``stopped``: a stop within a step stretches
+        springs; elsewhere taking them taut would make an objective rough for nothing),
+        ``found`` with the springs that end beyond ``1 + TAUT_MARGIN`` times their rest
+        length at ``end.x1`` having got longer by that much over the step (smooth motion
+        changes a spring's length slowly; a step that missed a stop does not), and the
+        stretched springs sharing a particle with one, taken taut; None if none changes."""
+        if not stopped:
+            return None
         s = self.springs
-        end = s.stretch(x1)
-        late = (end > 1 + TAUT_MARGIN) & (end > s.stretch(x0) + TAUT_MARGIN)
+        end_stretch = s.stretch(end.x1)
+        late = (end_stretch > 1 + TAUT_MARGIN) & (end_stretch > s.stretch(end.x) + TAUT_MARGIN)
         if late.any():  # and the springs around them, which a taut one would stretch next
             near = np.zeros(self.n, bool)
             near[s.i[late]] = near[s.j[late]] = True
-            late |= (near[s.i] | near[s.j]) & (end > 1)
+            late |= (near[s.i] | near[s.j]) & (end_stretch > 1)
         taut = np.zeros(s.i.size, bool) if found is None else found
         new = late & ~taut
         return (taut | new) if new.any() else None
-
-    def carried(self, taut, x):
-        """The springs a step at x keeps taut from the last (``taut``): those still
-        stretched past their rest length."""
-        if taut is None:
-            return None
-        kept = taut & (self.springs.stretch(x) > 1)
-        return kept if kept.any() else None
 
     def all_pairs(self):
         return self._ij

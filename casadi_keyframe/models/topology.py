@@ -28,8 +28,12 @@ def mesh_edges(faces: np.ndarray) -> np.ndarray:
                                              faces[:, [2, 0]]]), axis=1), axis=0)
 
 
-def mesh_topology(faces: np.ndarray):
-    """Stretch springs on the mesh edges, bend springs across each interior edge."""
+def mesh_hinges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(edges, hinges)`` of triangles ``faces``: the unique edges ``(E, 2)`` (smaller index
+    first, sorted) and per interior edge its hinge ``(a, b, c, d)``, the edge's ends a < b
+    and the vertices c and d opposite it in its two triangles (ValueError if an edge has
+    more than two)."""
+    faces = np.asarray(faces, dtype=np.intp)
     half = np.concatenate([faces[:, [0, 1, 2]], faces[:, [1, 2, 0]], faces[:, [2, 0, 1]]])
     edges = np.sort(half[:, :2], axis=1)  # each half-edge with its opposite vertex half[:, 2]
     order = np.lexsort((edges[:, 1], edges[:, 0]))
@@ -39,8 +43,16 @@ def mesh_topology(faces: np.ndarray):
     shared = np.flatnonzero(~first)  # second half-edge of an interior edge
     if np.any(np.bincount(np.cumsum(first) - 1) > 2):
         raise ValueError("non-manifold mesh: an edge is shared by more than two faces")
-    bend = np.stack([opposite[shared - 1], opposite[shared]], axis=1)
-    return {STRETCH: edges[first], SHEAR: np.zeros((0, 2), int), BEND: bend}
+    hinges = np.stack([edges[shared, 0], edges[shared, 1], opposite[shared - 1],
+                       opposite[shared]], axis=1)
+    return edges[first], hinges
+
+
+def mesh_topology(faces: np.ndarray):
+    """Stretch springs on the mesh edges, bend springs across each interior edge (between
+    the vertices of its hinge opposite it)."""
+    edges, hinges = mesh_hinges(faces)
+    return {STRETCH: edges, SHEAR: np.zeros((0, 2), int), BEND: hinges[:, 2:]}
 
 
 def lumped_masses(vertices: np.ndarray, faces: np.ndarray, total: float) -> np.ndarray:

@@ -4,7 +4,7 @@
 * :mod:`.keyframes`: state and centre-of-mass keyframes; :mod:`.regions`: region targets;
   :mod:`.mesh`: a keyframe given as a mesh;
 * :mod:`.effort`: the control effort; :mod:`.strain`: the soft strain limit;
-* :mod:`.tolerances`: when a keyframe counts as met.
+* :mod:`.tolerances`: when a keyframe counts as met, and a motion as physical.
 """
 from .effort import Smoothness
 from .keyframes import CenterOfMassKeyframe, ParticleKeyframe, StateKeyframe
@@ -12,7 +12,8 @@ from .mesh import MeshKeyframe
 from .regions import RegionTarget
 from .strain import StrainLimit
 from .terms import ControlTerm, Objective, StateTerm, TrajectoryTerm
+from .tolerances import PhysicalLimits
 
 __all__ = ["CenterOfMassKeyframe", "ControlTerm", "MeshKeyframe", "Objective",
-           "ParticleKeyframe", "RegionTarget", "Smoothness", "StateKeyframe", "StateTerm",
+           "ParticleKeyframe", "PhysicalLimits", "RegionTarget", "Smoothness", "StateKeyframe", "StateTerm",
            "StrainLimit", "TrajectoryTerm"]

@@ -7,7 +7,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..views import Marker
+from ..views import KeyframeGoal, Marker
 from .tolerances import center_tolerance, keyframe_tolerance, shortfall_phrase, tolerance_pair
 from .terms import StateTerm, checked_target, particle_indices
 
@@ -78,14 +78,20 @@ class StateKeyframe(WeightedErrors):
         return shortfall_phrase(self.label, self.miss(traj), checks)
 
     def marker(self):
-        """Every particle's target ("shape") or some particles' ("particles")."""
+        """Every particle's target ("shape"), some particles' ("particles") or, without a
+        position target, their velocities' ("velocity"), judged by the rms position and
+        velocity misses against their tolerances."""
+        goal = KeyframeGoal({"rms_position_error": self._tol[0],
+                             "rms_velocity_error": self._tol[1]},
+                            self.has_tolerance, self.miss, self.shortfall)
         if self._x is None:
-            return None
+            return Marker(self.label, self.frame, "velocity", np.zeros((0, self._v.shape[1])),
+                          self._idx, goal=goal)
         if np.unique(self._idx).size == self._n:
             shape = np.empty((self._n, self._x.shape[1]))
             shape[self._idx] = self._x
-            return Marker(self.label, self.frame, "shape", shape)
-        return Marker(self.label, self.frame, "particles", self._x, self._idx)
+            return Marker(self.label, self.frame, "shape", shape, goal=goal)
+        return Marker(self.label, self.frame, "particles", self._x, self._idx, goal=goal)
 
     def _params(self, model):
         zeros = np.zeros((self._idx.size, model.dim))
@@ -182,7 +188,15 @@ class CenterOfMassKeyframe(WeightedErrors):
 
 
     def marker(self):
-        return None if self._x is None else Marker(self.label, self.frame, "center", self._x)
+        """The centre's target ("center"; without one, "velocity" of its ``particles``),
+        judged by its position and velocity misses."""
+        goal = KeyframeGoal({"position_error": self.tolerance[0],
+                             "velocity_error": self.tolerance[1]},
+                            self.has_tolerance, self.miss, self.shortfall)
+        if self._x is None:
+            return Marker(self.label, self.frame, "velocity", np.zeros((0, self._v.size)),
+                          self._idx, goal=goal)
+        return Marker(self.label, self.frame, "center", self._x, goal=goal)
 
     def center(self, traj, frame=None):
         return self._w @ traj.x[self.frame if frame is None else frame][self._idx]

@@ -7,7 +7,7 @@ import casadi as ca
 import numpy as np
 
 from ..shapes import Shape
-from ..views import Marker
+from ..views import KeyframeGoal, Marker
 from .terms import StateTerm, particle_indices
 
 
@@ -52,7 +52,11 @@ class RegionTarget(StateTerm):
         return np.sqrt(self.weight) * ca.vec(self._outside(X))
 
     def marker(self):
-        return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx)
+        """The region's outline, judged by the fraction of the agents inside it."""
+        goal = KeyframeGoal({"fraction_inside": self.fill}, self.has_tolerance, self.miss,
+                            self.shortfall)
+        return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx,
+                      goal=goal)
 
     @property
     def has_tolerance(self) -> bool:

@@ -1,6 +1,9 @@
-"""When a keyframe counts as met: tolerance pairs and the phrases that name a miss beyond
-one (the goal of a search, see :mod:`casadi_keyframe.optimize.goal`)."""
+"""When a keyframe counts as met, and a motion as physical: tolerance pairs, the limits of
+stretch and depth, and the phrases that name a miss beyond one (the goal of a search, see
+:mod:`casadi_keyframe.optimize.goal`)."""
 from __future__ import annotations
+
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -56,3 +59,33 @@ def center_tolerance(tolerance: tuple, has_x: bool, has_v: bool) -> tuple:
         velocity = (position if np.isfinite(position) else
                     DEFAULT_POSITION_TOLERANCE) / VELOCITY_TIME
     return (position if has_x else None, velocity if has_v else None)
+
+
+@dataclass(frozen=True)
+class PhysicalLimits:
+    """When a cloth's motion counts as physical, at every frame: no spring longer than
+    ``stretch`` times its rest length (torn), no particle deeper than ``depth`` metres inside
+    a body (sunk).  A result is converged only within them as well as its tolerances."""
+
+    stretch: float = 1.3
+    depth: float = 0.005
+
+    def __post_init__(self):
+        if not (np.isfinite(self.stretch) and self.stretch > 1):
+            raise ValueError(f"PhysicalLimits.stretch must be a finite number > 1 (a spring's "
+                             f"length over its rest length), got {self.stretch!r}")
+        if not (self.depth > 0):
+            raise ValueError(f"PhysicalLimits.depth must be > 0 metres (inf: not checked), "
+                             f"got {self.depth!r}")
+
+    def shortfall(self, report: dict) -> list[str]:
+        """What a model's ``physical_report`` breaks of these limits, one phrase each."""
+        out = []
+        if report["max_stretch"] > self.stretch:
+            out.append(f"torn: stretch {report['max_stretch']:.3g} at frame "
+                       f"{report['max_stretch_frame']} (limit {self.stretch:.3g})")
+        depth = report.get("max_penetration", 0.0)
+        if depth > self.depth:
+            out.append(f"sunk: {1e3 * depth:.3g} mm inside a body at frame "
+                       f"{report['max_penetration_frame']} (tolerance {1e3 * self.depth:.3g} mm)")
+        return out

@@ -21,12 +21,13 @@ import time
 import numpy as np
 
 from ..adjoints import get_gradient
-from ..io import as_checkpoint
+from ..saved import as_checkpoint
 from .evaluator import evaluate_final
+from .kept import Kept, kept_outcome, kept_stage
 from .goal import check_stop, verdict
 from .multipliers import KeyframeMultipliers
 from .outcome import INTERRUPTED, LIMIT
-from .result import Result, assemble
+from .result import Result, assemble, stage_record
 from .search import solve
 
 
@@ -57,6 +58,8 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     checkpoint = as_checkpoint(options.pop("checkpoint", None))
     stop = check_stop(options.pop("stop", None), problem)
     history, stages, start = [], [], time.perf_counter()
+    kept = Kept(problem, problem, hard.checkpoint(checkpoint, first), by_objective=False)
+    kept.offer(u, "its start")
     res = None
     for k in range(first, max(rounds, first + 1)):
         left = None if time_limit is None else max(time_limit - (time.perf_counter() - start),
@@ -67,12 +70,19 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
         stages.append(_round(problem, k, hard.scale, res))
+        kept.offer(u, f"round {k}'s result", trajectory=traj, stage=k, nit=len(history))
         if (res.status == INTERRUPTED or _time_up(time_limit, start)
                 or (stop == "goal" and verdict(problem, traj).met)):
             break
         hard.update(traj, multipliers)
-    f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
+    earlier = kept.u is not u  # an earlier round, or the start, was better than the last
+    if earlier:
+        u, traj = kept.u, kept.trajectory
+        status, message = kept_outcome(kept, status, message)
+    f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
+    if earlier:
+        kept_stage(problem, stages, f, status, message)
     if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and _time_up(time_limit,
                                                                                    start):
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
@@ -87,15 +97,14 @@ def _round(problem, k, scale, res) -> dict:
     """Round ``k``'s :class:`~.result.Stage`: its solve's totals and how it ended, with the
     true problem's objective, control cost and misses at its controls."""
     breakdown = problem.breakdown(res.x, res.trajectory)
-    return {"stage": k, "dt": problem.dt, "steps": problem.steps,
-            "particles": problem.model.n, "weight_scale": scale, "nit": res.nit,
-            "nfev": res.nfev, "njev": res.njev, "seconds": res.timings["wall_seconds"],
-            "evaluation_seconds": res.timings["evaluation_seconds"],
-            "failed_simulations": res.timings["failed_simulations"],
-            "fun": breakdown["objective"], "control_cost": breakdown["control_cost"],
-            "misses": breakdown["misses"], "success": res.success, "status": res.status,
-            "message": res.message, "start_objective": res.start["objective"],
-            "start_keyframe_error": res.start["keyframe_error"]}
+    return stage_record(problem, k, nit=res.nit, nfev=res.nfev, njev=res.njev,
+                        fun=breakdown["objective"], status=res.status, message=res.message,
+                        seconds=res.timings["wall_seconds"],
+                        evaluation_seconds=res.timings["evaluation_seconds"],
+                        failed_simulations=res.timings["failed_simulations"],
+                        start=(res.start["objective"], res.start["keyframe_error"]),
+                        weight_scale=scale, control_cost=breakdown["control_cost"],
+                        misses=breakdown["misses"])
 
 
 def _time_up(time_limit, start) -> bool:

@@ -34,7 +34,7 @@ from ..objectives import StateKeyframe
 from ..simulate import backward
 from ..state import SimulationError
 from .outcome import CONVERGED, FAILED, LIMIT
-from .result import Result, assemble, history_record
+from .result import Result, assemble, history_record, stage_record
 
 
 class KeyframeConstraint:
@@ -240,14 +240,11 @@ class _Effort:
 
     def stage(self, fun, status, message) -> dict:
         """The run's one :class:`~.result.Stage`."""
-        p = self.problem
-        return {"stage": 0, "dt": p.dt, "steps": p.steps, "particles": p.model.n,
-                "nit": len(self.history), "nfev": self.nfev, "njev": self.sweeps,
-                "fun": float(fun), "start_objective": self.start[0],
-                "start_keyframe_error": self.start[1],
-                "success": status == CONVERGED, "status": status, "message": message,
-                "seconds": time.perf_counter() - self.started,
-                "evaluation_seconds": self.seconds, "failed_simulations": self.failures}
+        return stage_record(self.problem, 0, nit=len(self.history), nfev=self.nfev,
+                            njev=self.sweeps, fun=fun, status=status, message=message,
+                            seconds=time.perf_counter() - self.started,
+                            evaluation_seconds=self.seconds,
+                            failed_simulations=self.failures, start=self.start)
 
 
 def _factor_window(problem, Q, cols):

@@ -1,6 +1,8 @@
 """The objective as every search method sees it: :class:`Evaluator` (memoised, keeping the
-best point, counting failed simulations, writing the history and the checkpoint) and
-:class:`MetricView`, the same evaluator in a smooth metric's variables."""
+best point, counting failed simulations, writing the history and the checkpoint) of what
+it is given to evaluate (:class:`RouteMerit`, a problem's objective by a gradient route, or
+multiple shooting's merit of stacked variables), and :class:`MetricView`, the same
+evaluator in a smooth metric's variables."""
 from __future__ import annotations
 
 import copy
@@ -17,45 +19,110 @@ from .goal import GoalReached, verdict
 from .result import history_record
 
 
+class RouteMerit:
+    """What a single-shooting search evaluates: ``problem``'s objective and its gradient by
+    the ``gradient`` route (a name or strategy, :attr:`route`).
+
+    An evaluation's ``info`` keeps the trajectory the route simulated (:func:`watched`), so
+    judging the goal (``goal``, default ``problem``: the true targets where ``problem``'s
+    keyframes aim elsewhere) costs no simulation.  A merit of other variables (multiple
+    shooting's :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
+    """
+
+    def __init__(self, problem, gradient, goal=None):
+        self.problem, self.route = problem, get_gradient(gradient)
+        self.goal = goal or problem
+        self._seen = {}
+        self._watched = watched(problem, self._seen)
+
+    def __call__(self, u):
+        """``(f, gradient, info)`` at ``u``; ``info["trajectory"]``: its run, or None."""
+        self._seen.clear()
+        f, g = self.route(self._watched, u)
+        seen = self._seen.get("u")
+        kept = self._seen["trajectory"] if seen is not None and np.array_equal(seen, u) else None
+        return f, g, {"trajectory": kept}
+
+    def describe(self, u, f, info):
+        """What an iteration's record says of an evaluated point: ``(controls, objective,
+        keyframe error, extra record keys)``, of the goal's true targets."""
+        control = self.goal.control_cost(u)[0]
+        if self.goal is not self.problem:
+            f = self.goal.state_cost(self.run(u, info), gradient=False)[0] + control
+        return u, f, f - control, {}
+
+    def meets(self, goal, info) -> bool:
+        """Whether the evaluated point meets ``goal`` (judged on the run it kept)."""
+        traj = None if info is None else info["trajectory"]
+        return traj is not None and verdict(goal, traj).met
+
+    def may_meet(self, goal, info) -> bool:
+        """Whether the point may meet ``goal`` (the merit's cheap test before its run)."""
+        return True
+
+    def run(self, u, info):
+        """The controls' own run at ``u``: kept by its evaluation, or simulated now."""
+        kept = None if info is None else info["trajectory"]
+        return self.problem.simulate(u, records=False) if kept is None else kept
+
+
 class Evaluator:
     """Memoised objective and gradient that tracks the best point and failed simulations.
 
     Search methods ask for f and its gradient at the same point in separate calls (IPOPT)
     or together (L-BFGS-B): the last point's pair is kept, so each point is simulated once.
-    ``stage`` is the stage it serves; ``export`` maps its controls to the final problem's
-    grid for the checkpoint (an :class:`~casadi_keyframe.io.Checkpoint` or None).
-
-    The goal (:mod:`.goal`) is judged by the keyframe terms of ``goal`` (default: the
-    problem itself; an augmented-Lagrangian round passes the true problem, whose targets do
-    not move).  With ``stop="goal"`` each iteration checks it at the best point and raises
-    :class:`~.goal.GoalReached` once it is met.  The trajectory of the best point is kept
-    from the gradient's own simulation (:func:`watched`), so the check costs no simulation.
+    It evaluates ``merit`` (default: ``problem``'s objective by the ``gradient`` route,
+    :class:`RouteMerit`).  ``stage`` is the stage it serves; ``export`` maps its controls to
+    the final problem's grid for the checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint`
+    or None; ``final``: its points are the final problem's, comparable with any other
+    there).  The best point is judged by the goal (:mod:`.goal`, the terms and limits of
+    ``goal``, default ``problem``) first, then by the merit; each iteration's record
+    describes the ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
+    ``failed_best`` a failed evaluation stands as the best while there is no other.  With
+    ``stop="goal"`` each iteration raises :class:`~.goal.GoalReached` once the best point
+    meets the goal.
     """
 
     def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None,
-                 goal=None, stop: str = "method"):
-        self.problem, self.gradient = problem, get_gradient(gradient)
+                 goal=None, stop: str = "method", merit=None, report: str = "best",
+                 failed_best: bool = True, final: bool = True):
+        self.problem, self.final = problem, final
+        self.merit = RouteMerit(problem, gradient, goal) if merit is None else merit
+        self.gradient = self.merit.route
         self.checkpoint, self.stage = checkpoint, stage
         self.export = export or (lambda u: u)
         self.goal, self.stop = goal or problem, stop
-        self._seen = {}
-        self._watched = watched(problem, self._seen)
-        self.best_traj, self._judged = None, None
+        if report not in ("last", "best"):
+            raise ValueError(f"Evaluator report must be 'last' or 'best', got {report!r}")
+        self.report, self.failed_best = report, failed_best
         self.nfev = 0
         self.failures = 0
         self.last_failure = ""
         self.last_error = None
-        self.last_u = None
-        self.best_u, self.best_f, self.best_g = None, np.inf, None
         self.seconds = 0.0
         self.interrupted = None
         self.start = None  # (objective, keyframe error) at the starting controls
         self.health = GrowthLog()  # each gradient's backward growth (health.GradientError too)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the best point and the last one (a new merit: multiple shooting's round,
+        whose multipliers moved)."""
+        self.last_u = self.last = self.last_info = None
+        self.best_u, self.best_f, self.best_g = None, np.inf, None
+        self.best_info = self.best_traj = self._judged = None
+        self.best_met = False
 
     @property
     def njev(self) -> int:
         """Gradients computed: the evaluations that did not fail."""
         return self.nfev - self.failures
+
+    def counts(self) -> dict:
+        """Its evaluations, gradients, seconds and failed simulations, as a
+        :class:`~.result.Stage` names them."""
+        return {"nfev": self.nfev, "njev": self.njev, "evaluation_seconds": self.seconds,
+                "failed_simulations": self.failures}
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
@@ -64,8 +131,7 @@ class Evaluator:
         t = time.perf_counter()
         try:
             check()  # a signal caught by interrupts.catching stops the search here
-            self._seen.clear()
-            f, g = self.gradient(self._watched, u)
+            f, g, info = self.merit(u)
             self.health.seen(self.gradient)
         except SimulationError as err:  # health.GradientError too: a refused gradient
             # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
@@ -75,24 +141,35 @@ class Evaluator:
             self.failures += 1
             self.last_failure = str(err)
             best = self.best_f if np.isfinite(self.best_f) else 0.0
-            f, g = best + 10.0 * (abs(best) + 1.0), np.zeros_like(u)
+            f, g, info = best + 10.0 * (abs(best) + 1.0), np.zeros_like(u), None
         except KeyboardInterrupt as err:  # IPOPT would swallow it: remember, then re-raise
             self.interrupted = getattr(err, "signum", signal.SIGINT)
             raise
         self.seconds += time.perf_counter() - t
         self.nfev += 1
-        self.last_u, self.last = u, (f, g)
-        if f < self.best_f:
-            self.best_u, self.best_f, self.best_g = u, f, g
-            seen = self._seen.get("u")
-            self.best_traj = (self._seen["trajectory"] if seen is not None
-                              and np.array_equal(seen, u) else None)
+        self.last_u, self.last, self.last_info = u, (f, g), info
+        met = info is not None and self.merit.meets(self.goal, info)
+        if (not met, f) < (not self.best_met, self.best_f) and (
+                info is not None or self.failed_best):
+            self.best_u, self.best_f, self.best_g, self.best_info = u, f, g, info
+            self.best_traj, self.best_met = None, met
         return f, g
 
+    def take(self, x) -> bool:
+        """Make ``x`` the best point (evaluated now if it is not the last), where the merit
+        alone does not rank points (IPOPT's iterates on a constrained form); the failed
+        simulation's step back stays measured from the lowest value.  False if it fails."""
+        self(x)
+        if self.last_info is None:
+            return False
+        self.best_u, self.best_info = np.array(x, dtype=float).ravel(), self.last_info
+        self.best_traj = None
+        return True
+
     def best_trajectory(self):
-        """The trajectory at the best point (kept, or simulated now without records)."""
+        """The run of the best point's controls (kept, or simulated now without records)."""
         if self.best_traj is None:
-            self.best_traj = self.problem.simulate(self.best_u, records=False)
+            self.best_traj = self.merit.run(self.best_u, self.best_info)
         return self.best_traj
 
     def verdict(self):
@@ -105,28 +182,48 @@ class Evaluator:
         if self.stop != "goal" or self.best_u is None or self._judged is self.best_u:
             return
         self._judged = self.best_u
+        if not self.merit.may_meet(self.goal, self.best_info):
+            return
         found = self.verdict()
         if found.checked and found.met:
             raise GoalReached(found, iteration)
 
-    def record(self, history, start, bar):
-        """Append one iteration (at the last evaluated point) to ``history``; the checkpoint
-        gets the best controls on the final grid (``u``), their objective at this stage's
-        time step (``fun``), the iterations so far (``nit``), the ``stage`` and its
-        ``stage_dt``."""
-        u, (f, _) = self.last_u, self.last
-        control = self.problem.control_cost(u)[0]
+    def best_objective(self) -> float:
+        """The best point's objective on the goal's true targets (the merit's value where
+        they are its own)."""
+        return float(self._described("best")[1]) if self.best_u is not None else np.inf
+
+    def keep(self, nit: int = 0) -> None:
+        """Offer the best point to the checkpoint (on the final grid, with its objective on
+        the goal's true targets, whether it meets the goal, the iterations so far), which
+        keeps it only if it is better than what it holds."""
+        if self.checkpoint is None or self.best_u is None:
+            return
+        u, fun = self._described("best")[:2]
+        self.checkpoint.write(self.export(u), fun=float(fun), met=bool(self.best_met),
+                              final=self.final, nit=nit, stage=self.stage,
+                              stage_dt=float(self.problem.dt))
+
+    def _described(self, which: str):
+        if which == "best":
+            return self.merit.describe(self.best_u, self.best_f, self.best_info)
+        return self.merit.describe(self.last_u, self.last[0], self.last_info)
+
+    def record(self, history, start, bar=None, **extra):
+        """Append one iteration (at the :attr:`report` point) to ``history``, ``extra`` its
+        optional keys; the checkpoint gets the best controls on the final grid (``u``), their
+        objective at this stage's time step (``fun``), the iterations so far (``nit``), the
+        ``stage`` and its ``stage_dt``."""
+        u, objective, keyframe, more = self._described(self.report)
         growth = {} if self.health.last is None else {"gradient_growth": self.health.last}
         history.append(history_record(
-            self.problem, u, objective=f, keyframe_error=f - control,
+            self.problem, u, objective=objective, keyframe_error=keyframe,
             iteration=len(history) + 1, stage=self.stage,
-            seconds=time.perf_counter() - start, nfev=self.nfev, **growth))
-        if self.checkpoint is not None and self.best_u is not None:
-            self.checkpoint.write(self.export(self.best_u), fun=float(self.best_f),
-                                  nit=len(history), stage=self.stage,
-                                  stage_dt=float(self.problem.dt))
-        bar.update(1)
-        bar.set_postfix(f=f"{f:.4g}")
+            seconds=time.perf_counter() - start, nfev=self.nfev, **growth, **extra, **more))
+        self.keep(nit=len(history))
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(f=f"{objective:.4g}")
         check()
         self.check_goal(len(history))
 

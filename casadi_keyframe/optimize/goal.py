@@ -1,4 +1,5 @@
-"""The animator's goal: every keyframe within its tolerance.
+"""The animator's goal: every keyframe within its tolerance, the cloth whole and above the
+bodies it touches (:class:`~casadi_keyframe.objectives.tolerances.PhysicalLimits`).
 
 Each keyframe term declares when it counts as met (``StateKeyframe(..., tolerance=...)``,
 ``RegionTarget(..., fill=...)``, with defaults; see :mod:`casadi_keyframe.objectives.tolerances`).
@@ -18,22 +19,26 @@ STOPS = ("goal", "method")
 class Verdict:
     """Whether a trajectory meets a problem's goal.
 
-    * ``met``: every keyframe with a tolerance is within it (False when none has one);
-    * ``misses``: one phrase per keyframe still missed, naming each miss and its tolerance;
+    * ``met``: every keyframe with a tolerance is within it and the motion within the
+      problem's physical limits (False when no keyframe has a tolerance);
+    * ``misses``: one phrase per keyframe still missed, naming each miss and its tolerance,
+      then one per physical limit broken (torn, sunk);
     * ``checked``: how many keyframe terms declare a tolerance (0: the problem has no goal,
-      and ``met`` says nothing).
+      and ``met`` says nothing); ``physical``: whether physical limits were checked.
     """
 
     met: bool
     misses: tuple
     checked: int
+    physical: bool = False
 
     def describe(self) -> str:
         """``"every keyframe within its tolerance"`` or ``"still missed: ..."``."""
         if not self.checked:
             return "no keyframe declares a tolerance"
         if self.met:
-            return "every keyframe within its tolerance"
+            return "every keyframe within its tolerance" + (
+                ", the motion within its physical limits" if self.physical else "")
         return "still missed: " + "; ".join(self.misses)
 
 
@@ -43,10 +48,13 @@ def has_goal(problem) -> bool:
 
 
 def verdict(problem, trajectory) -> Verdict:
-    """The :class:`Verdict` of ``problem``'s keyframe terms on ``trajectory``."""
+    """The :class:`Verdict` of ``problem``'s keyframe terms and physical limits on
+    ``trajectory``."""
     terms = [t for t in problem.objective_terms.state_terms if t.has_tolerance]
     misses = tuple(m for t in terms if (m := t.shortfall(trajectory)) is not None)
-    return Verdict(met=bool(terms) and not misses, misses=misses, checked=len(terms))
+    broken = tuple(problem.physical_shortfall(trajectory))
+    return Verdict(met=bool(terms) and not misses and not broken, misses=misses + broken,
+                   checked=len(terms), physical=getattr(problem, "limits", None) is not None)
 
 
 def check_stop(stop, problem) -> str:

@@ -1,9 +1,11 @@
 """IPOPT (CasADi's ``nlpsol``) as a search method, fed by the evaluator through Callbacks.
 
 The objective is a ``casadi.Callback`` whose Jacobian is another Callback returning the
-chosen gradient route's gradient; IPOPT runs with a limited-memory Hessian.  Every Callback
-is kept referenced on the solver (one collected early makes IPOPT fail silently with
-``Invalid_Number_Detected``), and ``stats()['return_status']`` says how it ended.
+chosen gradient route's gradient; equality constraints with a sparse Jacobian (multiple
+shooting's defects) are a second pair of the same Callbacks (:func:`search`).  IPOPT runs
+with a limited-memory Hessian.  Every Callback is kept referenced on the solver (one
+collected early makes IPOPT fail silently with ``Invalid_Number_Detected``), and
+``stats()['return_status']`` says how it ended.
 
 ``options`` go to IPOPT over this module's defaults (limited-memory Hessian with 20 pairs,
 ``max_iter``, ``tol``, silent).  Their names are IPOPT's own: IPOPT decides whether it
@@ -79,58 +81,77 @@ def check_options(options: dict) -> list[str]:
     return unknown
 
 
-class _Objective(ca.Callback):
-    """phi(u) for IPOPT, with the gradient from the chosen strategy as its Jacobian."""
+class _Function(ca.Callback):
+    """A function of the ``n`` unknowns for IPOPT: ``value(x)`` shaped ``out``, with the
+    Callback :class:`_Jacobian` of ``jacobian(x)`` on the sparsity ``pattern``.  The
+    objective is one (its gradient from the chosen route), the equality constraints
+    another (:func:`search`)."""
 
-    def __init__(self, ev, n):
+    def __init__(self, name, n, out, value, pattern, jacobian):
         ca.Callback.__init__(self)
-        self.ev, self.n = ev, n
-        self.construct("phi", {"enable_fd": False})
+        self.n, self.out, self.value = n, out, value
+        self.pattern, self.jacobian = pattern, jacobian
+        self.construct(name, {"enable_fd": False})
 
     def get_sparsity_in(self, i):
         return ca.Sparsity.dense(self.n, 1)
 
     def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, 1)
+        return self.out
 
     def eval(self, arg):
-        return [self.ev(np.asarray(arg[0]).ravel())[0]]
+        return [self.value(np.asarray(arg[0]).ravel())]
 
     def has_jacobian(self):
         return True
 
     def get_jacobian(self, name, inames, onames, opts):
-        self._jac = _Gradient(self.ev, self.n, name, opts)  # IPOPT needs it kept alive
-        return self._jac
+        self._jac = _Jacobian(name, self.n, self.out, self.pattern, self.jacobian)
+        return self._jac  # IPOPT needs it kept alive
 
 
-class _Gradient(ca.Callback):
-    def __init__(self, ev, n, name, opts):
+class _Jacobian(ca.Callback):
+    def __init__(self, name, n, out, pattern, jacobian):
         ca.Callback.__init__(self)
-        self.ev, self.n = ev, n
+        self.n, self.out, self.pattern, self.jacobian = n, out, pattern, jacobian
         self.construct(name, {"enable_fd": False})
 
     def get_n_in(self):
         return 2
 
     def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, 1) if i == 0 else ca.Sparsity.dense(1, 1)
+        return ca.Sparsity.dense(self.n, 1) if i == 0 else self.out
 
     def get_sparsity_out(self, i):
-        return ca.Sparsity.dense(1, self.n)
+        return self.pattern
 
     def eval(self, arg):
-        return [self.ev(np.asarray(arg[0]).ravel())[1].reshape(1, -1)]
+        return [self.jacobian(np.asarray(arg[0]).ravel())]
+
+
+def _objective(ev, n) -> _Function:
+    """phi(x) from the evaluator ``ev``, its Jacobian ``ev``'s gradient."""
+    return _Function("phi", n, ca.Sparsity.dense(1, 1), lambda x: ev(x)[0],
+                     ca.Sparsity.dense(1, n), lambda x: ev(x)[1].reshape(1, -1))
+
+
+def _constraints(con, n) -> _Function:
+    """``con.values(x)`` (``con.size`` of them, held at 0), its Jacobian ``con.jacobian(x)``
+    (a scipy sparse matrix) read on ``con.pattern``."""
+    rows, cols = con.pattern.get_triplet()
+    return _Function("g", n, ca.Sparsity.dense(con.size, 1), con.values, con.pattern,
+                     lambda x: ca.DM(con.pattern,
+                                     np.asarray(con.jacobian(x)[rows, cols]).ravel()))
 
 
 class IterationHook(ca.Callback):
     """IPOPT's per-iteration hook for ``n`` unknowns and ``m`` constraints: calls
-    ``on_iteration()`` (``on_iteration(x)`` with ``with_point``) after each iteration and
-    returns 1, which stops IPOPT, on Ctrl-C or when the goal is met."""
+    ``on_iteration(x)`` with the iterate after each iteration and returns 1, which stops
+    IPOPT, on Ctrl-C or when the goal is met."""
 
-    def __init__(self, n, on_iteration, *, m: int = 0, with_point: bool = False):
+    def __init__(self, n, on_iteration, *, m: int = 0):
         ca.Callback.__init__(self)
-        self.n, self.m, self.on_iteration, self.with_point = n, m, on_iteration, with_point
+        self.n, self.m, self.on_iteration = n, m, on_iteration
         self.count, self.interrupted = 0, None
         self.reached = None  # the GoalReached that stopped it
         self.construct("iteration", {})
@@ -153,10 +174,7 @@ class IterationHook(ca.Callback):
         try:
             self.count += 1
             if self.count > 1:  # IPOPT reports iteration 0, the start, first
-                if self.with_point:
-                    self.on_iteration(np.asarray(arg[0]).ravel())
-                else:
-                    self.on_iteration()
+                self.on_iteration(np.asarray(arg[0]).ravel())
         except KeyboardInterrupt as err:
             self.interrupted = getattr(err, "signum", signal.SIGINT)
             return [1]
@@ -182,24 +200,42 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     memoised), calling ``on_iteration()`` after each iteration; ``deadline`` becomes IPOPT's
     ``max_wall_time``.  Returns ``(status, message)`` (:mod:`.outcome`); an interrupt raises
     :class:`~casadi_keyframe.interrupts.Interrupted`."""
-    n = problem.size
-    phi = _Objective(ev, n)
-    it = IterationHook(n, on_iteration)
-    U = ca.MX.sym("u", n)
+    status, message, _ = search(ev, u0, problem.bounds(), maxiter, tol, options,
+                                lambda x: on_iteration(), deadline)
+    return status, message
+
+
+def search(ev, x0, bounds, maxiter, tol, options, on_iteration, deadline, *,
+           constraints=None, name: str = "keyframe"):
+    """IPOPT from ``x0`` within ``bounds`` (``(lower, upper)``) on the evaluator ``ev``'s
+    objective, held to ``constraints.values(x) = 0`` when given (an object with ``size``,
+    ``values(x)``, ``jacobian(x)`` as a scipy sparse matrix and its CasADi ``pattern``);
+    ``on_iteration(x)`` after each iteration with the iterate.  Returns ``(status, message,
+    x)`` with IPOPT's last point; an interrupt raises
+    :class:`~casadi_keyframe.interrupts.Interrupted`, the goal met :class:`~.goal.GoalReached`."""
+    lb, ub = bounds
+    n = len(lb)
+    X = ca.MX.sym("x", n)
+    phi = _objective(ev, n)
+    nlp, keep, held = {"x": X, "f": phi(X)}, [phi], {}
+    if constraints is not None:
+        g = _constraints(constraints, n)
+        nlp["g"], held = g(X), {"lbg": 0, "ubg": 0}
+        keep.append(g)
+    it = IterationHook(n, on_iteration, m=0 if constraints is None else constraints.size)
     ipopt = ipopt_options(maxiter, tol, options, deadline)
-    solver = ca.nlpsol("keyframe", "ipopt", {"x": U, "f": phi(U)},
-                       {"ipopt": ipopt, "print_time": False, "iteration_callback": it,
-                        "error_on_fail": False})
-    solver._keep = (phi, it)  # Callbacks must outlive the solver
-    lb, ub = problem.bounds()
+    solver = ca.nlpsol(name, "ipopt", nlp, {"ipopt": ipopt, "print_time": False,
+                                            "iteration_callback": it, "error_on_fail": False})
+    solver._keep = (*keep, it)  # Callbacks must outlive the solver
     # an interrupt CasADi catches inside IPOPT ends it as NonIpopt_Exception_Thrown: the
     # handler's log, the evaluator and the iteration hook say it was one
     with catching(signal.SIGINT) as caught:
-        solver(x0=u0, lbx=lb, ubx=ub)
+        out = solver(x0=x0, lbx=lb, ubx=ub, **held)
     signum = caught.signum or ev.interrupted or it.interrupted
     if signum:
         raise Interrupted(signum)
     if it.reached is not None:
         raise it.reached
-    return ipopt_outcome(solver.stats().get("return_status", "unknown"),
-                         maxiter=ipopt["max_iter"])
+    status, message = ipopt_outcome(solver.stats().get("return_status", "unknown"),
+                                    maxiter=ipopt["max_iter"])
+    return status, message, np.asarray(out["x"]).ravel()

@@ -55,8 +55,8 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     try:
         res = minimize(ev, u0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts,
                        callback=callback)
-        status, message = lbfgsb_outcome(res.message, maxiter=opts["maxiter"],
-                                         maxfun=opts["maxfun"])
+        budget = {"maxiter": opts["maxiter"], "maxfun": opts["maxfun"]}  # this stage's
+        status, message = lbfgsb_outcome(res.message, **budget)
         # a line search that fails after progress restarts from the best point with no
         # curvature memory: its first step is along the steepest descent, so a second
         # failure there means no step lowers phi (a kink, such as the cloth law's at rest
@@ -75,7 +75,7 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
                         "objective (it failed, and again from the best point with fresh "
                         "curvature memory): a kink of the objective or its round-off floor "
                         f"[L-BFGS-B: {again.message}]")
-    return lbfgsb_outcome(again.message, maxiter=maxiter, maxfun=opts["maxfun"])
+    return lbfgsb_outcome(again.message, **budget)
 
 
 def _line_search_failed(res) -> bool:

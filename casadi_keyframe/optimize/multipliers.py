@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..io import Checkpoint
 from ..objectives import Objective, StateKeyframe
 
 
@@ -147,7 +146,7 @@ class KeyframeMultipliers:
         if checkpoint is None:
             return None
         state = {key: value.tolist() for key, value in self.mult.state("rounds_").items()}
-        return Checkpoint(checkpoint.path, **checkpoint.meta, rounds_round=k, **state)
+        return checkpoint.with_meta(generation=k, rounds_round=k, **state)
 
     def resume(self, meta: dict | None) -> int:
         """Take the multipliers a checkpoint's ``meta`` carries; the round to start at."""

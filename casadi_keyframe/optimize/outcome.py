@@ -12,8 +12,8 @@ STATUS = {CONVERGED: "converged", LIMIT: "limit reached", FAILED: "search failed
           INTERRUPTED: "interrupted"}
 
 INACCURATE = ("the gradient may be inaccurate or the problem badly scaled: compare the "
-              "gradient routes (gradcheck), use an exact route (--gradient adjoint, not the "
-              "approximate swapped one), or bring the keyframe and control weights closer")
+              "gradient routes (gradcheck), use an exact route, or bring the keyframe and "
+              "control weights closer")
 
 _IPOPT_FAILURES = {
     "Search_Direction_Becomes_Too_Small": "the search direction became too small to make "
@@ -41,9 +41,11 @@ def lbfgsb_outcome(message: str, *, maxiter: int, maxfun: int) -> tuple[int, str
                "the objective stopped decreasing (relative reduction below ftol)")
         return CONVERGED, f"converged: {why}{tag}"
     if "ITERATIONS" in text:
-        return LIMIT, f"iteration limit reached ({maxiter}) before converging{tag}"
+        return LIMIT, (f"iteration limit reached ({maxiter} iterations in this stage) before "
+                       f"converging{tag}")
     if "EVALUATIONS" in text or "F,G" in text:
-        return LIMIT, f"evaluation limit reached ({maxfun}) before converging{tag}"
+        return LIMIT, (f"evaluation limit reached ({maxfun} evaluations in this stage) before "
+                       f"converging{tag}")
     if text.startswith("ABNORMAL"):
         return FAILED, ("line search failed: no step along the search direction lowered the "
                         f"objective; {INACCURATE}{tag}")
@@ -62,15 +64,16 @@ def ipopt_outcome(return_status: str, *, maxiter: int) -> tuple[int, str]:
     if return_status == "Solved_To_Acceptable_Level":
         return CONVERGED, f"converged to IPOPT's acceptable tolerance{tag}"
     if return_status == "Maximum_Iterations_Exceeded":
-        return LIMIT, f"iteration limit reached ({maxiter}) before converging{tag}"
+        return LIMIT, (f"iteration limit reached ({maxiter} iterations in this stage) before "
+                       f"converging{tag}")
     if return_status in ("Maximum_WallTime_Exceeded", "Maximum_CpuTime_Exceeded"):
         return LIMIT, f"time limit reached before converging{tag}"
     why = _IPOPT_FAILURES.get(return_status, "IPOPT failed")
     return FAILED, f"search failed: {why}{tag}"
 
 
-HARD = ("hold the keyframes hard (rounds, --rounds), raise their weights, or start closer "
-        "(a guess, multiple shooting: --segments)")
+HARD = ("hold the keyframes hard (rounds), raise their weights, or start closer (a guess, "
+        "multiple shooting)")
 
 
 def judge(status: int, message: str, verdict) -> tuple[int, str]:
@@ -82,9 +85,10 @@ def judge(status: int, message: str, verdict) -> tuple[int, str]:
     if status == INTERRUPTED or not verdict.checked:
         return status, message
     if verdict.met:
-        if status == FAILED:
-            return CONVERGED, f"converged: every keyframe within its tolerance; then {message}"
-        return status, f"{message}; every keyframe within its tolerance"
+        if status == FAILED:  # the goal is met: how the method then stopped is a detail
+            return CONVERGED, (f"converged: {verdict.describe()} (then the method stopped: "
+                               f"{message.split('; ')[0]})")
+        return status, f"{message}; {verdict.describe()}"
     missed = verdict.describe()
     if status == CONVERGED:
         return FAILED, (f"search failed: the method stopped short of the goal ({message}); "

@@ -2,12 +2,13 @@
 the records it carries, :class:`Stage`, :class:`Timings` and :class:`HistoryRecord`.
 
 Every producer (:func:`~.search.solve`, :func:`~.augmented_lagrangian.solve_augmented`,
-:func:`~.constrained.lower_effort`) writes its history with :func:`history_record` and
-builds its result with :func:`assemble`, so ``summary.json``, ``result.npz``, the
-convergence plot, a sweep's table and a checkpoint read the same keys whoever made the
-result.  The records are ``TypedDict``\\ s, plain dicts: they go to JSON as they are.  A
-:class:`Result` checks them when it is made, so a producer that leaves out a key (a history
-without ``objective`` would draw an empty convergence plot) fails at once, by name.
+:func:`~.constrained.lower_effort`) writes its history with :func:`history_record`, its
+stages with :func:`stage_record` and builds its result with :func:`assemble`, so
+``summary.json``, ``result.npz``, the convergence plot, a sweep's table and a checkpoint
+read the same keys whoever made the result.  The records are ``TypedDict``\\ s, plain
+dicts: they go to JSON as they are.  A :class:`Result` checks them when it is made, so a
+producer that leaves out a key (a history without ``objective`` would draw an empty
+convergence plot) fails at once, by name.
 """
 from __future__ import annotations
 
@@ -226,11 +227,11 @@ class Result:
 
 def _health(stages, route: str) -> dict:
     """The gradients' health over ``stages``: the largest backward growth (None if no stage
-    watched one), the bound ``route`` is held to (None: an exact route, refused only when
-    not finite) and the evaluations refused."""
-    from ..health import growth_bound
+    watched one), the bound the route named ``route`` is held to (None: refused only when
+    not finite, or a strategy of the user's own) and the evaluations refused."""
+    from ..adjoints import GRADIENTS
 
-    bound = growth_bound(route)
+    bound = getattr(GRADIENTS.get(route), "bound", math.inf)
     growth = [s["gradient_growth"] for s in stages if "gradient_growth" in s]
     return {"largest_growth": max(growth) if growth else None,
             "bound": bound if math.isfinite(bound) else None,
@@ -260,6 +261,22 @@ def history_record(problem, u, *, objective: float, keyframe_error: float, itera
               "control_norm": float(np.linalg.norm(u)), "seconds": seconds, "nfev": nfev,
               **extra}
     _check_keys("history record", record, HistoryRecord)
+    return record
+
+
+def stage_record(problem, stage: int, *, nit: int, nfev: int, njev: int, fun: float,
+                 status: int, message: str, seconds: float, evaluation_seconds: float,
+                 failed_simulations: int, start=(None, None), **extra) -> Stage:
+    """The :class:`Stage` of stage number ``stage``, run on ``problem``, that ended with
+    ``status`` and ``message``; ``start`` is ``(objective, keyframe error)`` at its starting
+    controls (None if not evaluated); ``extra`` are the optional keys :class:`Stage` names."""
+    record = {"stage": stage, "dt": problem.dt, "steps": problem.steps,
+              "particles": problem.model.n, "nit": nit, "nfev": nfev, "njev": njev,
+              "fun": float(fun), "start_objective": start[0], "start_keyframe_error": start[1],
+              "success": status == CONVERGED, "status": status, "message": message,
+              "seconds": seconds, "evaluation_seconds": evaluation_seconds,
+              "failed_simulations": failed_simulations, **extra}
+    _check_keys("stage", record, Stage)
     return record
 
 

@@ -23,15 +23,16 @@ from tqdm.auto import tqdm
 from ..adjoints import get_gradient
 from ..health import GradientError
 from ..interrupts import NAMES, handled
-from ..io import as_checkpoint
+from ..saved import as_checkpoint
 from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
 from .goal import GoalReached, check_stop
+from .kept import Kept, kept_outcome, kept_stage
 from .methods import check_options, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .shooting_search import run_shooting, shooting_options
-from .result import Result, assemble
+from .shooting import run_shooting, shooting_options
+from .result import Result, assemble, stage_record
 from .stages import carry, stage_name, stage_problems
 
 
@@ -47,7 +48,7 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``gradient`` a route name or strategy; ``maxiter`` (a whole number >= 1) and ``tol``
     (> 0) the search's limits; ``u0`` the starting controls at ``problem.dt`` (default: the
     problem's guess, else passive); ``checkpoint`` a ``.npz`` path (or
-    :class:`~casadi_keyframe.io.Checkpoint`) that always holds the best controls so far (at
+    :class:`~casadi_keyframe.saved.Checkpoint`) that always holds the best controls so far (at
     ``problem.dt``, also during a coarse stage); ``options`` go to the method's library
     (an unknown name is refused before the search, with the valid ones); ``time_limit``
     (seconds, wall clock, over all stages) stops the search at the first iteration past it
@@ -88,9 +89,9 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
     same frames, e.g. the true problem of an augmented-Lagrangian round).
 
-    ``shooting`` (a number of segments K, or :class:`~.shooting_search.ShootingOptions`
+    ``shooting`` (a number of segments K, or :class:`~.shooting.ShootingOptions`
     or a dict of them) runs multiple shooting first on each stage
-    (:mod:`.shooting_search`): controls and the states at K - 1 nodes searched together,
+    (:mod:`.shooting.stage`): controls and the states at K - 1 nodes searched together,
     the segments' defects held by multipliers; its controls then start the stage's own
     search (unless ``polish`` is off), which stops at once if the goal is already met.  After
     the first stage the nodes start on the run of the controls carried over (``"guess"``).
@@ -102,27 +103,38 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     options = check_settings(method, maxiter, tol, time_limit, options)
     stop = check_stop(stop, goal or problem)
     multiple = shooting_options(shooting)
+    shooting_on = multiple is not None and multiple.segments > 1
     problems = stage_problems(problem, continuation, resolutions, homotopy)
     strategy = get_gradient(gradient)
     search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
                      time_limit)
     search.stop = stop
-    u = None if u0 is None else carry(problem, problem.controls.check(u0), problems[0])
+    start = problem.initial_controls() if u0 is None else problem.controls.check(u0)
+    kept = Kept(problem, goal or problem, search.checkpoint)
+    if len(problems) > 1 or shooting_on:  # stages that may end worse than the start
+        kept.offer(start, "its start")
+    u = None if u0 is None else carry(problem, start, problems[0])
     stages = []
     for k, p in enumerate(problems):
-        judge_by = goal if (goal is not None and p is problem) else p
+        final = p is problem
         export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
-        ev = Evaluator(p, strategy, search.checkpoint, stage=k, export=export, goal=judge_by,
-                       stop=stop)
-        start, polish = p.initial_controls() if u is None else u, True
-        if multiple is not None and multiple.segments > 1:
-            start, ev, polish = _shoot(p, k, multiple, start, search, stages, ev, problem)
+        ev = Evaluator(p, strategy, search.checkpoint, stage=len(stages), export=export,
+                       goal=(goal or problem) if final else p, stop=stop, final=final)
+        begin, polish = p.initial_controls() if u is None else u, True
+        origin = ("the start" if k == 0 else
+                  f"stage {stages[-1]['stage']}'s best, carried here" if stages else "the start")
+        if shooting_on:
+            begin, ev, polish = _shoot(p, k, multiple, begin, search, stages, ev, problem)
+            origin = "multiple shooting's result"
         if polish:
-            stages.append(search.run(ev.problem, ev, start, (k, len(problems))))
-        if p is problem or stages[-1]["status"] == INTERRUPTED or search.time_up():
+            ev.stage = len(stages)
+            stages.append(search.run(ev.problem, ev, begin, (k, len(problems)), origin))
+        if final or stages[-1]["status"] == INTERRUPTED or search.time_up():
             break
+        kept.offer(carry(p, ev.best_u, problem), f"stage {stages[-1]['stage']}'s best",
+                   stage=stages[-1]["stage"], nit=len(search.history))
         u = carry(p, ev.best_u, problems[k + 1])
-    return _result(problem, p, ev, strategy, search, stages, len(problems))
+    return _result(problem, p, ev, strategy, search, stages, kept)
 
 
 def _shoot(p, k, opts, start, search, stages, ev, origin):
@@ -132,12 +144,13 @@ def _shoot(p, k, opts, start, search, stages, ev, origin):
     after an interrupt or the time limit, the shooting's controls are evaluated and judged
     as they are."""
     opts = opts if k == 0 else replace(opts, init="guess")
-    record, start, aimed = run_shooting(p, opts, start, search, k, ev.goal, ev.export, origin)
+    record, start, aimed = run_shooting(p, opts, start, search, len(stages), ev.goal,
+                                        ev.export, origin)
     stages.append(record)
     if opts.polish and record["status"] != INTERRUPTED and not search.time_up():
         if aimed is not p:
-            ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=k, export=ev.export,
-                           goal=ev.goal, stop=ev.stop)
+            ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=len(stages),
+                           export=ev.export, goal=ev.goal, stop=ev.stop, final=ev.final)
         return start, ev, True
     evaluate_at(ev, start)
     record["status"], record["message"] = judge(record["status"], record["message"],
@@ -178,8 +191,9 @@ def _positive(value) -> bool:
             and math.isfinite(value) and value > 0)
 
 
-def _result(problem, p, ev, strategy, search, stages, count) -> Result:
-    """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``)."""
+def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
+    """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``),
+    or the ``kept`` point where that ended worse."""
     status, message = stages[-1]["status"], stages[-1]["message"]
     if p is problem and ev.problem is problem:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
@@ -192,13 +206,22 @@ def _result(problem, p, ev, strategy, search, stages, count) -> Result:
         if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
             status = LIMIT
             message = f"time limit reached ({search.time_limit:g} s) before converging"
-        message = (f"{message}, in stage {stages[-1]['stage']} of 0..{count - 1} "
-                   f"({stage_name(p)}): its best controls, carried to the problem "
-                   f"({stage_name(problem)}), kept")
+        message = (f"{message}, in stage {stages[-1]['stage']} ({stage_name(p)}): its best "
+                   f"controls, carried to the problem ({stage_name(problem)}), kept")
+    trajectory = problem.simulate(u)
+    if kept.beats(u, trajectory):
+        u, trajectory = kept.u, problem.simulate(kept.u)
+        fun, jac = evaluate_final(problem, strategy, u)
+        status, message = kept_outcome(kept, status, message)
+        kept_stage(problem, stages, fun, status, message)
+    else:  # the checkpoint holds the result too (a coarse stage's, carried, once judged here)
+        kept.offer(u, "the result", trajectory=trajectory, stage=stages[-1]["stage"],
+                   nit=len(search.history))
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
                     method=search.method,
                     gradient=getattr(strategy, "name", type(strategy).__name__),
-                    stages=stages, history=search.history, started=search.start)
+                    stages=stages, history=search.history, started=search.start,
+                    trajectory=trajectory)
 
 
 class _Search:
@@ -215,25 +238,23 @@ class _Search:
     def time_up(self) -> bool:
         return self.deadline is not None and time.perf_counter() >= self.deadline
 
-    def run(self, problem, ev, u0, stage) -> dict:
-        """One method run from ``u0``: the stage's :class:`~.result.Stage`."""
+    def run(self, problem, ev, u0, stage, origin: str = "the start") -> dict:
+        """One method run from ``u0`` (``origin`` says what it is): the stage's
+        :class:`~.result.Stage`, its objective on the stage's true targets."""
         t, first = time.perf_counter(), len(self.history)
-        status, message = self._search(problem, ev, u0, stage)
+        status, message = self._search(problem, ev, u0, stage, origin)
         if status == LIMIT and self.time_up():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         status, message = judge(status, message, ev.verdict())
-        return {"stage": stage[0], "dt": problem.dt, "steps": problem.steps,
-                "particles": problem.model.n,
-                "nit": len(self.history) - first, "nfev": ev.nfev, "njev": ev.njev,
-                "fun": float(ev.best_f),
-                "start_objective": ev.start[0], "start_keyframe_error": ev.start[1],
-                "success": status == CONVERGED, "status": status, "message": message,
-                "seconds": time.perf_counter() - t, "evaluation_seconds": ev.seconds,
-                "failed_simulations": ev.failures, **ev.health.stage_fields()}
+        ev.keep(nit=len(self.history))
+        return stage_record(problem, ev.stage, nit=len(self.history) - first,
+                            fun=ev.best_objective(), status=status, message=message,
+                            seconds=time.perf_counter() - t, start=ev.start, **ev.counts(),
+                            **ev.health.stage_fields())
 
-    def _search(self, problem, ev, u0, stage):
+    def _search(self, problem, ev, u0, stage, origin):
         k, count = stage
-        where = "" if count == 1 else f" of stage {k} ({stage_name(problem)})"
+        where = "" if count == 1 else f" of stage {ev.stage} ({stage_name(problem)})"
         f0, _ = ev(u0)
         ev.start = (float(f0), float(f0 - problem.control_cost(u0)[0]))
         if isinstance(ev.last_error, GradientError):
@@ -245,10 +266,11 @@ class _Search:
                                      "finer dt or mesh" if k == 0 else "; the controls "
                                      "carried from the previous stage fail here: start the "
                                      "continuation at a finer dt or mesh"), 0)
+        ev.keep(nit=len(self.history))
         try:
             ev.check_goal(0)
         except GoalReached:
-            return CONVERGED, "converged: the start already meets the goal (stop='goal')"
+            return CONVERGED, f"converged: {origin} already meets the goal (stop='goal')"
         desc = f"{problem.name} [{self.method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
         bar = tqdm(total=self.maxiter, disable=self.quiet, desc=desc, leave=False)
         run = get_method(self.method).run

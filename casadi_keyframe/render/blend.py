@@ -3,17 +3,11 @@
 For a problem with a :class:`..views.BlendView` (``problems/cape_blend.py``): ``animate`` writes
 a GIF and ``snapshot`` a PNG with three panels per time, left the fall source clip, middle
 the blend, right the walk source clip, each with its cape and its character's capsules.
-Blend frame ``k`` (time ``k dt`` after the blend starts) goes with the fall clip's frame
-``t_a / dt + k`` and the walk clip's ``t_b / dt + k`` (:func:`clip_frame`).
-
-The animation opens with a lead-in of :data:`LEAD_IN` s before the blend (negative ``k``;
-shorter if a clip starts sooner, so that both source panels still play along), during
-which the middle panel shows the fall clip itself in the cloth colour: the blend takes
-over from it.  From ``k = 0`` the middle panel's cape is orange (:data:`BLEND`) and the
-walk target, the problem's keyframe, is a red wireframe, faded until the last frame.  Each
-panel keeps its limits over all its frames, about its own centre on the same scale as the
-others (equal aspect, equal lengths across panels).  Each panel is a
-:class:`.cloth.ClothPanel` shown the positions of its clip's frame.
+Blend frame ``k`` goes with each clip's frame at its start time plus ``k dt``
+(:func:`clip_frame`).  The animation opens with a lead-in of :data:`LEAD_IN` s in which the
+middle panel shows the fall clip itself; from ``k = 0`` the blend's cape is orange
+(:data:`BLEND`) and the walk target, the problem's keyframe, a red wireframe.  Every panel
+keeps one scale over all its frames (equal aspect, equal lengths across panels).
 """
 from __future__ import annotations
 
@@ -28,7 +22,8 @@ from matplotlib.ticker import MaxNLocator
 from ..views import BlendView, view_of
 from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, same_scale, save_grid, targets
 from .flock import HIGHLIGHT
-from .frames import mass_centers, select_frames, write_gif
+from .frames import keyframes, mass_centers, select_frames, write_gif
+from .verdicts import say_checks, titled
 
 BLEND = HIGHLIGHT  # orange, as highlighted agents in the flock figures
 LEAD_IN = 0.3  # s of the fall shown before the blend starts
@@ -93,15 +88,20 @@ class BlendPanel(ClothPanel):
                          path=mass_centers(problem.model.masses, xs),
                          terms=targets(problem) if panel == "blend" else ())
         self.problem, self.trajectory, self.panel = problem, trajectory, panel
+        self.markers = problem.objective_terms.markers() if panel == "blend" else []
         self.name = PANELS[panel]
         for axis in (ax.xaxis, ax.yaxis, ax.zaxis):
             axis.set_major_locator(MaxNLocator(4))
 
-    def draw(self, k: int, full_title: bool = True):
+    def draw(self, k: int, full_title: bool = True, *, hold: bool = False):
+        """Show blend frame ``k``; the blend panel says how each keyframe at ``k`` went (with
+        ``hold``, at the latest keyframe frame up to ``k``)."""
         s = shown(self.problem, self.trajectory, self.panel, k)
         self.show(s.model, s.x, s.t, s.color)
         if k >= 0:
             self.show_targets(k)
+        self.dynamic += say_checks(self.ax, self.markers, self.trajectory, k, metres=True,
+                                   hold=hold, large=full_title)
         self.set_title(self.title(k, s.t, full_title), full_title)
 
     def title(self, k: int, t: float, full: bool = True) -> str:
@@ -144,7 +144,7 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
         def draw(i):
             k = int(ks[i])
             for panel in panels:
-                panel.draw(k)
+                panel.draw(k, hold=True)
             stage = (f"blend frame {k} / {problem.steps}" if k >= 0
                      else f"lead-in, {-k * problem.dt:.2f} s before the blend")
             fig.suptitle(f"{name} \u2014 {stage}", fontsize=11, y=0.985)
@@ -158,10 +158,11 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
 
 def snapshot(problem, trajectory, path, frames=None) -> Path:
     """Write a PNG: a row per panel (fall, blend, walk), a column per blend frame
-    (default: the start, two between and the end of the blend)."""
+    (default: the start, two between and the end of the blend, and every keyframe, where
+    the blend panel says whether it was hit)."""
     path, steps = Path(path), problem.steps
-    ks = sorted({int(k) for k in (np.round(np.linspace(0, steps, 4)) if frames is None
-                                 else frames)})
+    ks = sorted({int(k) for k in ([*np.round(np.linspace(0, steps, 4)), *keyframes(problem)]
+                                 if frames is None else frames)})
     if not ks or ks[0] < 0 or ks[-1] > steps:
         raise ValueError(f"snapshot frames must be in 0..{steps}, got {ks}")
     rows, cols, middle = len(PANELS), len(ks), None
@@ -174,7 +175,8 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
                 panel = BlendPanel(ax, problem, trajectory, p, range(steps + 1), box)
                 panel.draw(k, full_title=False)
                 middle = panel if p == "blend" else middle
-        save_grid(fig, path, problem.name, middle, _handles())
+        save_grid(fig, path, titled(problem.name, middle.markers, trajectory, problem), middle,
+                  _handles())
     finally:
         plt.close(fig)
     return path

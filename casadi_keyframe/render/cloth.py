@@ -24,10 +24,11 @@ from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from ..geometry import body_geometry, capsule_grid, circle, plane_patch
 from ..views import ClothView, view_of
-from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
-                     snapshot_frames, write_gif)
-from .targets import (camera_direction, center_distance, colorbar, distance_colors,
-                      distance_norm, distances, format_mm, miss_text, target_camera)
+from .frames import (frame_title, grid_shape, keyframes, mass_centers, save_figure,
+                     select_frames, snapshot_frames, write_gif)
+from .targets import (camera_direction, colorbar, distance_colors, distance_scale, distances,
+                      target_camera)
+from .verdicts import say_checks, titled
 
 CLOTH, TARGET, BODY, MARK, RING, COM = "#6a8fc7", "#d62728", "0.5", "0.1", "#e1812c", "#7b4ea3"
 BACK = "#c9b58f"  # the side of a cloth turned away from the camera (a cape's inside)
@@ -133,8 +134,9 @@ def same_scale(boxes: list) -> list:
 
 def targets(problem) -> list:
     """The markers of the problem's keyframes that have a position in space (a region's
-    outline, 2-D, has none)."""
-    return [m for m in problem.objective_terms.markers() if m.kind != "outline"]
+    outline, 2-D, has none, nor a keyframe on velocities only)."""
+    return [m for m in problem.objective_terms.markers() if m.kind not in ("outline",
+                                                                          "velocity")]
 
 
 class ClothPanel:
@@ -234,8 +236,8 @@ class ClothPanel:
             if later:
                 here = [t for t in self.terms if t.frame == min(later)]
                 self.dynamic.append(self.ax.text2D(
-                    0.02, 0.96, f"target at frame {here[0].frame}", color=TARGET,
-                    fontsize=8, transform=self.ax.transAxes, va="top"))
+                    0.98, 0.96, f"target at frame {here[0].frame}", color=TARGET,
+                    fontsize=8, transform=self.ax.transAxes, va="top", ha="right"))
         alpha = 1.0 if here and here[0].frame == n else 0.35
         for marker in here:
             if self.is_shape(marker):
@@ -252,51 +254,37 @@ class ClothPanel:
 
 class TrajectoryPanel(ClothPanel):
     """A cloth problem's ``trajectory`` in one 3-D axes; ``draw(n)`` shows frame ``n``, at a
-    keyframe frame coloured by each particle's distance to its target on the scale
-    ``norm`` (:func:`.targets.distance_norm`; default: over this trajectory's keyframes)."""
+    keyframe frame coloured by each particle's distance to its target on the problem's
+    scale (:func:`.targets.distance_scale`) and saying whether each keyframe was hit."""
 
-    def __init__(self, ax, problem, trajectory, *, name=None, box=None, camera=None,
-                 norm=None):
+    def __init__(self, ax, problem, trajectory, *, name=None, box=None, camera=None):
         super().__init__(ax, problem.model, Box.of(problem, trajectory) if box is None else box,
                          view_of(problem, ClothView),
                          path=mass_centers(problem.model.masses, trajectory.x),
                          terms=targets(problem), camera=camera)
-        self.trajectory = trajectory
+        self.trajectory, self.markers = trajectory, problem.objective_terms.markers()
         self.name = problem.name if name is None else name
-        self.norm = distance_norm(keyframe_millimetres(problem, trajectory)) if norm is None \
-            else norm
+        self.scale = distance_scale(self.terms)
 
-    def draw(self, n: int, full_title: bool = True, *, ahead: bool = True):
+    def draw(self, n: int, full_title: bool = True, *, ahead: bool = True,
+             hold: bool = False):
         """Replace the frame-dependent artists with those of frame ``n`` (targets due later
-        drawn faded and labelled only with ``ahead``)."""
+        drawn faded and labelled only with ``ahead``), saying how each keyframe at ``n``
+        went (with ``hold``, at the latest keyframe frame up to ``n``)."""
         x = self.trajectory.x[n]
         here = [m for m in self.terms if m.frame == n]
         shape = next((m for m in here if self.is_shape(m)), None)
-        rgb = None if shape is None else distance_colors(1e3 * distances(shape, x), self.norm)
+        rgb = None if shape is None else distance_colors(1e3 * distances(shape, x), self.scale)
         self.show(self.model, x, n * self.trajectory.dt, vertex_rgb=rgb)
         for m in here:
             if m.kind == "particles":  # the targeted particles, coloured by their distance
                 self.dynamic.append(self.ax.scatter(
                     *x[m.particles].T, s=22, zorder=3, depthshade=False, edgecolors="black",
-                    linewidths=0.4, c=distance_colors(1e3 * distances(m, x), self.norm)))
+                    linewidths=0.4, c=distance_colors(1e3 * distances(m, x), self.scale)))
         self.show_targets(n, ahead=ahead)
-        title = frame_title(self.name, n, self.trajectory, full_title)
-        missed = [1e3 * d for d in (distances(m, x) for m in here) if d is not None]
-        centre = [m for m in here if m.kind == "center"]
-        said = ([f"{miss_text(np.concatenate(missed))} off"] if missed else []) + [
-            f"centre of mass {format_mm(1e3 * center_distance(m, x, self.model.masses))} off"
-            for m in centre]
-        if said:
-            title += "\nkeyframe: " + "; ".join(said)
-        self.set_title(title, full_title)
-
-
-def keyframe_millimetres(problem, *trajectories) -> np.ndarray:
-    """Every targeted particle's distance to its target in mm, at every keyframe of every
-    trajectory (what one colour scale must hold)."""
-    out = [1e3 * d for traj in trajectories for m in targets(problem)
-           if (d := distances(m, traj.x[m.frame])) is not None]
-    return np.concatenate(out) if out else np.zeros(0)
+        self.dynamic += say_checks(self.ax, self.markers, self.trajectory, n, metres=True,
+                                   hold=hold, large=full_title)
+        self.set_title(frame_title(self.name, n, self.trajectory, full_title), full_title)
 
 
 def keyframe_camera(problem, frames, *trajectories) -> tuple[float, float]:
@@ -340,19 +328,20 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
     ``title`` overrides the problem name in the title.  One camera for the whole animation,
     the one nearest the problem's that sees every target's extent; between keyframes the
     next target is drawn faded and labelled with its frame; at a keyframe the cloth is
-    coloured by its distance to the target (the colour bar in mm)."""
+    coloured by its distance to the target (the colour bar in mm), and from it until the
+    next one the picture says whether that keyframe was hit."""
     path = Path(path)
     fig = plt.figure(figsize=(8.0, 7.6))
     try:
         panel = TrajectoryPanel(fig.add_subplot(projection="3d"), problem, trajectory,
                                 name=title,
                                 camera=keyframe_camera(problem, keyframes(problem), trajectory))
-        legend(fig, panel, bottom=0.09)
-        fig.subplots_adjust(left=0, right=1, bottom=0.14, top=0.94)
-        if keyframe_millimetres(problem, trajectory).size:
-            colorbar(fig, panel.norm, rect=(0.3, 0.06, 0.4, 0.014))
+        legend(fig, panel, bottom=0.11)
+        fig.subplots_adjust(left=0, right=1, bottom=0.16, top=0.94)
+        if coloured(problem, range(trajectory.steps + 1)):
+            colorbar(fig, panel.scale, rect=(0.3, 0.08, 0.4, 0.014))
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
-        write_gif(fig, panel.draw, frames, path, fps)
+        write_gif(fig, lambda n: panel.draw(n, hold=True), frames, path, fps)
     finally:
         plt.close(fig)
     return path
@@ -360,23 +349,22 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
 
 def snapshot(problem, trajectory, path, frames=None) -> Path:
     """Write a PNG of 3-D small multiples: by default the first frame, each keyframe and
-    the last, at most 8 panels (thinned evenly, keeping the first and last).  Each keyframe
-    panel has the camera that sees its target's extent and the cloth coloured by its
-    distance to the target; targets appear only at their own frame."""
+    the last.  Each keyframe panel has the camera that sees its target's extent, the cloth
+    coloured by its distance to the target and a line per keyframe saying whether it was
+    hit; targets appear only at their own frame; the title counts the hits."""
     path = Path(path)
-    frames = snapshot_frames(problem, trajectory, frames, most=8)
-    cols = {4: 2, 5: 3, 6: 3}.get(len(frames), min(len(frames), 4))
-    rows = -(-len(frames) // cols)
-    fig = plt.figure(figsize=(3.4 * cols, 3.3 * rows + 1.0))
+    frames = snapshot_frames(problem, trajectory, frames)
+    rows, cols = grid_shape(len(frames))
+    fig = plt.figure(figsize=(3.6 * cols, 3.5 * rows + 1.5))
     try:
         box = Box.of(problem, trajectory)
-        norm = distance_norm(keyframe_millimetres(problem, trajectory))
         for i, n in enumerate(frames):
             ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
-            panel = TrajectoryPanel(ax, problem, trajectory, box=box, norm=norm,
+            panel = TrajectoryPanel(ax, problem, trajectory, box=box,
                                     camera=keyframe_camera(problem, [n], trajectory))
             panel.draw(n, full_title=False, ahead=False)
-        save_grid(fig, path, problem.name, panel, norm=_shown_norm(problem, frames, norm))
+        save_grid(fig, path, titled(problem.name, panel.markers, trajectory, problem), panel,
+                  scale=panel.scale if coloured(problem, frames) else None)
     finally:
         plt.close(fig)
     return path
@@ -385,47 +373,47 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
 def side_by_side(problem, rows: dict, path, frames=None) -> Path:
     """Write a PNG with one row of 3-D panels per trajectory of ``rows`` (``{label:
     trajectory}``, e.g. the optimizer's start and its result) at the same frames (default:
-    the first, each keyframe and the last, at most 6), all in one box; each column seen
-    from the camera that shows its keyframe's target, the cloth coloured by its distance
-    to the target on one scale for all rows."""
+    the first, each keyframe and the last), all in one box; each column seen from the
+    camera that shows its keyframe's target, the cloth coloured by its distance to the
+    target on the problem's scale, each keyframe panel saying whether it was hit."""
     path = Path(path)
     first = next(iter(rows.values()))
-    frames = snapshot_frames(problem, first, frames, most=6)
-    fig = plt.figure(figsize=(3.0 * len(frames), 3.1 * len(rows) + 1.0))
+    frames = snapshot_frames(problem, first, frames)
+    fig = plt.figure(figsize=(3.2 * len(frames), 3.3 * len(rows) + 1.5))
     try:
         box = Box.of(problem, *rows.values())
-        norm = distance_norm(keyframe_millimetres(problem, *rows.values()))
         for r, (label, trajectory) in enumerate(rows.items()):
             for c, n in enumerate(frames):
                 ax = fig.add_subplot(len(rows), len(frames), r * len(frames) + c + 1,
                                      projection="3d")
-                panel = TrajectoryPanel(ax, problem, trajectory, box=box, norm=norm,
+                panel = TrajectoryPanel(ax, problem, trajectory, box=box,
                                         camera=keyframe_camera(problem, [n], *rows.values()))
                 panel.draw(n, full_title=False, ahead=False)
                 ax.set_title(f"{label}: " + ax.get_title() if c == 0 else ax.get_title(),
                              fontsize=8)
-        save_grid(fig, path, problem.name, panel, norm=_shown_norm(problem, frames, norm))
+        title = "  |  ".join(titled(label, panel.markers, t, problem) for label, t in rows.items())
+        save_grid(fig, path, f"{problem.name} \u2014 {title}", panel,
+                  scale=panel.scale if coloured(problem, frames) else None)
     finally:
         plt.close(fig)
     return path
 
 
-def _shown_norm(problem, frames, norm):
-    """``norm`` if a panel at ``frames`` is coloured by distance (a keyframe with particle
-    targets), else None: no colour bar for a picture without one."""
-    return norm if any(m.frame in frames and m.kind in ("shape", "particles")
-                       for m in targets(problem)) else None
+def coloured(problem, frames) -> bool:
+    """Whether a panel at one of ``frames`` is coloured by distance (a keyframe there has
+    particle targets): a picture without one has no colour bar."""
+    return any(m.frame in frames and m.kind in ("shape", "particles") for m in targets(problem))
 
 
-def save_grid(fig, path, title: str, panel: ClothPanel, extra=(), *, norm=None) -> None:
+def save_grid(fig, path, title: str, panel: ClothPanel, extra=(), *, scale=None) -> None:
     """Save a grid of 3-D panels as a PNG: ``title`` on top, the legend of ``panel`` (and
-    ``extra`` handles) below, and with ``norm`` the colour bar of the distance to the
+    ``extra`` handles) below, and with ``scale`` the colour bar of the distance to the
     targets under it; narrow margins."""
     fig.suptitle(title, fontsize=11)
     inch = 1 / fig.get_figheight()
-    legend(fig, panel, extra, bottom=(0.62 if norm is not None else 0.05) * inch)
-    if norm is not None:
-        colorbar(fig, norm, rect=(0.3, 0.36 * inch, 0.4, 0.09 * inch))
-    fig.subplots_adjust(left=0.02, right=0.98, bottom=(1.0 if norm is not None else 0.45) * inch,
+    legend(fig, panel, extra, bottom=(0.78 if scale is not None else 0.05) * inch)
+    if scale is not None:
+        colorbar(fig, scale, rect=(0.3, 0.5 * inch, 0.4, 0.09 * inch))
+    fig.subplots_adjust(left=0.02, right=0.98, bottom=(1.15 if scale is not None else 0.45) * inch,
                         top=1 - 0.75 * inch, wspace=0.05, hspace=0.3)
     save_figure(fig, path, dpi=110)

@@ -25,9 +25,11 @@ TOP = 10.0  # iterates above TOP x the start objective are drawn at the top edge
 
 def convergence(result, path) -> Path:
     """Write a PNG of the history of ``result`` (anything with ``history``, ``start``,
-    ``method`` and ``gradient``, as :class:`~casadi_keyframe.optimize.Result`)."""
+    ``method`` and ``gradient``, as :class:`~casadi_keyframe.optimize.Result`), from its
+    start at iteration 0; a search that took no iteration shows its start point alone, and
+    says so."""
     path = Path(path)
-    history = list(getattr(result, "history", None) or [])
+    history = with_start(result)
     fig, axes = plt.subplots(1, 2, figsize=(10, 4.6))
     try:
         fig.suptitle(f"{getattr(result, 'method', '?')} / gradient: "
@@ -39,22 +41,35 @@ def convergence(result, path) -> Path:
                 ax.set_xticks([]), ax.set_yticks([])
             fig.tight_layout()
         else:
-            start = getattr(result, "start", None) or {}
-            if start.get("objective") is not None and np.isfinite(start["objective"]):
-                history = [{"iteration": 0, "seconds": 0.0, **start,
-                            **{k: history[0][k] for k in ("stage", "dt", "particles", "round")
-                               if k in history[0]}}] + history
             notes = _draw(axes, history)
+            if len(history) == 1 and history[0]["iteration"] == 0:
+                notes.insert(0, "no iterations: the search ended at its start, the point "
+                                "drawn at iteration 0")
             handles, labels = axes[0].get_legend_handles_labels()
+            below = 0.03 * (len(notes) + 1) if notes else 0.0  # the notes under the legend
             fig.legend(handles, labels, loc="lower center", ncol=len(handles), fontsize=8,
-                       frameon=False, bbox_to_anchor=(0.5, 0.06 if notes else 0.0))
-            fig.tight_layout(rect=(0, 0.14 if notes else 0.08, 1, 1))
+                       frameon=False, bbox_to_anchor=(0.5, below))
+            fig.tight_layout(rect=(0, 0.08 + below, 1, 1))
             for i, note in enumerate(notes):
-                fig.text(0.5, 0.035 - 0.03 * i, note, ha="center", fontsize=8, color="0.3")
+                fig.text(0.5, below - 0.03 * (i + 1) + 0.005, note, ha="center", fontsize=8,
+                         color="0.3")
         save_figure(fig, path, dpi=110)
     finally:
         plt.close(fig)
     return path
+
+
+def with_start(result) -> list:
+    """The history of ``result`` behind its start (iteration 0) where the start's objective
+    is known: a search that took no iteration is its start alone."""
+    history = list(getattr(result, "history", None) or [])
+    start = getattr(result, "start", None) or {}
+    if start.get("objective") is None or not np.isfinite(start["objective"]):
+        return history
+    first = history[0] if history else {}
+    return [{"iteration": 0, "seconds": 0.0, **start,
+             **{k: first[k] for k in ("stage", "dt", "particles", "round") if k in first}}
+            ] + history
 
 
 def series(history, key) -> np.ndarray:
@@ -76,11 +91,15 @@ def _draw(axes, history) -> list[str]:
     for ax, xkey, xlabel in ((axes[0], "iteration", "iteration (0: the start)"),
                              (axes[1], "seconds", "wall time [s]")):
         x = np.array([h.get(xkey, i) for i, h in enumerate(history)], float)
-        marker = "." if len(history) < 30 else None
-        ax.plot(x, _shown(f, high), color=AGENT, lw=2.2, marker=marker, label="objective")
+        alone = {"marker": "o", "ms": 5} if len(history) == 1 else {}  # a point, not a line
+        ax.plot(x, _shown(f, high), color=AGENT, lw=2.2, label="objective",
+                **({"marker": "o", "ms": 9} if alone else
+                   {"marker": "." if len(history) < 30 else None}))
         ax.plot(x, _shown(k, high | zero), "--", color=PARTICLE, lw=1.3,
-                label="keyframe error")
-        ax.plot(x, _shown(c, high), ":", color=CONTROL, lw=1.3, label="control cost")
+                label="keyframe error", **alone)
+        ax.plot(x, _shown(c, high), ":", color=CONTROL, lw=1.3, label="control cost", **alone)
+        if alone:
+            ax.set_xticks([0.0])
         ax.set_yscale("log")
         ax.set_ylim(low, hi_lim)
         if high.any():

@@ -4,8 +4,9 @@
 Agents are dots with fading trails, the highlighted ones (:class:`..views.FlockView`) larger
 and orange; centre-of-mass targets crosses on a dashed path, the centre of mass a plus with
 its path so far, agent targets open circles, regions outlined polygons, each emphasised
-within :data:`NEAR` frames of its keyframe.  Only the first two coordinates of a 3-D flock
-are drawn.
+within :data:`NEAR` frames of its keyframe.  A panel at a keyframe says whether each of its
+keyframes was hit (:mod:`.verdicts`; an animation keeps saying it until the next keyframe).
+Only the first two coordinates of a 3-D flock are drawn.
 """
 from __future__ import annotations
 
@@ -18,8 +19,9 @@ from matplotlib.collections import LineCollection
 from matplotlib.patches import Polygon
 
 from ..views import FlockView, view_of
-from .frames import (frame_title, keyframes, mass_centers, save_figure, select_frames,
-                     snapshot_frames, write_gif)
+from .frames import (frame_title, grid_shape, keyframes, mass_centers, save_figure,
+                     select_frames, snapshot_frames, write_gif)
+from .verdicts import LARGE, SMALL, say_checks, stack_height, titled
 
 AGENT, HIGHLIGHT, REGION, COM, PARTICLE = "#4c72b0", "#e1812c", "#3a923a", "#7b4ea3", "#c03d3e"
 TRAIL, NEAR = 10, 3  # trail length and "near the keyframe" window, in frames
@@ -33,7 +35,8 @@ class FlockPanel:
         self.ax, self.traj = ax, traj
         self.name = problem.name if name is None else name
         self.xy = np.asarray(traj.x)[:, :, :2]
-        markers = problem.objective_terms.markers()
+        self.markers = markers = problem.objective_terms.markers()
+        self.verdicts = []
         self.coms = sorted((m for m in markers if m.kind == "center"), key=lambda m: m.frame)
         self.regions = [m for m in markers if m.kind == "outline"]
         self.states = [m for m in markers if m.kind in ("shape", "particles")]
@@ -83,8 +86,9 @@ class FlockPanel:
     def title(self, n: int, full: bool = True) -> str:
         return frame_title(self.name, n, self.traj, full)
 
-    def draw(self, n: int, full_title: bool = True):
-        """Move every artist to frame ``n``."""
+    def draw(self, n: int, full_title: bool = True, *, hold: bool = False):
+        """Move every artist to frame ``n`` and say how each keyframe at ``n`` went (with
+        ``hold``, at the latest keyframe frame up to ``n``)."""
         for t, patch, label in self.patches:
             near = abs(n - t.frame) <= NEAR
             patch.set(lw=2.2 if near else 0.8, fc=(*_rgb(REGION), 0.2 if near else 0.0),
@@ -100,7 +104,14 @@ class FlockPanel:
         self._draw_trails(n)
         self.dots.set_offsets(self.xy[n, ~self.hl])
         self.hdots.set_offsets(self.xy[n, self.hl])
-        self.ax.set_title(self.title(n, full_title), fontsize=9 if full_title else 8)
+        for artist in self.verdicts:
+            artist.remove()
+        self.verdicts = say_checks(self.ax, self.markers, self.traj, n, metres=False, hold=hold,
+                                   large=full_title, above=True)
+        size = LARGE if full_title else SMALL
+        self.pad = 6.0 + (stack_height(self.verdicts, size) + size if self.verdicts else 0.0)
+        self.ax.set_title(self.title(n, full_title), fontsize=9 if full_title else 8,
+                          pad=self.pad)  # above what the verdicts say
 
     def _draw_trails(self, n: int):
         seg = self.xy[max(n - TRAIL, 0):n + 1]
@@ -148,25 +159,27 @@ def animate(problem, trajectory, path, *, fps: int = 20, max_frames: int = 150,
     fig, ax = plt.subplots()
     try:
         panel = FlockPanel(ax, problem, trajectory, name=title)
-        fig.set_size_inches(*_figsize(panel, 6.0))
+        w, h = _figsize(panel, 6.0)
+        fig.set_size_inches(w, h)
+        pads = {n: (panel.draw(n, hold=True), panel.pad)[1] for n in keyframes(problem)}
+        if pads:  # the layout keeps room for the most any keyframe says
+            fig.set_size_inches(w, h + max(pads.values()) / 72)
+            panel.draw(max(pads, key=pads.get), hold=True)
         _legend(fig, panel)
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
-        write_gif(fig, panel.draw, frames, path, fps)
+        write_gif(fig, lambda n: panel.draw(n, hold=True), frames, path, fps)
     finally:
         plt.close(fig)
     return path
 
 
 def snapshot(problem, trajectory, path, frames=None) -> Path:
-    """Write a PNG of small multiples: by default the first frame, each keyframe and the last.
-
-    At most 6 panels: longer lists keep their first and last frame and are thinned evenly.
-    """
+    """Write a PNG of small multiples: by default the first frame, each keyframe and the
+    last, each keyframe's panel saying whether it was hit; the title counts the hits."""
     path = Path(path)
     frames = snapshot_frames(problem, trajectory, frames)
-    cols = {1: 1, 2: 2, 3: 3, 4: 2}.get(len(frames), 3)
-    rows = -(-len(frames) // cols)
+    rows, cols = grid_shape(len(frames))
     fig, axes = plt.subplots(rows, cols, squeeze=False)
     try:
         panels = [FlockPanel(ax, problem, trajectory) for ax in axes.flat[:len(frames)]]
@@ -176,7 +189,9 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
         fig.set_size_inches(w * cols, (h - 0.2) * rows + 0.5)
         for panel, n in zip(panels, frames):
             panel.draw(n, full_title=False)
-        fig.suptitle(problem.name, fontsize=11)
+        said = sum(max(p.pad for p in panels[r * cols:(r + 1) * cols]) for r in range(rows))
+        fig.set_size_inches(w * cols, (h - 0.2) * rows + 0.5 + said / 72)  # room for them
+        fig.suptitle(titled(problem.name, panels[0].markers, trajectory), fontsize=11)
         _legend(fig, panels[0])
         fig.tight_layout(rect=(0, 0.04, 1, 1))
         save_figure(fig, path, dpi=110)

@@ -12,7 +12,7 @@ import numpy as np
 from matplotlib.animation import PillowWriter
 
 from ..interrupts import check
-from ..io import atomic_path
+from ..saved import atomic_path
 
 
 def keyframes(problem) -> list[int]:
@@ -37,18 +37,21 @@ def select_frames(steps: int, required=(), max_frames: int = 150) -> list[int]:
     return sorted(grid)
 
 
-def snapshot_frames(problem, trajectory, frames=None, most: int = 6) -> list[int]:
-    """Frames of a snapshot: by default the first, each keyframe and the last.
-
-    At most ``most``: longer lists keep their first and last frame and are thinned evenly.
-    """
+def snapshot_frames(problem, trajectory, frames=None) -> list[int]:
+    """Frames of a snapshot: ``frames``, by default the first, each keyframe and the last
+    (every keyframe gets its panel, however many there are)."""
     frames = sorted({0, trajectory.steps, *keyframes(problem)} if frames is None
                     else {int(f) for f in frames})
     if not frames or frames[0] < 0 or frames[-1] > trajectory.steps:
         raise ValueError(f"snapshot frames must be in 0..{trajectory.steps}, got {frames}")
-    if len(frames) > most:
-        frames = [frames[i] for i in np.round(np.linspace(0, len(frames) - 1, most)).astype(int)]
     return frames
+
+
+def grid_shape(count: int, widest: int = 4) -> tuple[int, int]:
+    """``(rows, columns)`` of a grid of ``count`` panels, at most ``widest`` columns: one
+    row up to three, then as square as it goes."""
+    cols = count if count <= 3 else min(widest, int(np.ceil(np.sqrt(count))))
+    return -(-count // cols), cols
 
 
 def frame_title(name: str, n: int, traj, full: bool = True) -> str:

@@ -1,21 +1,28 @@
 """What a cloth picture shows of its keyframe targets, so that a viewer can tell whether each
 was hit: a camera that sees a target's extent (a flat target seen edge-on is a solid band
 that hides the cloth), and the cloth's distance to its target, per particle, as colour in
-millimetres with a colour bar.
+millimetres on a scale fixed per problem around the keyframes' tolerance
+(:class:`DistanceScale`), with a colour bar.
 
 Plotting-light: the camera choice and the distances are numpy only; :func:`colorbar` and
 :func:`distance_colors` use matplotlib's colour maps.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import matplotlib
 import matplotlib.ticker
 import numpy as np
-from matplotlib.colors import LogNorm
+from matplotlib.colors import Normalize
+
+from .verdicts import format_mm
 
 DISTANCE_MAP = "viridis"  # dark: on the target; yellow: far from it
 ELEVATIONS = np.arange(5.0, 80.0, 5.0)
 AZIMUTHS = np.arange(-180.0, 180.0, 5.0)
+TOLERANCES_SHOWN = 3  # the colour bar of the distance spans 0 to this many tolerances
+UNJUDGED_SPAN = 0.05  # of the targets' extent: the bar's span where no tolerance is checked
 
 
 def camera_direction(camera) -> np.ndarray:
@@ -76,50 +83,56 @@ def distances(marker, x) -> np.ndarray | None:
     return None
 
 
-def center_distance(marker, x, masses) -> float:
-    """The distance in metres of the centre of mass of positions ``x`` (weighted by
-    ``masses``) to a "center" marker's target."""
-    w = np.asarray(masses, float)
-    return float(np.linalg.norm(w @ np.asarray(x, float) / w.sum() - marker.points[0]))
+@dataclass(frozen=True)
+class DistanceScale:
+    """The colour scale of each particle's distance to its target, in mm, fixed per problem:
+    0 to ``top``, with ``tolerance`` (the tightest position tolerance, if any) marked;
+    farther distances take the top colour (clipped)."""
+
+    top: float
+    tolerance: float | None
+
+    @property
+    def norm(self) -> Normalize:
+        return Normalize(vmin=0.0, vmax=self.top, clip=True)
 
 
-def distance_norm(millimetres) -> LogNorm:
-    """A log colour scale in mm from 1 mm to the largest of ``millimetres`` rounded up to 1,
-    2 or 5 times a power of ten (at least 10 mm): a hit within a millimetre and a miss of a
-    metre both read off one bar."""
-    values = np.asarray([v for v in np.ravel(millimetres) if np.isfinite(v)] or [1.0])
-    decade = 10 ** np.floor(np.log10(max(values.max(), 1.0)))
-    top = decade * next(k for k in (1, 2, 5, 10) if k * decade >= values.max())
-    return LogNorm(vmin=1.0, vmax=max(10.0, top), clip=True)
+def distance_scale(markers) -> DistanceScale:
+    """The :class:`DistanceScale` of a problem's keyframe ``markers``: up to
+    :data:`TOLERANCES_SHOWN` times the tightest position tolerance of those coloured by
+    distance (targets for particles), or, where none has a tolerance, :data:`UNJUDGED_SPAN`
+    of their targets' extent.  It depends on the problem alone, so every picture of one
+    problem (any trajectory, any frame) shares it."""
+    coloured = [m for m in markers if m.kind in ("shape", "particles")]
+    tolerances = [t for m in coloured if (t := m.position_tolerance) is not None]
+    if tolerances:
+        tolerance = 1e3 * min(tolerances)
+        return DistanceScale(TOLERANCES_SHOWN * tolerance, tolerance)
+    extent = max([float(np.ptp(m.points, axis=0).max()) for m in coloured] + [0.0])
+    return DistanceScale(1e3 * UNJUDGED_SPAN * extent if extent > 0 else 100.0, None)
 
 
-def distance_colors(millimetres, norm: LogNorm) -> np.ndarray:
-    """RGB of each distance in mm on :data:`DISTANCE_MAP` (below 1 mm: the bottom colour)."""
-    values = np.maximum(np.asarray(millimetres, float), norm.vmin)
-    return matplotlib.colormaps[DISTANCE_MAP](norm(values))[..., :3]
+def distance_colors(millimetres, scale: DistanceScale) -> np.ndarray:
+    """RGB of each distance in mm on :data:`DISTANCE_MAP` (beyond ``scale.top``: the top
+    colour)."""
+    return matplotlib.colormaps[DISTANCE_MAP](scale.norm(np.asarray(millimetres, float)))[..., :3]
 
 
-def colorbar(fig, norm: LogNorm, rect=(0.3, 0.035, 0.4, 0.018)):
-    """A horizontal colour bar of the distance in mm, in figure coordinates ``rect``."""
-    mappable = matplotlib.cm.ScalarMappable(norm=norm, cmap=DISTANCE_MAP)
-    bar = fig.colorbar(mappable, cax=fig.add_axes(rect), orientation="horizontal")
-    bar.set_label("distance of each particle to its keyframe target [mm] (at keyframe "
-                  "frames)", fontsize=7)
-    bar.ax.xaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
-    bar.ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
-    bar.ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+def colorbar(fig, scale: DistanceScale, rect=(0.3, 0.035, 0.4, 0.018)):
+    """A horizontal colour bar of the distance in mm in figure coordinates ``rect``, the
+    tolerance marked on it, saying that farther distances are clipped to its top colour."""
+    mappable = matplotlib.cm.ScalarMappable(norm=scale.norm, cmap=DISTANCE_MAP)
+    bar = fig.colorbar(mappable, cax=fig.add_axes(rect), orientation="horizontal",
+                       extend="max")
+    top = format_mm(scale.top)
+    said = ("no tolerance checked" if scale.tolerance is None
+            else f"the line at {scale.tolerance:.3g}: tolerance {format_mm(scale.tolerance)}")
+    bar.set_label(f"each particle's distance to its keyframe target [mm]\n{said}; "
+                  f"beyond {top}: clipped (top colour)", fontsize=7)
+    if scale.tolerance is not None:
+        bar.ax.axvline(scale.tolerance, color="white", lw=2.5)
+        bar.ax.axvline(scale.tolerance, color="black", lw=1.0)
+        bar.set_ticks(scale.tolerance * np.arange(TOLERANCES_SHOWN + 1))
+    bar.ax.xaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:.3g}"))
     bar.ax.tick_params(labelsize=6)
     return bar
-
-
-def miss_text(millimetres) -> str:
-    """``"rms 2.2 mm, max 5.8 mm"`` of distances in mm."""
-    d = np.asarray(millimetres, float)
-    return f"rms {format_mm(np.sqrt(np.mean(d ** 2)))}, max {format_mm(d.max())}"
-
-
-def format_mm(value: float) -> str:
-    """A distance in mm to two significant figures (``"< 0.01 mm"`` below that)."""
-    if value < 0.01:
-        return "< 0.01 mm"
-    return f"{value:.2g} mm" if value < 10 else f"{value:.0f} mm"

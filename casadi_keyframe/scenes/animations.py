@@ -102,23 +102,18 @@ class Walk(Animation):
 @dataclass(frozen=True)
 class Fall(Animation):
     """Dropped from rest with the feet ``height`` m above the ground: the centre of mass
-    falls under gravity while the body turns ``pitch`` rad forward (about its right axis),
-    ``roll`` rad about its long axis and ``yaw`` rad about the vertical, limbs flailing
-    ``flail`` rad (random frequencies and phases from ``seed``), drifting ``drift`` m
-    (right, forward), and lies face down once the turn ends (pitch = pi/2 mod 2 pi and roll
-    = 0 mod 2 pi keep it face down).  The turn lasts ``spin_time`` times the free-fall time.
+    falls under gravity while the body turns ``pitch`` rad forward, ``roll`` rad about its
+    long axis and ``yaw`` rad about the vertical, limbs flailing ``flail`` rad (random
+    frequencies and phases from ``seed``), drifting ``drift`` m (right, forward), and lies
+    face down once the turn ends, which lasts ``spin_time`` times the free-fall time.
 
     The body is held above the ground by a smooth maximum (over ``cushion`` m) of the
-    ballistic height and the height at which its lowest capsule touches the ground (a soft
-    minimum over the capsules' ends, within ``softness * log 22`` m) plus ``clearance``, so it
-    never goes below z = 0 and lands within a few steps instead of stopping dead (which
-    snaps the cape).  The clearance leaves room for cloth caught between a limb and the
-    ground: with none, the body's and the ground's contact layers overlap and squeeze the
-    cloth out at metres per second.
-    Before t = 0 it stands still (C^1 at t = 0: it starts at rest).  ``end``: the clip's
-    length in s.  The defaults keep limbs under ~6 m/s relative to the falling body: a
-    somersault (``pitch=-1.5 * pi``) or ``roll=2 * pi`` sweeps limbs through a cape at over
-    10 m/s, which tears a 16 x 26 cape at dt = 1/60 (stretch 2.1-2.3, 5-9 cm deep).
+    ballistic height and the height at which its lowest capsule touches the ground, plus
+    ``clearance`` (room for cloth caught between a limb and the ground), so it lands within
+    a few steps instead of stopping dead.  Before t = 0 it stands still (C^1 at t = 0).
+    ``end``: the clip's length in s.  The defaults keep limbs slow enough relative to the
+    falling body for a cape at dt = 1/60; a somersault or a full roll sweeps them through it
+    fast enough to tear it (docs/problem_notes.md).
     """
 
     character: Character = field(default_factory=Character)

@@ -18,7 +18,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..integrators import LinearizedBackwardEuler
-from ..models import Attachment, ClothModel, ClothParams
+from ..models import DEFAULT_COLLISION, Attachment, ClothModel, ClothParams
 from ..models.colliders import Contact, Plane
 from ..simulate import simulate
 from .animations import Animation, Walk, fall, walk
@@ -45,16 +45,12 @@ def cape_contacts(particle_mass: float, spacing: float, dt: float = 1 / 60,
     """Contact laws for the body, the ground and self-contact, scaled by the particle mass.
 
     ``k = stiffness m / dt^2`` and ``c = damping k dt``: the same dimensionless contact at
-    every resolution (the default :class:`Contact`, 2000 N/m, is ``k dt^2 / m = 555`` on the
-    16 x 26 cape's 1 g particles but 67 on an 8 x 6 test cape's 8 g), and ``k dt^2 / m =
-    50`` is 11 times softer than the default there (``dt sqrt(k/m)`` 7 instead of 24: the
-    stiffer the linearized step, the worse its swapped adjoint, which the blend problem
-    needs) while a particle's weight still sinks it only ``g dt^2 / 50`` (0.05 mm).  With
-    ``c = k dt`` an implicit step removes about half a penetration and leaves no rebound.
-    On the passive clips this and the default gave the same figures within the scatter of
-    the fall (four falls: penetration 0.2-1.9 cm vs 0.6-1.4 cm, max stretch 1.23-1.71 vs
-    1.28-1.72).  Layers: 1.2 cm on the body, 2 cm on the ground (fast cloth crosses 1 cm
-    in a step), ``0.4 spacing`` between cloth particles (``spacing`` in m).
+    every resolution (``dt sqrt(k/m) = sqrt(stiffness)``), softer than the default
+    :class:`Contact` on fine capes so that the linearized step stays mild, while a particle's
+    weight still sinks it only ``g dt^2 / stiffness``; with ``c = k dt`` an implicit step
+    removes about half a penetration and leaves no rebound.  Layers: 1.2 cm on the body,
+    2 cm on the ground (fast cloth crosses 1 cm in a step), ``0.4 spacing`` between cloth
+    particles (``spacing`` in m).  Measurements behind the choice: docs/problem_notes.md.
     """
     if not (particle_mass > 0 and spacing > 0 and dt > 0 and stiffness > 0 and damping >= 0):
         raise ValueError("cape_contacts needs positive particle_mass, spacing, dt, stiffness "
@@ -71,7 +67,7 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
                width: float = 0.6, length: float = 1.0, mass: float = 0.4,
                attach_width: float = 0.44, params: ClothParams | None = None,
                dt: float = 1 / 60, lead: float | None = None, contacts: dict | None = None,
-               collision: str = "guarded", jit: bool | None = None) -> ClothModel:
+               collision: str = DEFAULT_COLLISION, jit: bool | None = None) -> ClothModel:
     """The cape as a :class:`ClothModel` on ``character`` moving through ``animation``.
 
     Rest shape: a ``width`` x ``length`` sheet in the xz plane, top row (row 0) along x at

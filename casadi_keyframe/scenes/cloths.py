@@ -11,16 +11,19 @@ from .maths import rotation
 
 
 def cloth_problem(*, model, steps: int, dt: float, objective, name: str, x0=None, v0=None,
-                  controls=None, view=None, solver: str = "auto", guess=None) -> ControlProblem:
+                  controls=None, view=None, solver: str = "auto", guess=None,
+                  inputs=(), limits=None) -> ControlProblem:
     """A cloth control problem integrated by linearized backward Euler (rest shape and rest
-    velocities by default, per-step force controls on the free particles by default)."""
+    velocities by default, per-step force controls on the free particles by default);
+    ``inputs``: the files it is built from; ``limits``: its physical limits (default ones)."""
     x0 = model.rest_positions if x0 is None else x0
     v0 = np.zeros_like(x0) if v0 is None else v0
     if controls is None:
         controls = StepForces(agents=np.flatnonzero(model.free_mask()[::3]))
     return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver),
                           x0=x0, v0=v0, steps=steps, dt=dt, controls=controls,
-                          objective=objective, name=name, view=view, guess=guess)
+                          objective=objective, name=name, view=view, guess=guess,
+                          inputs=inputs, limits=limits)
 
 
 def weight_support(model, controls, steps: int) -> np.ndarray:

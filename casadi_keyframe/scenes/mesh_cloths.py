@@ -29,7 +29,7 @@ EXAMPLE = "40:wave.obj,80:fold.obj"
 
 def refuse(option: str, message: str):
     """An :class:`~..loading.OverrideError` naming ``option`` (the CLI exits 2 with it)."""
-    return OverrideError(f"{PROBLEM}: {option}: {message}", PROBLEM)
+    return OverrideError(f"{PROBLEM}: {option}: {message}", PROBLEM, listed=False)
 
 
 def parse_keyframes(text: str) -> list[tuple[int, str]]:
@@ -78,15 +78,20 @@ def pinned_of(mesh: Mesh, pins, pin_group, pin_box):
     return np.unique(np.concatenate(chosen))
 
 
-def targets_of(model, keyframes, steps, *, weight, align) -> list[MeshKeyframe]:
+def targets_of(model, keyframes, steps, *, weight, align, cloth=None) -> list[MeshKeyframe]:
     """One :class:`MeshKeyframe` per ``(frame, file)``, each checked against the cloth's
-    vertices and faces and the horizon here, so the message names the option."""
+    vertices and faces and the horizon here, so the message names the option; a target
+    that is the ``cloth``'s own file is refused (a mistyped name, most likely)."""
     terms = []
     for frame, target in keyframes:
         path = target.label() if isinstance(target, Mesh) else target
         if frame > steps:
             raise refuse("keyframes", f"frame {frame} ({path}) is beyond the horizon of "
                                       f"steps={steps}; pick a frame in 1..{steps} or raise steps")
+        if _same_file(target, cloth):
+            raise refuse("keyframes", f"frame {frame}'s target {path} is the cloth file "
+                                      "itself: give the file of the shape the cloth should "
+                                      "take (to ask for the rest shape, export a copy)")
         mesh = target if isinstance(target, Mesh) else read_option("keyframes", target)
         if mesh.n != model.n:
             raise refuse("keyframes", f"the target {path} (frame {frame}) has {mesh.n} "
@@ -98,6 +103,15 @@ def targets_of(model, keyframes, steps, *, weight, align) -> list[MeshKeyframe]:
                                       f"cloth's own mesh")
         terms.append(MeshKeyframe(frame, mesh, weight=weight / model.n, align=align))
     return terms
+
+
+def _same_file(target, cloth) -> bool:
+    """Whether a keyframe's target names the file the cloth was read from."""
+    if cloth is None or getattr(cloth, "source", None) is None:
+        return False
+    path = target.source if isinstance(target, Mesh) else target
+    return path is not None and Path(path).expanduser().resolve() == Path(
+        cloth.source).resolve()
 
 
 def colliders_of(ground, spheres) -> list:
@@ -177,7 +191,7 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     with "none" from zero forces."""
     model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders)
     steps = max(f for f, _ in keyframes) if steps is None else steps
-    terms = targets_of(model, keyframes, steps, weight=weight, align=align)
+    terms = targets_of(model, keyframes, steps, weight=weight, align=align, cloth=cloth)
     free = np.flatnonzero(model.free_mask()[::3])
     if free.size == 0:
         raise refuse("pins", "every vertex is pinned: nothing can move")
@@ -186,7 +200,9 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     objective = sum(terms, Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
     prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
                          x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls,
-                         view=ClothView(camera=(15, -30)))
+                         view=ClothView(camera=(15, -30)),
+                         inputs=[m.source for m in (cloth, *(t.mesh for t in terms))
+                                 if m is not None and m.source is not None])
     if guess == "none" or control != "forces":
         return prob
     return prob.with_guess(tracking_guess(prob, land=guess == "land"))

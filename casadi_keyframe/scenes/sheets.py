@@ -7,14 +7,14 @@ import numpy as np
 from ..checks import frame_at
 from ..controls import StepForces
 from ..integrators import LinearizedBackwardEuler
-from ..models import ClothModel, ClothParams
+from ..models import DEFAULT_COLLISION, ClothModel, ClothParams
 from ..models.colliders import Plane
 from ..objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from ..problem import ControlProblem
 
 
 def hanging_sheet(rows: int = 5, stretch: float = 500.0, ground: bool = True,
-                  colliders=(), collision: str = "guarded") -> ClothModel:
+                  colliders=(), collision: str = DEFAULT_COLLISION) -> ClothModel:
     """A 1 m, 1 kg sheet of rows x rows particles pinned at its top corners, its lower edge
     resting on the ground if ``ground``, with any further ``colliders`` (touched as
     ``collision`` says: held by the step, or the paper's penalty springs)."""
@@ -41,7 +41,7 @@ def swing_problem(model: ClothModel, steps: int, dt: float, integrator, *,
 
 def contact_problem(dt: float = 1 / 60, horizon: float = 1 / 3, stretch: float = 500.0,
                     rows: int = 5, solver: str = "direct", controls=None,
-                    collision: str = "guarded") -> ControlProblem:
+                    collision: str = DEFAULT_COLLISION) -> ControlProblem:
     """The gradient-accuracy case: :func:`hanging_sheet`, resting on the ground, swung
     forward (:func:`swing_problem`) over ``horizon`` s."""
     steps = frame_at(horizon, dt, "contact_problem: the horizon")

@@ -9,9 +9,8 @@ Each point is solved as ``casadi-keyframe solve`` solves it, into its own folder
 (``sweep.csv``, ``sweep.parquet`` with pyarrow), ``sweep.png`` and ``sweep.json`` sum them
 up.  :mod:`.grid` makes the points, :mod:`.tasks` runs one on a worker, :mod:`.runner`
 drives the cluster, :mod:`.plan` plans and sums up a sweep, :mod:`.table` writes the table,
-:mod:`.studies` runs the accuracy studies' grids.
+the accuracy studies' grids run on it from :mod:`casadi_keyframe.studies.sweeps`.
 """
 from .plan import SWEEP_EXIT_CODES, SweepResult, report, sweep
-from .studies import STUDIES, study_sweep
 
-__all__ = ["STUDIES", "SWEEP_EXIT_CODES", "SweepResult", "report", "study_sweep", "sweep"]
+__all__ = ["SWEEP_EXIT_CODES", "SweepResult", "report", "sweep"]

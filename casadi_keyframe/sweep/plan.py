@@ -17,12 +17,12 @@ import types
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from ..files import FileDamaged, writable_folder
+from ..saved import FileDamaged, writable_folder
 from ..interrupts import NAMES, catching, handled
-from ..io import write_json
+from ..saved import write_json
 from ..loading import OverrideError, check_overrides, load_module, resolve
 from ..optimize.outcome import INTERRUPTED
-from ..run import exit_code
+from ..runs import exit_code
 from .grid import points
 from .progress import Progress, format_seconds
 from .runner import check_workers, connect, run_specs

@@ -21,7 +21,7 @@ import threading
 from pathlib import Path
 
 from ..interrupts import Interrupted, catching, check, deferred
-from ..io import write_json
+from ..saved import write_json
 from . import worker_setup
 from .progress import Progress
 from .tasks import ERROR, ROW, run_task

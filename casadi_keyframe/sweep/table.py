@@ -12,7 +12,7 @@ import csv
 import math
 from pathlib import Path
 
-from ..io import atomic_path
+from ..saved import atomic_path
 from .tasks import ERROR
 
 CSV, PARQUET = "sweep.csv", "sweep.parquet"

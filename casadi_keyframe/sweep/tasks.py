@@ -24,8 +24,8 @@ import time
 import traceback
 from pathlib import Path
 
-from ..files import FileDamaged, read_json
-from ..io import SUMMARY, write_json
+from ..saved import FileDamaged, read_json
+from ..saved import SUMMARY, write_json
 from ..loading import ProblemFileError
 from ..optimize.outcome import FAILED, STATUS
 
@@ -64,7 +64,7 @@ def run_task(spec: dict) -> dict:
 
 def read_row(folder) -> dict | None:
     """The ``row.json`` of a point folder, or None if there is none; a damaged one (cut
-    short, not JSON, not a row) is a :class:`~casadi_keyframe.files.FileDamaged`."""
+    short, not JSON, not a row) is a :class:`~casadi_keyframe.saved.FileDamaged`."""
     path = Path(folder) / ROW
     if not path.is_file():
         return None
@@ -77,7 +77,7 @@ def read_row(folder) -> dict | None:
 
 def _solve(spec: dict, folder: Path) -> dict:
     from ..loading import load_module
-    from ..run import run_solve, solve_run
+    from ..runs import run_solve, solve_run
     from .grid import start_controls
 
     module = load_module(spec["problem_file"])

@@ -1,0 +1,175 @@
+"""The commands (``list``, ``show``, ``solve``, ``render``, ``export``, ``gradcheck``,
+``study``, ``sweep``): each reads its parsed arguments, runs, and returns its exit code."""
+from __future__ import annotations
+
+import inspect
+import shutil
+import textwrap
+from pathlib import Path
+
+import numpy as np
+
+from ..adjoints import ROUTES as GRADIENT_ROUTES
+from ..loading import (check_overrides, list_problems, load_module, load_problem,
+                       overrides_of, solve_defaults)
+from ..runs import run_export, run_render, run_solve, solve_run
+from ..runs.report import format_value
+from ..saved import writable_folder
+from .values import (option_items, parse_grid, parse_levels, parse_overrides,
+                     parse_resolutions, parse_shooting, parse_time_steps)
+
+def cmd_list(args) -> int:
+    width = min(shutil.get_terminal_size((100, 24)).columns, 100)
+    problems = list_problems()
+    column = max(len(name) for name, _ in problems) + 2
+    for name, summary in problems:
+        print(textwrap.fill(summary, width, initial_indent=name.ljust(column),
+                            subsequent_indent=" " * column))
+    print("\n" + textwrap.fill("'casadi-keyframe show PROBLEM' prints a problem's description, "
+                               "its overrides (--set NAME=VALUE) with their defaults and "
+                               "ranges, and its solve defaults.", width))
+    return 0
+
+
+def cmd_show(args) -> int:
+    module = load_module(args.problem)
+    print(f"{Path(module.__file__).stem}  ({module.__file__})\n")
+    print(inspect.cleandoc(module.__doc__ or "(no description)") + "\n")
+    rows = [(o.name, o.type_name, format_value(o.default), describe_allowed(o))
+            for o in overrides_of(module)]
+    print("overrides (--set NAME=VALUE):")
+    head = ("name", "type", "default", "allowed")
+    widths = [max(len(r[i]) for r in [head, *rows]) for i in range(3)]
+    for row in [head, *rows]:
+        print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
+    solve = solve_defaults(module)
+    print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
+          + " (--method, --gradient, --maxiter, --rounds, --weight-growth change them)")
+    return 0
+
+
+def describe_allowed(override) -> str:
+    """The allowed values of an override for ``show``: its range, choices, or "any"."""
+    if isinstance(override.allowed, tuple):
+        text = ", ".join(override.allowed)
+    else:
+        text = override.allowed or ("any" if override.kind != "floats" else "any numbers")
+    return text + (", or None" if override.optional else "")
+
+
+def cmd_solve(args) -> int:
+    from ..export import check_library
+
+    for fmt in args.export or ():
+        check_library(fmt)  # before the solve, not after it
+    module = load_module(args.problem)
+    overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
+    continuation = parse_time_steps(args.continuation)
+    out = writable_folder(args.out, "--out") if args.out is not None else None
+    shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
+                                                          "init=blend,workers=2"),
+                              args.scheduler)
+    homotopy = parse_levels(module, option_items(args.homotopy, "--homotopy", "contact=3"))
+    spec = solve_run(module, args.problem, overrides, out, method=args.method,
+                     gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
+                     weight_growth=args.weight_growth, continuation=continuation,
+                     resolutions=parse_resolutions(module, args.resolution), homotopy=homotopy,
+                     shooting=shooting, time_limit=args.time_limit, stop=args.stop,
+                     resume=args.resume,
+                     quiet=args.quiet,
+                     animation=not args.no_animation, exports=tuple(args.export or ()),
+                     viewer=not args.no_viewer)
+    writable_folder(spec.out, "--out")
+    return run_solve(spec)
+
+
+def cmd_render(args) -> int:
+    return run_render(args.results, animation=not args.no_animation)
+
+
+def cmd_export(args) -> int:
+    return run_export(args.results, args.format, out=args.out)
+
+
+def cmd_gradcheck(args) -> int:
+    from ..studies.health_report import compare_routes, format_health, gradient_health
+
+    prob = load_problem(args.problem, **parse_overrides(args.set))
+    route = args.gradient or solve_defaults(load_module(args.problem))["gradient"]
+    names = [n.strip() for n in args.routes.split(",")] if args.routes else []
+    unknown = [n for n in names if n not in GRADIENT_ROUTES]
+    if unknown:
+        raise ValueError(f"--routes: unknown gradient route(s) {unknown}; choose from "
+                         f"{', '.join(GRADIENT_ROUTES)}")
+    rng = np.random.default_rng(args.seed)
+    u = prob.initial_controls() + args.scale * rng.standard_normal(prob.size)
+    report = gradient_health(prob, u, route, steps=(1e4 * args.h, 1e2 * args.h, args.h),
+                             directions=args.directions, seed=args.seed,
+                             radius=not args.no_radius)
+    where = "the start" if args.scale == 0 else f"the start + {args.scale:g} x N(0, 1)"
+    print(f"{prob.name} at {where}:")
+    print(format_health(report))
+    if names:
+        print(compare_routes(prob, u, names))
+    return 0
+
+
+def cmd_study(args) -> int:
+    from ..studies import accuracy
+
+    if args.grid:
+        from ..studies.sweeps import study_sweep
+        from ..sweep import report
+
+        out = writable_folder(out_folder(args, f"study-{args.study}"), "--out")
+        result = study_sweep(args.study, parse_grid(args.grid), out=out,
+                             overrides=parse_overrides(args.set), figure=args.figure,
+                             **runner_options(args))
+        report(result, out)
+        return result.exit_code
+    if args.study == "swap-validity":  # the map's slices, on the sweep runner
+        from ..studies.swap_validity import format_swap_validity
+        from ..studies.sweeps import swap_validity_map
+
+        if args.set:
+            raise ValueError("--set goes with --grid (a study grid run as a sweep)")
+        out = writable_folder(out_folder(args, f"study-{args.study}"), "--out")
+        study = swap_validity_map(args.quick, out=out, **runner_options(args))
+        print(format_swap_validity(study))
+        return study["sweep"]["exit_code"]
+    if args.set or args.out is not None:
+        raise ValueError("--set and --out go with --grid (a study grid run as a sweep)")
+    if args.study == "gradient-accuracy":
+        print(accuracy.format_gradient_accuracy(accuracy.gradient_accuracy(quick=args.quick)))
+    else:
+        print(accuracy.format_one_step_gap(accuracy.one_step_gap(quick=args.quick)))
+    return 0
+
+
+def cmd_sweep(args) -> int:
+    from ..sweep import report, sweep
+
+    grid = parse_grid(args.grid)
+    out = writable_folder(out_folder(args, f"sweep-{Path(args.problem).stem}"), "--out")
+    result = sweep(args.problem, grid, out=out, starts=args.starts,
+                   overrides=parse_overrides(args.set), seed=args.seed, perturb=args.perturb,
+                   figure=args.figure, pictures=args.pictures,
+                   group_by=args.group_by.split(",") if args.group_by else None,
+                   continuation=parse_time_steps(args.continuation),
+                   **{k: getattr(args, k) for k in ("method", "gradient", "maxiter",
+                                                    "time_limit")},
+                   **runner_options(args))
+    report(result, out)
+    return result.exit_code
+
+
+def out_folder(args, default: str):
+    """``--out`` as given (an empty one is refused by the check), else ``results/DEFAULT``."""
+    return Path("results") / default if args.out is None else args.out
+
+
+def runner_options(args) -> dict:
+    return {"workers": args.workers, "scheduler": args.scheduler, "tries": args.tries,
+            "resume": args.resume, "progress": not args.quiet}
+
+

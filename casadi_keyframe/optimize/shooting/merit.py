@@ -1,0 +1,53 @@
+"""Multiple shooting's merit as the optimizer's :class:`~.evaluator.Evaluator` evaluates
+it: :class:`ShootingMerit`, a function of the stacked variables z (controls and node
+states) with an ``info`` dict, and what an iteration's record and the goal check read from
+it."""
+from __future__ import annotations
+
+from ..goal import verdict
+
+
+class ShootingMerit:
+    """The merit of ``shooting`` (:meth:`~.form.Shooting.evaluate`) with its segments swept by
+    ``runner`` and its defects held by ``mult`` (None: the objective alone, the defects
+    held as constraints elsewhere).  ``problem`` is the stage's own: its true keyframe
+    targets describe a point and its controls' run judges the goal (the rounds' aim lives
+    in ``shooting.problem``)."""
+
+    route = None  # its sweeps run no gradient route: nothing for the health log to read
+
+    def __init__(self, problem, shooting, runner, mult):
+        self.problem, self.shooting, self.runner, self.mult = problem, shooting, runner, mult
+
+    def __call__(self, z):
+        """``(merit, gradient, info)`` at ``z`` (see :meth:`~.form.Shooting.evaluate`)."""
+        return self.shooting.evaluate(z, self.runner, self.mult)
+
+    def describe(self, z, f, info):
+        """``(controls, objective, keyframe error, {"defect": ...})`` of an evaluated point:
+        the problem's objective on its stitched trajectory, its largest scaled defect."""
+        u = self.shooting.unpack(z)[0]
+        keyframe, objective = true_objective(self.problem, u, info)
+        return u, objective, keyframe, {"defect": self.shooting.defect_size(info["defects"])}
+
+    def meets(self, goal, info) -> bool:
+        """Never judged met on its own: a stitched run is not the controls' run (the rounds
+        rank points by the merit alone; the stage's result is judged as a run)."""
+        return False
+
+    def may_meet(self, goal, info) -> bool:
+        """Whether the point may meet ``goal``: its defects within their tolerance and its
+        stitched trajectory meeting it (then its controls' own run is judged)."""
+        return (self.shooting.defect_size(info["defects"]) <= 1.0
+                and verdict(goal, info["trajectory"]).met)
+
+    def run(self, z, info):
+        """The run of z's controls from the start, one trajectory (no records)."""
+        return self.problem.simulate(self.shooting.unpack(z)[0], records=False)
+
+
+def true_objective(problem, u, info) -> tuple[float, float]:
+    """``(keyframe error, objective)`` of ``problem`` (its true targets, not a round's aim)
+    on the stitched trajectory of an evaluation's ``info``, at controls ``u``."""
+    keyframe = problem.state_cost(info["trajectory"], gradient=False)[0]
+    return keyframe, keyframe + problem.control_cost(u)[0]

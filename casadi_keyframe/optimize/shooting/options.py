@@ -1,0 +1,82 @@
+"""How multiple shooting runs: :class:`ShootingOptions` and :func:`shooting_options`, which
+checks what ``solve(..., shooting=...)`` and the command line's ``--segments/--shooting``
+give."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .nodes import INITS
+
+FORMULATIONS = ("lagrangian", "ipopt")
+
+
+@dataclass(frozen=True)
+class ShootingOptions:
+    """How multiple shooting runs (``solve(..., shooting=...)``).
+
+    * ``segments``: K, the segments the horizon is cut into (1: single shooting);
+    * ``init``: where the node states start (:mod:`.nodes`): ``"passive"``,
+      ``"guess"`` (the start controls' run: no defect), ``"target"``, ``"blend"``, or a
+      function of the problem giving a path of positions (a problem's own guess of states);
+    * ``rounds``: augmented-Lagrangian rounds at most (the stage's ``maxiter`` is shared
+      among them);
+    * ``workers``: processes sweeping the segments (1: this one); ``scheduler``: a Dask
+      scheduler's address instead;
+    * ``penalty``: factor on the defects' starting weights (1: a defect as large as the
+      tolerance costs what the keyframe's miss of that size costs); ``growth``: factor a
+      weight grows by where its defect did not shrink to a quarter;
+    * ``polish``: end with the stage's single-shooting search from the result;
+    * ``hold``: hold the StateKeyframes by multipliers too (``"lagrangian"`` only);
+    * ``formulation``: ``"lagrangian"`` (the defects held by multipliers, rounds of the
+      solve's method on the merit function) or ``"ipopt"`` (IPOPT with the defects as
+      constraints and their Jacobian by one backward sweep per row,
+      :mod:`.ipopt_form`; one run, ``rounds`` unused).
+    """
+
+    segments: int
+    init: str = "passive"
+    rounds: int = 8
+    workers: int = 1
+    scheduler: str | None = None
+    penalty: float = 1.0
+    growth: float = 10.0
+    polish: bool = True
+    hold: bool = True
+    formulation: str = "lagrangian"
+
+
+def shooting_options(value) -> ShootingOptions | None:
+    """``value`` (None, a whole number K, a dict of :class:`ShootingOptions` fields, or one)
+    as checked options, or None for no multiple shooting; ValueError naming what is wrong."""
+    if value is None or isinstance(value, ShootingOptions):
+        opts = value
+    elif isinstance(value, dict):
+        unknown = sorted(set(value) - set(ShootingOptions.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"shooting: unknown option(s) {unknown}; it takes "
+                             f"{', '.join(ShootingOptions.__dataclass_fields__)}")
+        opts = ShootingOptions(**value)
+    elif isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        opts = ShootingOptions(int(value))
+    else:
+        raise ValueError(f"shooting must be a number of segments, a dict of options or "
+                         f"ShootingOptions, got {value!r}")
+    if opts is None:
+        return None
+    if opts.formulation not in FORMULATIONS:
+        raise ValueError(f"shooting formulation must be one of {', '.join(FORMULATIONS)}, got "
+                         f"{opts.formulation!r}")
+    if not callable(opts.init) and opts.init not in INITS:
+        raise ValueError(f"shooting init must be one of {', '.join(INITS)} or a function of "
+                         f"the problem giving a path of positions, got {opts.init!r}")
+    for name in ("segments", "rounds", "workers"):
+        got = getattr(opts, name)
+        if isinstance(got, bool) or not isinstance(got, (int, np.integer)) or got < 1:
+            raise ValueError(f"shooting {name} must be a whole number >= 1, got {got!r}")
+    if not (np.isfinite(opts.penalty) and opts.penalty > 0 and np.isfinite(opts.growth)
+            and opts.growth >= 1):
+        raise ValueError(f"shooting penalty must be > 0 and growth >= 1, got "
+                         f"{opts.penalty!r} and {opts.growth!r}")
+    return opts

@@ -1,0 +1,193 @@
+"""A solve run: a problem file solved into a results folder, as ``casadi-keyframe solve``
+and every point of a sweep run it.
+
+A run writes ``checkpoint.npz`` at every iteration, then ``result.npz`` and
+``summary.json``, then the pictures, each file whole or not at all (:mod:`..saved`).  SIGINT
+and SIGTERM stop the search the same way (:mod:`.interrupts`): the best result is written,
+the pictures are skipped (``render`` draws them later) and the exit code names the signal.
+A second signal stops at once; the files already written stay whole.
+"""
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from types import SimpleNamespace
+
+from ..interrupts import check
+from ..optimize.outcome import INTERRUPTED
+from ..optimize.report import format_misses, format_physical
+from ..saved import (CHECKPOINT, Checkpoint, check_inputs, check_trajectory, input_record,
+                     read_run, save_result)
+from ..state import SimulationError
+from .exits import exit_code, guarded, stopped
+from .outputs import draw, write_outputs
+from .report import command_line, hint, left_on_disk, report
+
+
+@dataclass
+class SolveRun:
+    """What ``casadi-keyframe solve`` asks for: the built problem, where its file is and the
+    overrides it was built with, the output folder and the search's options."""
+
+    problem: object
+    out: Path
+    problem_file: str
+    problem_arg: str = ""  # the problem as typed (a name or a path), for the hints
+    overrides: dict = field(default_factory=dict)
+    method: str = "lbfgsb"
+    gradient: str = "adjoint"
+    maxiter: int = 200
+    continuation: list | None = None
+    resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
+    rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
+    shooting: dict | None = None  # multiple shooting's options (solve's shooting=)
+    homotopy: list | None = None  # build overrides of the homotopy's levels (solve's homotopy=)
+    time_limit: float | None = None
+    stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
+    resume: str | None = None
+    quiet: bool = False
+    animation: bool = True
+    exports: tuple = ()  # export formats written beside the pictures (see .export)
+    viewer: bool = True  # the HTML viewer (skipped with a note when plotly is missing)
+    pictures: bool = True  # False: result files only ('render' draws them later)
+    u0: object = None  # starting controls instead of the problem's (a sweep's perturbed start)
+
+
+def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=None,
+              gradient=None, maxiter=None, rounds=None, weight_growth=None,
+              resolutions=None, shooting=None, **options) -> SolveRun:
+    """The :class:`SolveRun` of a loaded problem file built with ``overrides`` (checked
+    first), writing to ``out`` (default ``results/PROBLEM``): the search options not given
+    (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
+    each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
+    The file's default ``resolutions`` keep only the meshes coarser than the problem built
+    (none when it is built coarse itself), and give way to rounds asked for; rounds and
+    resolutions both given are refused (ValueError).  ``shooting`` (options of multiple
+    shooting, ``{"segments": 0}`` for none) goes over the file's."""
+    from ..loading import build_problem, default_resolutions, resolve, solve_defaults
+
+    prob = build_problem(module, **overrides)
+    defaults = solve_defaults(module, overrides)
+    asked = dict(shooting or {})
+    shooting = {**defaults.get("shooting", {}), **asked} or None
+    if options.get("homotopy") is None and defaults.get("homotopy"):
+        options["homotopy"] = [dict(h) for h in defaults["homotopy"]]
+    if shooting and shooting.get("segments", 1) <= 1:
+        others = sorted(set(asked) - {"segments"})
+        if others:
+            raise ValueError(f"--shooting {', '.join(others)} (or --scheduler) set multiple "
+                             f"shooting's options, but this run has none: give --segments K "
+                             f"(K >= 2){'' if 'segments' in asked else f'; {prob.name} asks for none'}")
+        shooting = None
+    given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
+             if v is not None}
+    if given and resolutions:
+        raise ValueError("coarse meshes (--resolution) and augmented-Lagrangian rounds "
+                         "(--rounds, --weight-growth) do not combine: choose one")
+    rounds = given or ({} if resolutions else
+                       {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults})
+    if resolutions is None:  # the file's, unless rounds are asked for
+        resolutions = [] if rounds else default_resolutions(module, prob)
+    return SolveRun(
+        prob, Path(out) if out else Path("results") / prob.name,
+        problem_file=str(resolve(module.__file__).resolve()), problem_arg=str(problem_arg),
+        overrides=overrides, method=method or defaults["method"],
+        gradient=gradient or defaults["gradient"],
+        maxiter=defaults["maxiter"] if maxiter is None else maxiter,
+        resolutions=[dict(r) for r in resolutions], rounds=rounds, shooting=shooting,
+        **options)
+
+
+def run_solve(spec: SolveRun) -> int:
+    """Solve, write, draw; return the exit code (see :data:`EXIT_CODES`)."""
+    done = SimpleNamespace(started=False, written=False)
+    return guarded(lambda caught: _solve(spec, caught, done),
+                    lambda signum: f"\n{spec.problem.name}: {stopped(signum)} "
+                                   f"{left_on_disk(done, spec)}")
+
+
+def _solve(spec: SolveRun, caught, done) -> int:
+    prob, out = spec.problem, spec.out
+    u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
+    origin = ("resumed" if resumed else "given" if u0 is not None
+              else "guess" if prob.has_guess else "passive")
+    start_controls = prob.initial_controls() if u0 is None else u0
+    try:
+        start_trajectory = prob.simulate(start_controls, records=False)
+        start = prob.breakdown(start_controls, start_trajectory)
+    except SimulationError as err:
+        raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
+                              f"({origin}): {err}", err.step) from None
+    physical = f"; {format_physical(start['physical'])}" if "physical" in start else ""
+    print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
+          f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}")
+    meta = {"problem": prob.name, "problem_file": spec.problem_file,
+            "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient,
+            **input_record(prob)}
+    done.started = True
+    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed)
+    signum = caught.signum if result.status == INTERRUPTED else None
+    extra = {"problem_file": spec.problem_file, **input_record(prob),
+             **({"resumed_from": {k: v for k, v in resumed.items() if k != "meta"}}
+                if resumed else {})}
+    summary = save_result(result, out, problem_name=prob.name, overrides=spec.overrides,
+                          **extra)
+    done.written = True
+    report(result, summary, out)
+    if result.status == INTERRUPTED:
+        print(f"  {stopped(signum)}: pictures skipped; draw them with 'casadi-keyframe "
+              f"render {out}', continue with '{command_line(spec, 'solve')} --out {out} "
+              f"--resume {out}'")
+    elif not spec.pictures:
+        print(f"  pictures not drawn; draw them with 'casadi-keyframe render {out}'")
+    else:
+        draw(prob, result.trajectory, result, out, animation=spec.animation,
+             start=start_trajectory)
+        print(f"  pictures drawn in {out}/")
+        write_outputs(spec, result.trajectory)
+    hint(result, spec)
+    check()  # a signal after the last safe point still counts
+    return exit_code(result.status, signum)
+
+
+def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
+    """The search ``spec`` asks for from ``u0``; a resumed one goes straight to the problem's
+    own mesh (its controls were found there), and rounds go on from the round and the
+    multipliers its checkpoint carries."""
+    from ..optimize import solve
+
+    options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
+                   quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
+                   time_limit=spec.time_limit, u0=u0, stop=spec.stop, shooting=spec.shooting,
+                   homotopy=spec.homotopy)
+    if spec.rounds:
+        from ..optimize.augmented_lagrangian import solve_augmented
+        return solve_augmented(spec.problem, **spec.rounds, **options,
+                               resume=resumed.get("meta") if resumed else None)
+    resolutions = None if resumed or not spec.resolutions else spec.resolutions
+    return solve(spec.problem, resolutions=resolutions, **options)
+
+
+def resume_controls(spec: SolveRun):
+    """The controls to start from and where they came from, read from ``spec.resume`` (a
+    results folder: the newer of its checkpoint and result; or either file).  Refused
+    (ValueError) if they were found for another problem, other overrides or another size."""
+    run = read_run(spec.resume)
+    meta, prob, path = run["meta"], spec.problem, run["path"]
+    given = json.loads(json.dumps(spec.overrides, default=str))
+    if meta.get("problem") != prob.name:
+        raise ValueError(f"--resume {path} holds a run of problem {meta.get('problem')!r}, "
+                         f"not {prob.name!r}")
+    if meta.get("overrides", {}) != given:
+        raise ValueError(f"--resume {path} was solved with overrides {meta.get('overrides')}, "
+                         f"this run has {given}: give the same --set values")
+    if run["u"].size != prob.size:
+        raise ValueError(f"--resume {path} holds {run['u'].size} controls, {prob.name} has "
+                         f"{prob.size}")
+    check_trajectory(run, prob)  # a stored trajectory that does not fit: an altered file
+    check_inputs(meta, path, prob.inputs)
+    return run["u"], {"path": str(path), "nit": meta.get("nit"), "fun": meta.get("fun"),
+                      "meta": meta}
+
+

@@ -21,7 +21,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import numpy as np  # noqa: E402
 from scipy.optimize import least_squares  # noqa: E402
 
-from casadi_keyframe.cli import parse_overrides  # noqa: E402
+from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
 from casadi_keyframe.optimize import solve  # noqa: E402
 from casadi_keyframe.optimize.residuals import Linearization  # noqa: E402

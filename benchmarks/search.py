@@ -30,10 +30,10 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from casadi_keyframe.cli import parse_overrides  # noqa: E402
-from casadi_keyframe.io import read_run  # noqa: E402
+from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
+from casadi_keyframe.saved import read_run  # noqa: E402
 from casadi_keyframe.loading import load_module  # noqa: E402
-from casadi_keyframe.run import run_solve, solve_run  # noqa: E402
+from casadi_keyframe.runs import run_solve, solve_run  # noqa: E402
 from casadi_keyframe.scenes.mesh_targets import write_sheet_and_targets  # noqa: E402
 
 

@@ -12,9 +12,9 @@ parameters (:meth:`~Interaction.parameters`).
 
 What a family acts over or decides per step is its ``found``, given back to every method:
 what :meth:`find` sees at x (self-contact's pairs), or what a step decides (:meth:`decide`),
-learns from its solve (:meth:`solved`), revises at its end (:meth:`stops`, :meth:`revise`),
-carries to the next (:meth:`carry`) and gives the symbolic step
-(:meth:`decision_parameters`): the springs taken taut, the particles the hold holds.
+learns from its solve (:meth:`solved`), revises at its end (:meth:`stops`, :meth:`revise`)
+or settles when the step stands (:meth:`settle`), carries to the next (:meth:`carry`) and
+gives the symbolic step (:meth:`decision_parameters`): the springs taken taut, the particles the hold holds.
 
 Three shapes of family, after jax-md's split of a law and its lifting: a
 :class:`PairInteraction` lifts a kernel of ``d = x_j - x_i`` over pairs (``+f`` on i, ``-f``
@@ -113,6 +113,11 @@ class Interaction:
         """``found`` revised after the step ended at ``end.x1`` when the end shows it chose
         wrong (``stopped``: some family stopped particles), None if it stands (here)."""
         return None
+
+    def settle(self, found, end: StepSpan, stopped: bool):
+        """``found`` of a step that stands, with what its end leaves to the next step (the
+        springs: those to take taut from then on); here, unchanged."""
+        return found
 
     def solved(self, found, residual: np.ndarray):
         """``found`` given the solved step's residual ``A dv - b`` (flat; the hold's

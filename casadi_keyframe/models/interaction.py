@@ -57,7 +57,7 @@ class StepSpan:
     """A step as a family's decisions see it: from ``(x, v)`` at ``t`` over ``dt``; ``free``
     ``(n,)`` the particles without prescribed motion; ``x1`` where it ended (None at its
     start).  :meth:`distances` keeps each body's signed distances at x1 for the families
-    that ask."""
+    that ask, :meth:`kept` any other such figure."""
 
     x: np.ndarray
     v: np.ndarray
@@ -65,13 +65,19 @@ class StepSpan:
     dt: float
     free: np.ndarray
     x1: np.ndarray | None = None
-    _distances: dict = field(default_factory=dict, repr=False, compare=False)
+    _kept: dict = field(default_factory=dict, repr=False, compare=False)
 
     def distances(self, body) -> np.ndarray:
         """Every particle's signed distance to ``body`` at the step's end (x1, t + dt)."""
-        if id(body) not in self._distances:
-            self._distances[id(body)] = signed_distances(body, self.x1, self.t + self.dt)
-        return self._distances[id(body)]
+        return self.kept(("distances", id(body)),
+                         lambda: signed_distances(body, self.x1, self.t + self.dt))
+
+    def kept(self, key, compute):
+        """``compute()``, computed once for this span and ``key`` (what the families
+        deciding on it share)."""
+        if key not in self._kept:
+            self._kept[key] = compute()
+        return self._kept[key]
 
 
 class Interaction:

@@ -137,8 +137,10 @@ class Springs:
 
     def stretch(self, x: np.ndarray) -> np.ndarray:
         """Every spring's length over its rest length at positions ``x`` (``(..., n, 3)``)."""
-        d = x[..., self.j, :] - x[..., self.i, :]
-        return np.linalg.norm(d, axis=-1) / self.rest
+        x = np.asarray(x)
+        d = np.take(x, self.j, axis=-2)
+        d -= np.take(x, self.i, axis=-2)
+        return np.sqrt(np.einsum("...a,...a->...", d, d)) / self.rest
 
 
 @dataclass(frozen=True)
@@ -238,8 +240,9 @@ class ChoiKoSprings(PairInteraction):
         if not stopped:
             return None, None
         s = self.springs
-        end_stretch = s.stretch(end.x1)
-        late = (end_stretch > 1 + TAUT_MARGIN) & (end_stretch > s.stretch(end.x) + TAUT_MARGIN)
+        end_stretch = end.kept((id(self), "x1"), lambda: s.stretch(end.x1))
+        start_stretch = end.kept((id(self), "x"), lambda: s.stretch(end.x))
+        late = (end_stretch > 1 + TAUT_MARGIN) & (end_stretch > start_stretch + TAUT_MARGIN)
         if late.any():  # and the springs around them, which a taut one would stretch next
             near = np.zeros(self.n, bool)
             near[s.i[late]] = near[s.j[late]] = True

@@ -13,8 +13,17 @@ model against the paper's penalty springs ("today's") where both ran, and the is
 checks.  One process, one BLAS thread, ``time.process_time``; the cases run in turn, each
 model's runs of a case next to each other.
 
+The cost table (``--only cost``) is the contact issue's: CPU seconds of a forward pass (no
+records), the median of ``--repeat`` rounds, each round running a case's two problems one
+after the other so that both see the same load: ``cloth_arch`` at 50 x 50 x 100 from a
+perturbed point (its guess plus white-noise forces of ``NOISE`` m/s^2 rms per particle and
+step, seed 0) under the default contact against the paper's penalty springs, and a 50 x 50
+sheet dropped at 8 m/s onto a sphere (0.5 s) against the same sheet falling freely, with the
+linear solves each took; then the targets (1.3x, 1.5x, the arch under 3.5 s).
+
     .venv/bin/python benchmarks/contact.py [--sizes 25 50] [--speeds 4 8 12]
         [--models penalty guarded constraint] [--duration 0.5] [--repeat 1]
+        [--only drops|friction|cost]
 """
 import os
 
@@ -26,19 +35,24 @@ import statistics  # noqa: E402
 import time  # noqa: E402
 
 
+import numpy as np  # noqa: E402
+
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
-from casadi_keyframe.models import COLLISIONS  # noqa: E402
+from casadi_keyframe.loading import load_problem  # noqa: E402
+from casadi_keyframe.models import COLLISIONS, ClothModel  # noqa: E402
 from casadi_keyframe.scenes.drops import (drop_model, drop_start, ground_throw,  # noqa: E402
                                           slope_slide)
 from casadi_keyframe.state import SimulationError  # noqa: E402
 
+NOISE = 10.0  # m/s^2 rms: the perturbed point of the arch (any search iterate)
 IMPACTS = [("ground", 0), ("ground", 30), ("sphere", 0), ("capsule", 0), ("rising sphere", 0),
            ("rising capsule", 0), ("swinging capsule", 0)]
 
 
-def drop_problem(rows, body, speed, tilt, collision, dt, duration):
-    model = drop_model(rows, body, collision)
+def drop_problem(rows, body, speed, tilt, collision, dt, duration, model=None):
+    """The drop's problem (zero controls); ``model`` replaces the sheet and its body."""
+    model = drop_model(rows, body, collision) if model is None else model
     x0, v0 = drop_start(model, speed, tilt)
     steps = int(round(duration / dt))
     objective = StateKeyframe(steps, x=x0 - [0, 0, 0.2], position_weight=1.0 / model.n)
@@ -77,7 +91,17 @@ def main():
     ap.add_argument("--duration", type=float, default=0.5)
     ap.add_argument("--dt", type=float, default=1 / 60)
     ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--only", choices=["drops", "friction", "cost"])
     args = ap.parse_args()
+    if args.only in (None, "drops"):
+        drops(args)
+    if args.only in (None, "friction"):
+        friction(args)
+    if args.only in (None, "cost"):
+        cost(max(args.repeat, 3) if args.only is None else args.repeat)
+
+
+def drops(args):
     print(f"Free drops, {args.duration:g} s at dt = {args.dt:.4g} s; CPU ms per step (one BLAS "
           f"thread, process_time, median of {args.repeat}); depth: deepest particle inside the "
           "body; solves: linear solves over the steps")
@@ -115,6 +139,8 @@ def main():
           f"{len(held) - len(bad)} of {len(checks)} drops with a new contact model"
           + ("" if not bad else "; missed: " + "; ".join(f"{c} ({m})" for c, m in bad)))
 
+
+def friction(args):
     print("\nfriction against Coulomb (within 10 %):")
     for model in [m for m in args.models if m != "penalty"]:
         for mu in (0.2, 0.5):
@@ -124,6 +150,48 @@ def main():
         travelled, analytic = ground_throw(0.3, 3.0, collision=model)
         print(f"  {model:10s} thrown at 3 m/s, mu 0.3: stopped after {travelled:.3f} m, "
               f"v^2 / (2 mu g) = {analytic:.3f} m")
+
+
+def perturbed_arch(collision: str):
+    """``(problem, controls)``: cloth_arch 50 x 50 x 100 at its guess plus :data:`NOISE`."""
+    prob = load_problem("cloth_arch", rows=50, cols=50, steps=100, collision=collision)
+    noise = np.random.default_rng(0).standard_normal((prob.steps, prob.model.n, 3))
+    return prob, prob.initial_controls() + (NOISE * noise * prob.model.masses[:, None]).ravel()
+
+
+def sphere_drop(body: bool):
+    """``(problem, controls)``: a 50 x 50 sheet at 8 m/s onto a sphere, or falling freely."""
+    free = None if body else ClothModel.grid(50, 50, width=1.0, height=1.0, plane="xy",
+                                             mass=0.3)
+    prob = drop_problem(50, "sphere", 8.0, 0, "guarded", 1 / 60, 0.5, model=free)
+    return prob, prob.initial_controls()
+
+
+def cost(repeat: int):
+    """The contact issue's cost table (module docstring)."""
+    print(f"\ncost: forward CPU s (one BLAS thread, process_time, median of {repeat}, the two "
+          "problems of a case run in turn); solves: linear solves over the steps")
+    cases = [("cloth_arch 50x50x100, guess + 10 m/s^2 noise", "guarded", "penalty",
+              lambda c: perturbed_arch(c), 1.3),
+             ("50x50 sheet at 8 m/s onto a sphere, 0.5 s", "sphere", "free fall",
+              lambda c: sphere_drop(c == "sphere"), 1.5)]
+    for name, new, base, build, bound in cases:
+        runs = {c: build(c) for c in (new, base)}
+        solves = {c: sum(r.solves for r in p.simulate(u).records) for c, (p, u) in runs.items()}
+        times = {c: [] for c in runs}
+        for _ in range(repeat):
+            for c, (p, u) in runs.items():
+                t = time.process_time()
+                p.simulate(u, records=False)
+                times[c].append(time.process_time() - t)
+        med = {c: statistics.median(t) for c, t in times.items()}
+        ratio = med[new] / med[base]
+        print(f"  {name}: {new} {med[new]:.2f} s ({solves[new]} solves), {base} "
+              f"{med[base]:.2f} s ({solves[base]} solves): {ratio:.2f}x (target <= {bound}x: "
+              f"{'met' if ratio <= bound else 'MISSED'})", flush=True)
+        if new == "guarded":
+            print(f"  cloth_arch 50x50x100 forward {med[new]:.2f} s (target < 3.5 s: "
+                  f"{'met' if med[new] < 3.5 else 'MISSED'})", flush=True)
 
 
 if __name__ == "__main__":

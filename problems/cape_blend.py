@@ -13,8 +13,9 @@ at every resolution.  From zero forces (``guess="passive"``, the paper's start) 
 searches stall far off or tear the cape, so the default start is a tracking guess
 (:mod:`casadi_keyframe.scenes.cape_tracking`) that lands on the walk's state; from zero
 forces ``SOLVE`` asks for multiple shooting.  ``contact`` > 1 makes the body's contact that
-many times softer and thicker (a homotopy level); ``collision`` how the body is touched.  Measurements behind these choices:
-``docs/problem_notes.md``.
+many times softer and thicker (a homotopy level); ``collision`` how the body is touched;
+``friction`` the Coulomb coefficient of the body and the ground (0: frictionless).
+Measurements behind these choices: ``docs/problem_notes.md``.
 """
 from __future__ import annotations
 
@@ -55,14 +56,14 @@ RANGES = {"rows": "[2, inf)", "cols": "[3, inf)", "steps": "[2, inf)", "dt": "(0
           "t_a": "[0, inf)", "t_b": "[0, inf)", "window": "(0, inf)",
           "position_weight": "[0, inf)", "velocity_weight": "[0, inf)", "alpha": "[0, inf)",
           "temporal": "[0, inf)", "guess": GUESSES, "contact": "[1, inf)",
-          "collision": COLLISIONS}
+          "collision": COLLISIONS, "friction": "[0, inf)"}
 
 
 def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 1 / 60,
           t_a: float = 0.8, t_b: float = 0.6, window: float | None = None,
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
           temporal: float = 1e-7, guess: str = "tracking", contact: float = 1.0,
-          collision: str = DEFAULT_COLLISION):
+          collision: str = DEFAULT_COLLISION, friction: float = 0.0):
     steps = blend_steps(steps, window, dt)
     fall_start = frame_at(t_a, dt, "cape_blend: t_a")
     walk_start = frame_at(t_b, dt, "cape_blend: t_b")
@@ -77,7 +78,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     walk_model, walk_traj, walk_motion = cached_clip("walk", rows, cols, t_b + window, dt)
     motion = transition(fall_motion, walk_motion, t_a, t_b, window)
     model = cape_model(character, motion.shifted(-t_a), rows=rows, cols=cols, dt=dt,
-                       contacts=_contacts(rows, cols, dt, contact), collision=collision)
+                       contacts=_contacts(rows, cols, dt, contact, friction),
+                       collision=collision)
     x0, v0 = fall_traj.x[fall_start], fall_traj.v[fall_start]
     target_x = walk_traj.x[walk_start + steps] + motion.offset
     target_v = walk_traj.v[walk_start + steps]
@@ -100,12 +102,15 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     return prob.with_guess(tracking_guess(prob, path, (target_x, target_v)))
 
 
-def _contacts(rows, cols, dt, softness):
+def _contacts(rows, cols, dt, softness, friction=0.0):
     """The cape's own contact laws (:func:`cape_contacts`), the body's ``softness`` times
-    softer, thicker and more gradual (1: the model's own)."""
+    softer, thicker and more gradual (1: the model's own), the body's and the ground's with
+    Coulomb coefficient ``friction``."""
     contacts = cape_contacts(0.4 / (rows * cols), min(0.6 / (cols - 1), 1.0 / (rows - 1)), dt)
     body = contacts["body"]
     contacts["body"] = replace(body, stiffness=body.stiffness / softness,
                                damping=body.damping / softness,
                                thickness=body.thickness * softness, width=body.width * softness)
+    for name in ("body", "ground"):
+        contacts[name] = replace(contacts[name], friction=friction)
     return contacts

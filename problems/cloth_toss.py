@@ -10,7 +10,8 @@ to the landing on the ground (1.2 s), which the default contact keeps whole (und
 paper's penalty springs, ``collision="penalty"``, it tears the sheet).
 ``SOLVE`` solves 12 x 12 and 25 x 25 sheets of the same cloth first, since a rigid spin is
 one smooth field among thousands of controls that a direct search at 50 x 50 never finds;
-``StrainLimit`` keeps springs under 1.2 times their length.  The exact adjoint is the
+``StrainLimit`` keeps springs under 1.2 times their length; ``friction`` is the ground's
+Coulomb coefficient (0: frictionless).  The exact adjoint is the
 default: with the paper's swapped adjoint the sheet never turns.  Measurements behind these
 choices: ``docs/problem_notes.md``.
 """
@@ -18,7 +19,7 @@ import numpy as np
 
 from casadi_keyframe.controls import InitialVelocity
 from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION, ClothModel
-from casadi_keyframe.models.colliders import Plane
+from casadi_keyframe.models.colliders import Contact, Plane
 from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, Smoothness,
                                         StrainLimit)
 from casadi_keyframe.scenes.cloths import cloth_problem, rotate_about
@@ -30,7 +31,8 @@ RANGES = {"rows": "[2, inf)", "cols": "[2, inf)", "steps": "[2, inf)", "dt": "(0
           "size": "(0, inf)", "height": "(0, inf)", "ring_radius": "(0, inf)",
           "ring_weight": "[0, inf)", "corner_weight": "[0, inf)", "alpha": "[0, inf)",
           "max_speed": "(0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
-          "ring_at": "(0, 1]", "flip_at": "(0, 1]", "collision": COLLISIONS}
+          "ring_at": "(0, 1]", "flip_at": "(0, 1]", "collision": COLLISIONS,
+          "friction": "[0, inf)"}
 
 
 def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
@@ -39,8 +41,8 @@ def build(rows: int = 50, cols: int = 50, steps: int = 72, dt: float = 1 / 60,
           ring_radius: float = 0.35, ring_weight: float = 100.0, corner_weight: float = 10.0,
           alpha: float = 0.36, max_speed: float = 8.0, strain_limit: float = 1.2,
           strain_weight: float = 1e3, ring_at: float = 0.445, flip_at: float = 0.806,
-          collision: str = DEFAULT_COLLISION):
-    ground = Plane((0.0, 0.0, 0.0))
+          collision: str = DEFAULT_COLLISION, friction: float = 0.0):
+    ground = Plane((0.0, 0.0, 0.0), contact=Contact(friction=friction))
     model = ClothModel.grid(rows, cols, width=size, height=size, plane="xy", mass=0.3,
                             origin=(-size / 2, -size / 2, height), colliders=[ground],
                             collision=collision)

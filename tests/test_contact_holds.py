@@ -52,9 +52,9 @@ def test_a_held_contact_that_pulls_is_let_go():
     assert record.held is None and later.x[:, 2].min() > state.x[:, 2].min()
 
 
-def drop_problem(collision, steps=6):
-    model = drop_model(4, "sphere", collision)
-    x0, v0 = drop_start(model, 6.0, gap=0.02)
+def drop_problem(collision, steps=6, rows=6):
+    model = drop_model(rows, "sphere", collision)
+    x0, v0 = drop_start(model, 10.0, gap=0.02)
     objective = StateKeyframe(steps, x=x0 + [0, 0, -0.05]) + Smoothness(1e-4)
     return ControlProblem(model=model, integrator=LinearizedBackwardEuler("direct"), x0=x0,
                           v0=v0, steps=steps, dt=1 / 60, controls=StepForces(),
@@ -68,4 +68,6 @@ def test_gradients_through_held_contacts_and_revised_steps_are_exact(collision):
     traj = prob.simulate(u)
     assert any(r.held is not None for r in traj.records)
     assert any(r.solves > 1 for r in traj.records)  # some step was revised
+    assert any(r.decisions[0] is not None and r.decisions[0].later is not None
+               for r in traj.records)  # and some deferred springs to the next step
     assert_exact_routes(prob, u)

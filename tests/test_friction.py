@@ -151,3 +151,23 @@ def test_gradients_through_sticking_and_sliding_are_exact(collision, steps, body
     e = 1e-6
     central = (prob.objective(u + e * d) - prob.objective(u - e * d)) / (2 * e)
     assert central == pytest.approx(g @ d, rel=2e-3)  # a slide's onset direction is lagged
+
+
+SMALL = {"cloth_arch": {"rows": 3, "cols": 3, "steps": 2},
+         "cloth_toss": {"rows": 3, "cols": 3, "steps": 4},
+         "cape_blend": {"rows": 6, "cols": 4, "steps": 4, "guess": "passive"}}
+
+
+@pytest.mark.parametrize("name", sorted(SMALL))
+def test_set_friction_reaches_every_body_of_the_problems_that_have_bodies(name):
+    from casadi_keyframe.cli.values import parse_overrides
+    from casadi_keyframe.loading import OverrideError, load_problem
+    plain = load_problem(name, **SMALL[name]).model
+    assert all(b.contact.friction == 0 for b in plain.colliders)  # frictionless by default
+    model = load_problem(name, **SMALL[name], **parse_overrides(["friction=0.4"])).model
+    hold = model.family("body hold")
+    assert model.colliders and all(b.contact.friction == 0.4 for b in model.colliders)
+    assert [b.friction for b in hold.bodies] == [0.4] * len(model.colliders)
+    assert hold.coulomb is not None
+    with pytest.raises(OverrideError, match="friction"):
+        load_problem(name, **SMALL[name], friction=-0.1)

@@ -262,8 +262,11 @@ class LinearizedBackwardEuler(Integrator):
             except SolveError as err:
                 raise SimulationError(f"step {n + 1}: {err}", n + 1) from err
             x1 = x + dt * (v + dv.reshape(v.shape))
-            revised = model.revised_decisions(found, x, v, t, dt, x1)
-            if revised is None or revision == MAX_REVISIONS:
+            revised, again = model.revised_decisions(found, x, v, t, dt, x1)
+            if not again:
+                found = revised  # what it stands by, with what it leaves to the next step
+                break
+            if revision == MAX_REVISIONS:
                 break
             found = revised  # the step chose wrong: solve it again with the revision
             if keep:
@@ -400,11 +403,10 @@ class LinearizedBackwardEuler(Integrator):
             dv = np.where(model.free_mask(), (v1 - v).ravel(), (prescribed - v).ravel())
             if held is not None:
                 dv = (held.unheld_part(dv) + held.prescribed(v)).ravel()
-            revised = model.revised_decisions(found, x, v, t, dt,
-                                              x + dt * (v + dv.reshape(v.shape)))
-            if revised is None:
+            found, again = model.revised_decisions(found, x, v, t, dt,
+                                                   x + dt * (v + dv.reshape(v.shape)))
+            if not again:
                 break
-            found = revised
         if work is not None:
             work.planned = found
         A, K = step_matrices(model, x, v, dt, t, interactions=found)

@@ -148,9 +148,10 @@ class ForceJacobians(abc.ABC):
         return decisions
 
     def revised_decisions(self, decisions, x, v, t: float, dt: float, x1):
-        """``decisions`` revised after the step from (x, v) at t ended at x1, when the end
-        shows it chose wrong; None if they stand (here, always)."""
-        return None
+        """``(decisions, again)`` after the step from (x, v) at t ended at x1: revised, with
+        ``again`` True, when the end shows it chose wrong and the step must be solved again;
+        else what the step stands by (here, always ``decisions`` unchanged)."""
+        return decisions, False
 
     def carried_decisions(self, decisions):
         """What the next step takes from a step's ``decisions`` (None: nothing)."""

@@ -207,14 +207,16 @@ class FamilyModel(BlockJacobians, StepHold):
         return tuple(f.solved(d, residual) for f, d in zip(self.families, decisions))
 
     def revised_decisions(self, decisions, x, v, t: float, dt: float, x1):
-        """``decisions`` revised after the step from (x, v) at t ended at x1 (particles the
-        hold should have held, springs it should have taken taut), None if they stand."""
+        """``(decisions, again)`` after the step from (x, v) at t ended at x1: revised where
+        the end shows the step chose wrong (particles the hold should have held, springs it
+        should have taken taut), ``again`` if it must be solved again with them; else what
+        the step defers to the next (:meth:`~.interaction.Interaction.settle`)."""
         end = self._span(x, v, t, dt, x1)
         stopped = any([f.stops(d, end) for f, d in zip(self.families, decisions)])
         revised = [f.revise(d, end, stopped) for f, d in zip(self.families, decisions)]
-        if all(r is None for r in revised):
-            return None
-        return tuple(d if r is None else r for d, r in zip(decisions, revised))
+        if any(r is not None for r in revised):
+            return tuple(d if r is None else r for d, r in zip(decisions, revised)), True
+        return tuple(f.settle(d, end, stopped) for f, d in zip(self.families, decisions)), False
 
     def carried_decisions(self, decisions):
         """What the next step takes from a step's ``decisions`` (None: nothing)."""

@@ -12,9 +12,9 @@ parameters (:meth:`~Interaction.parameters`).
 
 What a family acts over or decides per step is its ``found``, given back to every method:
 what :meth:`find` sees at x (self-contact's pairs), or what a step decides (:meth:`decide`),
-learns from its solve (:meth:`solved`), revises at its end (:meth:`stops`, :meth:`revise`),
-carries to the next (:meth:`carry`) and gives the symbolic step
-(:meth:`decision_parameters`): the springs taken taut, the particles the hold holds.
+learns from its solve (:meth:`solved`), revises at its end (:meth:`stops`, :meth:`revise`)
+or settles when the step stands (:meth:`settle`), carries to the next (:meth:`carry`) and
+gives the symbolic step (:meth:`decision_parameters`): the springs taken taut, the particles the hold holds.
 
 Three shapes of family, after jax-md's split of a law and its lifting: a
 :class:`PairInteraction` lifts a kernel of ``d = x_j - x_i`` over pairs (``+f`` on i, ``-f``
@@ -57,7 +57,7 @@ class StepSpan:
     """A step as a family's decisions see it: from ``(x, v)`` at ``t`` over ``dt``; ``free``
     ``(n,)`` the particles without prescribed motion; ``x1`` where it ended (None at its
     start).  :meth:`distances` keeps each body's signed distances at x1 for the families
-    that ask."""
+    that ask, :meth:`kept` any other such figure."""
 
     x: np.ndarray
     v: np.ndarray
@@ -65,13 +65,19 @@ class StepSpan:
     dt: float
     free: np.ndarray
     x1: np.ndarray | None = None
-    _distances: dict = field(default_factory=dict, repr=False, compare=False)
+    _kept: dict = field(default_factory=dict, repr=False, compare=False)
 
     def distances(self, body) -> np.ndarray:
         """Every particle's signed distance to ``body`` at the step's end (x1, t + dt)."""
-        if id(body) not in self._distances:
-            self._distances[id(body)] = signed_distances(body, self.x1, self.t + self.dt)
-        return self._distances[id(body)]
+        return self.kept(("distances", id(body)),
+                         lambda: signed_distances(body, self.x1, self.t + self.dt))
+
+    def kept(self, key, compute):
+        """``compute()``, computed once for this span and ``key`` (what the families
+        deciding on it share)."""
+        if key not in self._kept:
+            self._kept[key] = compute()
+        return self._kept[key]
 
 
 class Interaction:
@@ -113,6 +119,11 @@ class Interaction:
         """``found`` revised after the step ended at ``end.x1`` when the end shows it chose
         wrong (``stopped``: some family stopped particles), None if it stands (here)."""
         return None
+
+    def settle(self, found, end: StepSpan, stopped: bool):
+        """``found`` of a step that stands, with what its end leaves to the next step (the
+        springs: those to take taut from then on); here, unchanged."""
+        return found
 
     def solved(self, found, residual: np.ndarray):
         """``found`` given the solved step's residual ``A dv - b`` (flat; the hold's

@@ -34,7 +34,7 @@ across the rest length.  Every kind buckles with ``k_b = bend``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import casadi as ca
 import numpy as np
@@ -49,8 +49,11 @@ STRETCH, SHEAR, BEND = range(3)
 # numeric and symbolic routes for states at rest up to it (a sheet at rest, or translating)
 REST_TOLERANCE = 1e-9
 # a spring a step ends this far past its rest length, having got this much longer within
-# the step (relative), was linearized too softly: the step is solved again with it taut
+# the step (relative), was linearized too softly: it is taken taut
 TAUT_MARGIN = 0.05
+# the step is solved again with such springs taut only if one of them ends this far past its
+# rest length; else they are taut from the next step on, and the step stands
+REDO_MARGIN = 0.2
 
 
 def _fit_sinc_inverse(degree: int = 10) -> np.ndarray:
@@ -134,8 +137,20 @@ class Springs:
 
     def stretch(self, x: np.ndarray) -> np.ndarray:
         """Every spring's length over its rest length at positions ``x`` (``(..., n, 3)``)."""
-        d = x[..., self.j, :] - x[..., self.i, :]
-        return np.linalg.norm(d, axis=-1) / self.rest
+        x = np.asarray(x)
+        d = np.take(x, self.j, axis=-2)
+        d -= np.take(x, self.i, axis=-2)
+        return np.sqrt(np.einsum("...a,...a->...", d, d)) / self.rest
+
+
+@dataclass(frozen=True)
+class TautSprings:
+    """What a step decided for the springs: ``now`` (a bool per spring), those its matrix
+    takes taut, and ``later`` (None: none), those it stretched too far too fast but not far
+    enough to be solved again (:data:`REDO_MARGIN`), taut from the next step on."""
+
+    now: np.ndarray
+    later: np.ndarray | None = None
 
 
 class ChoiKoSprings(PairInteraction):
@@ -143,8 +158,8 @@ class ChoiKoSprings(PairInteraction):
 
     ``stiffness`` is ``(stretch, shear, bend)`` of :class:`~.cloth.ClothParams`, ``damping``
     the along-spring damping c, ``eps`` the length regularisation.  What a step decides for
-    them (its ``found``) is which compressed springs it takes taut (:func:`spring_law`): a
-    bool array over the springs, or None for none."""
+    them (its ``found``) is which springs it takes taut (:func:`spring_law`): a
+    :class:`TautSprings`, or None for none."""
 
     name = "springs"
     role = "internal"
@@ -168,7 +183,7 @@ class ChoiKoSprings(PairInteraction):
         return self._ij
 
     def pair_parameters(self, i, j, found=None):
-        taut = self._slack if found is None else found.astype(float)[:, None]
+        taut = self._slack if found is None else found.now.astype(float)[:, None]
         return [*self.parameters_per_spring, taut]
 
     def symbolic_pair_parameters(self, i, j, decisions=None):
@@ -178,38 +193,63 @@ class ChoiKoSprings(PairInteraction):
 
     def decision_parameters(self, found, t, dt):
         """The taut flags (0/1 per spring) the symbolic blocks take."""
-        return np.zeros(self.springs.i.size) if found is None else found.astype(float)
+        return np.zeros(self.springs.i.size) if found is None else found.now.astype(float)
 
     def decide(self, step, carried):
-        """The springs a step at x keeps taut from the last (``carried``, its taut flags):
-        those still stretched past their rest length (None if none)."""
+        """The springs a step at x keeps taut from the last (``carried``, taut flags): those
+        still stretched past their rest length (None if none)."""
         if carried is None:
             return None
         kept = carried & (self.springs.stretch(step.x) > 1)
-        return kept if kept.any() else None
+        return TautSprings(kept) if kept.any() else None
 
     def carry(self, found):
-        return found
+        """The springs taut now or from the next step on (a bool array; None: none)."""
+        if found is None:
+            return None
+        return found.now if found.later is None else found.now | found.later
 
     def revise(self, found, end, stopped):
-        """Where a step stopped particles (``stopped``: a stop within a step stretches
-        springs; elsewhere taking them taut would make an objective rough for nothing),
-        ``found`` with the springs that end beyond ``1 + TAUT_MARGIN`` times their rest
-        length at ``end.x1`` having got longer by that much over the step (smooth motion
-        changes a spring's length slowly; a step that missed a stop does not), and the
-        stretched springs sharing a particle with one, taken taut; None if none changes."""
-        if not stopped:
+        """``found`` with the :meth:`late` springs taken taut if one of them ends beyond
+        ``1 + REDO_MARGIN`` times its rest length at ``end.x1`` (the step is solved again);
+        None if none does (:meth:`settle` defers them)."""
+        late, end_stretch = self.late(found, end, stopped)
+        if late is None or not (end_stretch[late] > 1 + REDO_MARGIN).any():
             return None
+        taut = late if found is None else found.now | late
+        return TautSprings(taut, None if found is None else found.later)
+
+    def settle(self, found, end, stopped):
+        """``found`` with the :meth:`late` springs of a step that stands taken taut from the
+        next step on."""
+        late, _ = self.late(found, end, stopped)
+        if late is None:
+            return found
+        if found is None:
+            return TautSprings(np.zeros_like(late), late)
+        return replace(found, later=late if found.later is None else found.later | late)
+
+    def late(self, found, end, stopped):
+        """``(late, end stretch)``: where a step stopped particles (``stopped``: a stop
+        within a step stretches springs; elsewhere taking them taut would make an objective
+        rough for nothing), the springs not yet taut that end beyond ``1 + TAUT_MARGIN``
+        times their rest length at ``end.x1`` having got longer by that much over the step
+        (smooth motion changes a spring's length slowly; a step that missed a stop does
+        not), and the stretched springs sharing a particle with one; ``late`` None if
+        none."""
+        if not stopped:
+            return None, None
         s = self.springs
-        end_stretch = s.stretch(end.x1)
-        late = (end_stretch > 1 + TAUT_MARGIN) & (end_stretch > s.stretch(end.x) + TAUT_MARGIN)
+        end_stretch = end.kept((id(self), "x1"), lambda: s.stretch(end.x1))
+        start_stretch = end.kept((id(self), "x"), lambda: s.stretch(end.x))
+        late = (end_stretch > 1 + TAUT_MARGIN) & (end_stretch > start_stretch + TAUT_MARGIN)
         if late.any():  # and the springs around them, which a taut one would stretch next
             near = np.zeros(self.n, bool)
             near[s.i[late]] = near[s.j[late]] = True
             late |= (near[s.i] | near[s.j]) & (end_stretch > 1)
-        taut = np.zeros(s.i.size, bool) if found is None else found
-        new = late & ~taut
-        return (taut | new) if new.any() else None
+        if found is not None:
+            late &= ~found.now
+        return (late, end_stretch) if late.any() else (None, None)
 
     def all_pairs(self):
         return self._ij

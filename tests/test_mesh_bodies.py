@@ -161,3 +161,17 @@ def test_gradients_on_a_mesh_body_are_exact(case):
     central = (prob.objective(u + e * d) - prob.objective(u - e * d)) / (2 * e)
     # friction: a slide's onset direction is lagged (as on analytic bodies)
     assert central == pytest.approx(g @ d, rel=2e-3 if "friction" in case else 1e-6)
+
+
+def test_mesh_keyframes_takes_bodies_and_refuses_bad_ones_by_name(tmp_path):
+    from casadi_keyframe.loading import OverrideError, load_problem
+    V, F = ball(1, 0.2)
+    obj = write_obj(tmp_path / "ball.obj", V + [0.3, 0.0, -0.6], F)
+    prob = load_problem("mesh_keyframes", bodies=str(obj), guess="none")
+    assert any(isinstance(b, MeshBody) for b in prob.model.colliders)
+    assert prob.simulate(prob.initial_controls()).x.shape[0] == prob.steps + 1
+    (tmp_path / "empty.obj").write_bytes(b"")
+    for bad, why in ((tmp_path / "none.obj", "no such file"), (tmp_path / "empty.obj", "no mesh"),
+                     (tmp_path / "walk.pc2", "rest mesh")):
+        with pytest.raises(OverrideError, match=f"mesh_keyframes: bodies: .*{why}"):
+            load_problem("mesh_keyframes", bodies=str(bad))

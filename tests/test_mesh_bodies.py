@@ -175,3 +175,21 @@ def test_mesh_keyframes_takes_bodies_and_refuses_bad_ones_by_name(tmp_path):
                      (tmp_path / "walk.pc2", "rest mesh")):
         with pytest.raises(OverrideError, match=f"mesh_keyframes: bodies: .*{why}"):
             load_problem("mesh_keyframes", bodies=str(bad))
+
+
+def test_the_character_as_a_mesh_follows_its_capsules(tmp_path):
+    from casadi_keyframe.scenes.animations import walk
+    from casadi_keyframe.scenes.body_meshes import character_body, write_body
+    from casadi_keyframe.scenes.skeleton import Character
+    character = Character()
+    motion = walk(character)
+    body = character_body(character, motion, 0.1, 1 / 60)
+    assert len(body.parts()) == len(character.radii)  # one piece per capsule, held apart
+    rng = np.random.default_rng(0)
+    x = body.world_vertices(0.05)[rng.integers(0, len(body.vertices), 300)]
+    x = x + rng.normal(scale=0.02, size=x.shape)
+    exact = character.clearance(motion.pose(0.05), x)
+    assert np.abs(signed_distances(body, x, 0.05) - exact).max() < 2e-3  # the facets' sag
+    again = MeshBody.from_file(write_body(tmp_path / "walk.pc2", body, 0.1, 1 / 60), fps=60)
+    np.testing.assert_allclose(again.world_vertices(0.05), body.world_vertices(0.05),
+                               atol=1e-6)

@@ -15,6 +15,7 @@ import numpy as np
 
 from .checks import MeshError
 from .mesh import Mesh
+from .point_cache import read_pc2
 from .readers import read_mesh, usd_frames
 
 
@@ -46,7 +47,6 @@ def read_animated(path, *, rest=None, fps: float | None = None) -> Animated:
     if fps is None or not fps > 0:
         raise MeshError(f"{path}: a PC2 cache holds no frame rate; give its frames per second")
     mesh = read_mesh(rest)
-    from ..export.pc2 import read_pc2  # the writer's own reader (export imports the models)
     try:
         frames, _, rate = read_pc2(path)
     except ValueError as err:

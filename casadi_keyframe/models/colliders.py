@@ -114,6 +114,10 @@ class Body:
         for every point here (a mesh gives each point its closest feature)."""
         return [np.broadcast_to(g, (len(x), np.size(g))) for g in self.geometry(t)]
 
+    def parts(self) -> tuple:
+        """The bodies contact acts on one by one: this one (a mesh: each of its pieces)."""
+        return (self,)
+
     @property
     def moves(self) -> bool:
         """Whether the body moves: a motion, or a point given as a path."""
@@ -290,6 +294,20 @@ class MeshBody(Body):
         found = read_animated(path, rest=rest, fps=fps)
         return cls(found.mesh.vertices, found.mesh.faces, found.frames, times=found.times,
                    contact=contact, motion=motion, source=path)
+
+    def parts(self) -> tuple:
+        """Each piece as a body of its own (the hold chooses among them per particle, and a
+        step that ends inside another piece is revised on that piece), or this one."""
+        if len(self.pieces) == 1:
+            return (self,)
+        out = []
+        for piece in self.pieces:
+            used, faces = np.unique(self.faces[piece], return_inverse=True)
+            out.append(MeshBody(self.vertices[used], faces.reshape(-1, 3),
+                                None if self.frames is None else self.frames[:, used],
+                                times=self.times, contact=self.contact, motion=self.motion,
+                                source=self.source))
+        return tuple(out)
 
     def __getstate__(self):  # the trees are rebuilt where the body is unpickled
         return {**vars(self), "_shapes": {}, "_rows": {}}

@@ -193,3 +193,17 @@ def test_the_character_as_a_mesh_follows_its_capsules(tmp_path):
     again = MeshBody.from_file(write_body(tmp_path / "walk.pc2", body, 0.1, 1 / 60), fps=60)
     np.testing.assert_allclose(again.world_vertices(0.05), body.world_vertices(0.05),
                                atol=1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("rising", [False, True])
+def test_a_sheet_dropped_on_an_icosphere_file_stays_on_the_true_sphere(rising):
+    """The issue's icosphere check (benchmarks/contact.py --mesh prints it whole): within
+    5 mm of the true sphere, springs under 1.3; the centre of mass follows the analytic
+    sphere's run within 1 cm through the impact, after which the draping sheet parts from
+    it by about as much as from a sphere 0.3 mm smaller (the facets' sag)."""
+    from casadi_keyframe.scenes.drops import mesh_drop
+    r = mesh_drop(25, 8.0, rising=rising)
+    assert r["mesh"]["inside"] <= 0.005 and r["mesh"]["stretch"] <= 1.3
+    gap = np.linalg.norm(r["mesh"]["com"] - r["sphere"]["com"], axis=1)
+    assert gap[:5].max() <= 0.01 and gap.max() <= 0.07

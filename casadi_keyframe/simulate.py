@@ -1,7 +1,8 @@
 r"""The one forward loop and the one backward loop; integrators only step.
 
 Forward: ``s_{n+1} = S_n(s_n, e_n)`` for n = 0 .. N-1 (:func:`simulate`), optionally carrying
-a tangent along (:func:`simulate` with ``tangent=``: forward sensitivities in the same pass).
+a tangent along (:func:`simulate` with ``tangent=``: forward sensitivities in the same pass;
+:func:`tangent` carries tangents along a run already recorded).
 
 Backward, eq. (5) of the paper: with ``s_n = (x_n, v_n)`` and ``a_n = dphi/ds_n`` (total),
 
@@ -48,6 +49,20 @@ def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = 
                                       d_external[n], tangent_work)
             dx[n + 1], dv[n + 1] = out.x, out.v
     return traj if tangent is None else (traj, dx, dv)
+
+
+def tangent(integrator, model, traj: Trajectory, dx0, dv0, d_external):
+    """The tangent of a recorded run: ``(dx0, dv0)`` at frame 0 and ``d_external`` ``(steps,
+    n, dim)`` carried through every step's ``step_jvp`` on ``traj``'s records, without
+    stepping again (many tangents of one run); ``(dx, dv)`` per frame."""
+    dx, dv = np.empty_like(traj.x), np.empty_like(traj.v)
+    dx[0], dv[0] = dx0, dv0
+    work = integrator.init(model)
+    for n in range(traj.steps):
+        out = integrator.step_jvp(model, traj.state(n), traj.state(n + 1), traj.record(n), n,
+                                  traj.dt, State(dx[n], dv[n]), d_external[n], work)
+        dx[n + 1], dv[n + 1] = out.x, out.v
+    return dx, dv
 
 
 def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop: int = 0,

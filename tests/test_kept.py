@@ -97,3 +97,31 @@ def test_a_checkpoint_takes_only_points_at_least_as_good(tmp_path):
     assert later.write(np.array([7]), fun=8.0, met=True) and not later.write(
         np.array([8]), fun=1.0, met=False)
     assert read_run(tmp_path / "c.npz")["meta"]["rounds_round"] == 1
+
+
+@pytest.mark.parametrize("extra", [["--set", "steps=16", "--continuation", "1/10"],
+                                   ["--segments", "2", "--shooting", "rounds=2"]])
+def test_one_story_per_run(extra, tmp_path, capsys):
+    """The objective printed, in summary.json, the last stage's, the history's last and the
+    one recomputed from result.npz are one number; stages have distinct numbers."""
+    import json
+
+    from casadi_keyframe.cli import main
+    from casadi_keyframe.saved import load_saved
+
+    out = tmp_path / "run"
+    main(["solve", "flock_path", "--set", "agents=6", "--set", "steps=20", "--set",
+          "tolerance=2.0", "--maxiter", "4", "--quiet", "--no-animation", "--no-viewer",
+          "--out", str(out), *extra])
+    printed = capsys.readouterr().out
+    summary = json.loads((out / "summary.json").read_text())
+    saved = load_saved(out)
+    again = saved.problem.objective(np.load(out / "result.npz")["u"])
+    assert summary["fun"] == pytest.approx(summary["stages"][-1]["fun"], rel=1e-9)
+    assert summary["fun"] == pytest.approx(again, rel=1e-9)
+    assert f"objective {summary['fun']:.6g}" in printed
+    history = np.load(out / "result.npz")["history_objective"]
+    assert history[-1] == pytest.approx(summary["fun"], rel=1e-9)
+    numbers = [s["stage"] for s in summary["stages"]]
+    assert numbers == sorted(set(numbers))
+    assert summary["nfev"] == sum(s["nfev"] for s in summary["stages"])

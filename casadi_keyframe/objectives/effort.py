@@ -4,6 +4,7 @@ from __future__ import annotations
 
 
 import casadi as ca
+import numpy as np
 
 from .terms import ControlTerm
 
@@ -35,4 +36,34 @@ class Smoothness(ControlTerm):
             val += 0.5 * self.temporal / dt * ca.sumsqr(blocks[:, 1:] - blocks[:, :-1])
         return val
 
+    # the residual form: sqrt(alpha dt) u_n and sqrt(temporal / dt) (u_{n+1} - u_n), or
+    # sqrt(alpha) u for initial velocities; linear, so its Jacobian is the map itself
+    def _roots(self, controls, dt):
+        """The residual's two factors, and the steps (None: controls without steps)."""
+        if len(controls.block_shape) != 3:
+            return np.sqrt(self.alpha), 0.0, None
+        steps = controls.block_shape[0]
+        return (np.sqrt(self.alpha * dt), np.sqrt(self.temporal / dt) if steps > 1 else 0.0,
+                steps)
 
+    def residual(self, u, controls, dt) -> np.ndarray:
+        root, change, steps = self._roots(controls, dt)
+        u = np.asarray(u, float)
+        if not change:
+            return root * u
+        blocks = u.reshape(steps, -1)
+        return np.concatenate([root * u, change * (blocks[1:] - blocks[:-1]).ravel()])
+
+    residual_jvp = residual  # linear in u
+
+    def residual_vjp(self, w, controls, dt) -> np.ndarray:
+        root, change, steps = self._roots(controls, dt)
+        w = np.asarray(w, float)
+        size = controls.size
+        out = root * w[:size]
+        if change:
+            diff = change * w[size:].reshape(steps - 1, -1)
+            blocks = out.reshape(steps, -1)  # a view: adds into out
+            blocks[1:] += diff
+            blocks[:-1] -= diff
+        return out

@@ -12,7 +12,22 @@ from .tolerances import center_tolerance, keyframe_tolerance, shortfall_phrase, 
 from .terms import StateTerm, checked_target, particle_indices
 
 
-class StateKeyframe(StateTerm):
+class WeightedErrors(StateTerm):
+    """A term whose value is ``0.5 (position_weight |e_x|^2 + velocity_weight |e_v|^2)`` of
+    the errors its ``_errors`` gives, and whose residual is those errors, weighted."""
+
+    def _expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return 0.5 * (self.position_weight * ca.sumsqr(ex)
+                      + self.velocity_weight * ca.sumsqr(ev))
+
+    def _residual_expr(self, X, V, P, model):
+        ex, ev = self._errors(X, V, P, model)
+        return ca.vertcat(np.sqrt(self.position_weight) * ca.vec(ex),
+                          np.sqrt(self.velocity_weight) * ca.vec(ev))
+
+
+class StateKeyframe(WeightedErrors):
     """Positions and/or velocities of all particles (or ``agents``) at ``frame``.
 
     value = 0.5 * (position_weight ||x - x*||^2 + velocity_weight ||v - v*||^2)
@@ -84,13 +99,14 @@ class StateKeyframe(StateTerm):
         vs = self._v + self.aim[1] if self._v is not None else zeros
         return np.concatenate([xs.ravel(), vs.ravel()])
 
-    def _expr(self, X, V, P, model):
+    def _errors(self, X, V, P, model):
+        """The position and velocity errors ``(dim x particles)`` of the term's particles."""
         k = self._idx.size * model.dim
         xs = ca.reshape(P[:k], model.dim, self._idx.size)
         vs = ca.reshape(P[k:], model.dim, self._idx.size)
         idx = self._idx.tolist()
-        return 0.5 * (self.position_weight * ca.sumsqr(X[:, idx] - xs)
-                      + self.velocity_weight * ca.sumsqr(V[:, idx] - vs))
+        return X[:, idx] - xs, V[:, idx] - vs
+
 
     aim = (0.0, 0.0)  # where the penalty aims, relative to the targets (see aiming)
 
@@ -130,7 +146,7 @@ class ParticleKeyframe(StateKeyframe):
         super().__init__(frame, agents=agents, **kw)
 
 
-class CenterOfMassKeyframe(StateTerm):
+class CenterOfMassKeyframe(WeightedErrors):
     """Mass-weighted centre of mass (and/or its velocity) of ``agents`` at ``frame``.
 
     ``tolerance``: the centre's distance and its velocity's miss that count as met, one
@@ -164,12 +180,12 @@ class CenterOfMassKeyframe(StateTerm):
         z = np.zeros(model.dim)
         return np.concatenate([z if self._x is None else self._x, z if self._v is None else self._v])
 
-    def _expr(self, X, V, P, model):
+    def _errors(self, X, V, P, model):
+        """The centre's position and velocity errors."""
         idx, w = self._idx.tolist(), ca.DM(self._w)
         cx, cv = ca.mtimes(X[:, idx], w), ca.mtimes(V[:, idx], w)
-        d = model.dim
-        return 0.5 * (self.position_weight * ca.sumsqr(cx - P[:d])
-                      + self.velocity_weight * ca.sumsqr(cv - P[d:]))
+        return cx - P[:model.dim], cv - P[model.dim:]
+
 
     def marker(self):
         """The centre's target ("center"; without one, "velocity" of its ``particles``),

@@ -90,12 +90,18 @@ class MeshKeyframe(StateKeyframe):
     def _expr(self, X, V, P, model):
         if self.vertex_weights is None:
             return super()._expr(X, V, P, model)
-        k = self._idx.size * model.dim
-        xs, vs = ca.reshape(P[:k], model.dim, self._idx.size), ca.reshape(P[k:], model.dim,
-                                                                         self._idx.size)
-        idx, w = self._idx.tolist(), ca.DM(self._w).T
-        return 0.5 * (self.position_weight * ca.sum2(w * ca.sum1((X[:, idx] - xs) ** 2))
-                      + self.velocity_weight * ca.sumsqr(V[:, idx] - vs))
+        ex, ev = self._errors(X, V, P, model)
+        w = ca.DM(self._w).T
+        return 0.5 * (self.position_weight * ca.sum2(w * ca.sum1(ex ** 2))
+                      + self.velocity_weight * ca.sumsqr(ev))
+
+    def _residual_expr(self, X, V, P, model):
+        if self.vertex_weights is None:
+            return super()._residual_expr(X, V, P, model)
+        ex, ev = self._errors(X, V, P, model)
+        root = ca.DM(np.sqrt(self.position_weight * self._w)).T
+        return ca.vertcat(ca.vec(ex * ca.repmat(root, model.dim, 1)),
+                          np.sqrt(self.velocity_weight) * ca.vec(ev))
 
     # -- the aligned match: value and gradient in numpy, at the best rigid motion ----------
     def aligned_target(self, x) -> np.ndarray:
@@ -118,6 +124,42 @@ class MeshKeyframe(StateKeyframe):
         err = x[self._idx] - self.aligned_target(x)
         gx[self.frame][self._idx] += self.position_weight * self._w[:, None] * err
         return float(0.5 * self.position_weight * np.sum(self._w[:, None] * err ** 2))
+
+    # the aligned residual r_i = sqrt(weight w_i) (x_i - (R x*_i + t)): its Jacobian for a
+    # Gauss-Newton search is APPROXIMATE, the projection off the rigid motions' directions
+    # (Kaufman's variable projection), exact where r = 0; J^T r is the exact gradient
+    def residual(self, traj):
+        if not self.align:
+            return super().residual(traj)
+        x = traj.x[self.frame]
+        return (self._root()[:, None] * (x[self._idx] - self.aligned_target(x))).ravel()
+
+    def residual_jvp(self, traj, dx, dv):
+        if not self.align:
+            return super().residual_jvp(traj, dx, dv)
+        return self._off_rigid(traj, (self._root()[:, None] * dx[self.frame][self._idx]).ravel())
+
+    def residual_vjp(self, traj, w, gx, gv):
+        if not self.align:
+            return super().residual_vjp(traj, w, gx, gv)
+        back = self._off_rigid(traj, np.asarray(w, float)).reshape(-1, 3)
+        gx[self.frame][self._idx] += self._root()[:, None] * back
+
+    def _root(self):
+        return np.sqrt(self.position_weight * self._w)
+
+    def _off_rigid(self, traj, r):
+        """``r`` less its part along the rigid motions of the aligned target (weighted)."""
+        y, root = self.aligned_target(traj.x[self.frame]), self._root()
+        basis = []
+        for k in range(3):
+            axis = np.zeros(3)
+            axis[k] = 1.0
+            basis += [root[:, None] * axis, root[:, None] * np.cross(axis, y)]
+        q, sv, _ = np.linalg.svd(np.stack([b.ravel() for b in basis], axis=1),
+                                 full_matrices=False)
+        q = q[:, sv > 1e-12 * sv[0]]  # a target on a line turns about it freely
+        return r - q @ (q.T @ r)
 
     def symbolic(self, X, V):
         if self.align:

@@ -40,9 +40,16 @@ class RegionTarget(StateTerm):
     def _check(self, model):
         self._idx = particle_indices(self.agents, model.n, self.label)
 
-    def _expr(self, X, V, P, model):
+    def _outside(self, X):
+        """Each agent's distance outside the shape shrunk by the margin (0 inside)."""
         sd = self.shape.sd_function.map(self._idx.size)(X[:2, self._idx.tolist()])
-        return 0.5 * self.weight * ca.sumsqr(ca.fmax(sd + self.margin, 0))
+        return ca.fmax(sd + self.margin, 0)
+
+    def _expr(self, X, V, P, model):
+        return 0.5 * self.weight * ca.sumsqr(self._outside(X))
+
+    def _residual_expr(self, X, V, P, model):
+        return np.sqrt(self.weight) * ca.vec(self._outside(X))
 
     def marker(self):
         """The region's outline, judged by the fraction of the agents inside it."""

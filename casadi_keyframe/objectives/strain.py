@@ -57,15 +57,41 @@ class StrainLimit(TrajectoryTerm):
     def accumulate(self, traj, gx, gv) -> float:
         d, length, excess = self._excess(traj.x[1:1 + self._frames(traj)])
         scale = self.weight * traj.dt * excess / (self._rest * np.maximum(length, 1e-300))
-        pull = scale[..., None] * d  # d value / d x_j per frame and spring
-        frames, n = pull.shape[0], traj.x.shape[1]
+        self._scatter(scale[..., None] * d, gx)  # d value / d x_j per frame and spring
+        return float(0.5 * self.weight * traj.dt * np.sum(excess ** 2))
+
+    def _scatter(self, pull, gx) -> None:
+        """Add ``pull`` (per counted frame and spring, on its end j) into ``gx``: +pull at
+        j, -pull at i."""
+        frames, n = pull.shape[0], gx.shape[1]
         offset = (n * np.arange(frames))[:, None]
         into_j, into_i = (self._j + offset).ravel(), (self._i + offset).ravel()
         for k in range(3):
             col = pull[..., k].ravel()
             gx[1:1 + frames, :, k] += (np.bincount(into_j, col, minlength=frames * n)
                              - np.bincount(into_i, col, minlength=frames * n)).reshape(frames, n)
-        return float(0.5 * self.weight * traj.dt * np.sum(excess ** 2))
+
+    # the residual form: r = sqrt(weight dt) max(0, s - limit) per counted frame and spring
+    def residual(self, traj) -> np.ndarray:
+        _, _, excess = self._excess(traj.x[1:1 + self._frames(traj)])
+        return np.sqrt(self.weight * traj.dt) * excess.ravel()
+
+    def _slopes(self, traj):
+        """``d r / d x_j`` per counted frame and spring (``-`` that for x_i), and the frames."""
+        frames = self._frames(traj)
+        d, length, excess = self._excess(traj.x[1:1 + frames])
+        scale = np.sqrt(self.weight * traj.dt) * (excess > 0) / (
+            self._rest * np.maximum(length, 1e-300))
+        return scale[..., None] * d, frames
+
+    def residual_jvp(self, traj, dx, dv) -> np.ndarray:
+        slope, frames = self._slopes(traj)
+        moved = dx[1:1 + frames, self._j] - dx[1:1 + frames, self._i]
+        return np.sum(slope * moved, axis=-1).ravel()
+
+    def residual_vjp(self, traj, w, gx, gv) -> None:
+        slope, frames = self._slopes(traj)
+        self._scatter(np.asarray(w, float).reshape(slope.shape[:2])[..., None] * slope, gx)
 
     def symbolic(self, X, V, dt, n):
         """Frame ``n``'s share, ``0.5 weight dt sum max(0, s - limit)^2`` (X: 3 x n)."""

@@ -133,6 +133,49 @@ class StateTerm(_Addable):
     def symbolic(self, X, V):
         return self._sym(X, V, self._p)
 
+    # -- the residual form: value = 0.5 |r|^2 (a Gauss-Newton search's view) ----------------
+    def residual(self, traj) -> np.ndarray:
+        """The (bound) term's residual r at its frame, with value = 0.5 |r|^2."""
+        n = self.frame
+        return np.asarray(self._residual_fns()[0](traj.x[n].T, traj.v[n].T, self._p)).ravel()
+
+    def residual_jvp(self, traj, dx, dv) -> np.ndarray:
+        """``J_r`` times the frame tangents ``dx, dv`` ``(steps + 1, n, dim)``."""
+        n = self.frame
+        out = self._residual_fns()[1](traj.x[n].T, traj.v[n].T, self._p, dx[n].T, dv[n].T)
+        return np.asarray(out).ravel()
+
+    def residual_vjp(self, traj, w, gx, gv) -> None:
+        """Add ``J_r^T w`` (the residual cotangent ``w``) into the frame cotangents ``gx, gv``."""
+        n = self.frame
+        ax, av = self._residual_fns()[2](traj.x[n].T, traj.v[n].T, self._p, w)
+        gx[n] += np.asarray(ax).T
+        gv[n] += np.asarray(av).T
+
+    def _residual_fns(self):
+        """The residual, its forward and its transposed product, compiled at first use."""
+        fns = self.__dict__.get("_residual_compiled")
+        if fns is None:
+            model = self._model
+            X, V = ca.SX.sym("X", model.dim, model.n), ca.SX.sym("V", model.dim, model.n)
+            dX, dV = ca.SX.sym("dX", model.dim, model.n), ca.SX.sym("dV", model.dim, model.n)
+            P = ca.SX.sym("P", self._p.size)
+            r = ca.vec(self._residual_expr(X, V, P, model))
+            w = ca.SX.sym("w", r.numel())
+            XV, dXV = ca.vertcat(ca.vec(X), ca.vec(V)), ca.vertcat(ca.vec(dX), ca.vec(dV))
+            back = ca.jtimes(r, XV, w, True)
+            k = model.dim * model.n
+            fns = self._residual_compiled = (
+                ca.Function("r", [X, V, P], [r]),
+                ca.Function("r_jvp", [X, V, P, dX, dV], [ca.jtimes(r, XV, dXV)]),
+                ca.Function("r_vjp", [X, V, P, w], [ca.reshape(back[:k], model.dim, model.n),
+                                                    ca.reshape(back[k:], model.dim, model.n)]))
+        return fns
+
+    def _residual_expr(self, X, V, P, model):
+        """The residual as a CasADi expression, ``0.5 sumsqr(r) == _expr``."""
+        raise NotImplementedError(no_residual(self))
+
     # subclasses
     label = "term"
 
@@ -200,8 +243,12 @@ def checked_target(value, shape, label, what):
 
 
 class ControlTerm(_Addable):
-    """A term on the controls only."""
+    """A term on the controls only.  Its residual form (for a Gauss-Newton search):
+    ``residual(u, controls, dt)`` with value = 0.5 |r|^2, ``residual_jvp(du, controls, dt)``
+    and ``residual_vjp(w, controls, dt)``, the products with its Jacobian and transpose."""
 
+    def residual(self, u, controls, dt) -> np.ndarray:
+        raise NotImplementedError(no_residual(self))
 
 
 class TrajectoryTerm(_Addable):
@@ -212,4 +259,16 @@ class TrajectoryTerm(_Addable):
     def bind(self, model, steps: int) -> "TrajectoryTerm":
         """The term checked against the system (a copy where it keeps what it found)."""
         return self
+
+    def residual(self, traj) -> np.ndarray:
+        """The residual over every frame, value = 0.5 |r|^2; with ``residual_jvp(traj, dx,
+        dv)`` and ``residual_vjp(traj, w, gx, gv)`` as for a :class:`StateTerm`."""
+        raise NotImplementedError(no_residual(self))
+
+
+def no_residual(term) -> str:
+    """Why a term without a residual form cannot be searched by Gauss-Newton."""
+    return (f"{getattr(term, 'label', type(term).__name__)} has no residual form (value = "
+            f"0.5 |r|^2), which a Gauss-Newton search needs: give {type(term).__name__} "
+            "one (a state term: _residual_expr), or search with method='lbfgsb'")
 

@@ -11,7 +11,7 @@ import difflib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
-from . import ipopt, lbfgsb
+from . import gauss_newton, ipopt, lbfgsb, least_squares
 
 
 @dataclass(frozen=True)
@@ -44,6 +44,11 @@ METHODS: dict[str, Method] = {
     "lbfgsb": Method("scipy's L-BFGS-B", lbfgsb.run, lbfgsb.option_names,
                      _undocumented(lbfgsb.option_names)),
     "ipopt": Method("IPOPT", ipopt.run, ipopt.option_names, ipopt.check_options),
+    "gauss-newton": Method("the Gauss-Newton trust region", gauss_newton.run,
+                           gauss_newton.option_names, gauss_newton.check_options),
+    "least-squares": Method("scipy's least_squares", least_squares.run,
+                            least_squares.option_names,
+                            _undocumented(least_squares.option_names)),
 }
 
 

@@ -26,49 +26,41 @@ from .outcome import CONVERGED, STATUS
 
 class _HistoryFields(TypedDict):
     iteration: int
+    """1, 2, ... over the whole call (all stages and rounds)."""
     stage: int
+    """The stage it belongs to (0 without stages)."""
     dt: float
+    """That stage's time step (s)."""
     particles: int
+    """That stage's particle count."""
     objective: float
+    """The objective at the point, on its stage's true targets, dt and mesh."""
     keyframe_error: float
+    """Its state terms' part (the objective less the control cost)."""
     control_norm: float
+    """The Euclidean norm of the controls."""
     seconds: float
+    """Wall time since the call began."""
     nfev: int
+    """Evaluations so far in that stage."""
 
 
 class HistoryRecord(_HistoryFields, total=False):
-    """One iteration of a search (the point it reached), made by :func:`history_record`.
-
-    Every record has:
-
-    * ``iteration``: 1, 2, ... over the whole call (all stages and rounds);
-    * ``stage``: the stage it belongs to (0 without continuation or coarser meshes);
-    * ``dt``, ``particles``: that stage's time step (s) and particle count;
-    * ``objective``: the objective at the point, at that stage's dt and mesh;
-    * ``keyframe_error``: its state terms' part (the objective less the control cost);
-    * ``control_norm``: the Euclidean norm of the controls;
-    * ``seconds``: wall time since the call began;
-    * ``nfev``: evaluations so far in that stage.
-
-    Producers may add:
-
-    * ``round``: the augmented-Lagrangian round (:func:`~.augmented_lagrangian.solve_augmented`,
-      and multiple shooting's rounds);
-    * ``defect``: multiple shooting's largest rms defect between segments, in units of the
-      keyframes' tolerances (1: as large as the tolerance);
-    * ``control_cost``, ``damping``, ``misses``: :func:`~.constrained.lower_effort`'s
-      control cost, the damping it stepped with, and each keyframe row's ``(kind, rms
-      miss)``;
-    * ``gradient_growth``: the backward growth of the gradient at the point
-      (:mod:`casadi_keyframe.health`; routes that watch their backward pass).
-    """
+    """One iteration of a search: the best point so far, made by :func:`history_record`;
+    a producer may add the optional keys below."""
 
     round: int
+    """The round of hard keyframes or of multiple shooting."""
     defect: float
+    """Multiple shooting's largest rms defect, in tolerances (1: as large as it)."""
     control_cost: float
+    """:func:`~.constrained.lower_effort`'s control cost."""
     damping: float
+    """:func:`~.constrained.lower_effort`'s damping."""
     misses: list
+    """:func:`~.constrained.lower_effort`'s ``(kind, rms miss)`` per keyframe row."""
     gradient_growth: float
+    """The backward growth of the gradient at the point (:mod:`casadi_keyframe.health`)."""
 
 
 class Timings(TypedDict):
@@ -90,109 +82,100 @@ class Timings(TypedDict):
 
 class _StageFields(TypedDict):
     stage: int
+    """Its number, 0 first, one per record."""
     dt: float
+    """Its problem's time step (s)."""
     steps: int
+    """Its problem's steps."""
     particles: int
+    """Its problem's particles."""
     nit: int
+    """Its iterations."""
     nfev: int
+    """Its evaluations."""
     njev: int
+    """Its gradients."""
     fun: float
+    """The best objective it reached, on its true targets, at its own dt and mesh."""
     start_objective: float | None
+    """The objective at the controls it started from (None if not evaluated)."""
     start_keyframe_error: float | None
+    """Its state terms' part there."""
     success: bool
+    """``status == 0``."""
     status: int
+    """How it ended (as :attr:`Result.status`)."""
     message: str
+    """That in a sentence."""
     seconds: float
+    """Its wall time."""
     evaluation_seconds: float
+    """Its time inside evaluations."""
     failed_simulations: int
+    """Its evaluations that failed (refused gradients included)."""
 
 
 class Stage(_StageFields, total=False):
-    """One stage of a call: a continuation time step, a coarser mesh, an
-    augmented-Lagrangian round, or :func:`~.constrained.lower_effort`'s one run.
-
-    Every stage has:
-
-    * ``stage``: its number, 0 first;
-    * ``dt``, ``steps``, ``particles``: its problem's time step (s), steps and particles;
-    * ``nit``, ``nfev``, ``njev``: its iterations, evaluations and gradients (as
-      :class:`Result`'s);
-    * ``fun``: the best objective it reached, at its own dt and mesh;
-    * ``start_objective``, ``start_keyframe_error``: the objective and its state terms'
-      part at the controls it started from (None if not evaluated);
-    * ``success``, ``status``, ``message``: how it ended (as :class:`Result`'s);
-    * ``seconds``, ``evaluation_seconds``, ``failed_simulations``: as in :class:`Timings`,
-      for this stage.
-
-    An augmented-Lagrangian round adds ``weight_scale`` (its keyframe weights' factor),
-    ``control_cost`` and ``misses`` (the problem's keyframe misses at its controls, as
-    in ``breakdown``).  A multiple-shooting stage adds ``segments`` and ``defect`` (the
-    largest rms defect left, in tolerances); its ``fun`` is the objective on the stitched
-    segments.  A search's stage adds its gradients' health
-    (:class:`~casadi_keyframe.health.GrowthLog`): ``gradient_growth``, the largest backward
-    growth of its evaluations (a route that watches its backward pass), and
-    ``gradient_refused``, the evaluations whose gradient was refused (counted in
-    ``failed_simulations`` too).
-    """
+    """One stage of a call: a continuation time step, a coarser mesh, a homotopy level, a
+    multiple-shooting stage, a round of hard keyframes, or the kept point returned; a
+    producer adds the optional keys below."""
 
     weight_scale: float
+    """A round's keyframe weights' factor."""
     segments: int
+    """A multiple-shooting stage's segments."""
     defect: float
+    """Its largest rms defect left, in tolerances."""
     control_cost: float
+    """A round's control cost at its controls."""
     misses: list
+    """A round's keyframe misses at its controls, as in ``breakdown``."""
     gradient_growth: float
+    """The largest backward growth of its evaluations (a route that watches it)."""
     gradient_refused: int
+    """Its evaluations whose gradient was refused (in ``failed_simulations`` too)."""
 
 
 @dataclass
 class Result:
-    """The outcome of a search: the best controls it saw, and how it got there.
-
-    Fields (scipy's ``OptimizeResult`` names where scipy has one):
-
-    * ``x``: the controls, a flat vector on the problem's own grid and mesh;
-    * ``fun``: the objective at ``x``;
-    * ``jac``: its gradient at ``x`` by the route ``gradient`` names (NaN if an interrupt
-      stopped that evaluation);
-    * ``nit``: iterations, over all stages and rounds;
-    * ``nfev``: objective evaluations (each one simulation), failed ones included;
-    * ``njev``: gradients the search computed: one per evaluation that did not fail
-      (:func:`~.constrained.lower_effort`: its adjoint sweeps, one per keyframe residual
-      row and iteration);
-    * ``success``: ``status == 0``;
-    * ``status``: how the search ended: 0 converged; 1 a limit (iterations, evaluations,
-      ``time_limit``) was reached first; 2 the search failed (a line search found no lower
-      point, an IPOPT error); 3 interrupted (Ctrl-C, SIGTERM);
-    * ``message``: that in a sentence and, on failure, what to try;
-    * ``method``: ``"lbfgsb"``, ``"ipopt"`` or ``"lower_effort"``;
-    * ``gradient``: the gradient route that ran (``"adjoint"``, ``"swapped"``, ...);
-    * ``trajectory``: the simulation at ``x``;
-    * ``history``: one :class:`HistoryRecord` per iteration;
-    * ``timings``: :class:`Timings`;
-    * ``breakdown``: the problem's objective at ``x`` term by term, keyframe misses
-      included (:meth:`~casadi_keyframe.problem.ControlProblem.breakdown`);
-    * ``stages``: one :class:`Stage` per stage or round.
-
-    Made by :func:`assemble`; the records are checked here (ValueError naming the missing
-    keys).
-    """
+    """The outcome of a search: the best controls it saw, and how it got there, in scipy's
+    ``OptimizeResult`` names where scipy has one.  Made by :func:`assemble`, which checks
+    the records (ValueError naming a missing key)."""
 
     x: np.ndarray
+    """The controls, a flat vector on the problem's own grid and mesh."""
     fun: float
+    """The objective at ``x``."""
     jac: np.ndarray
+    """Its gradient at ``x`` by the route ``gradient`` (NaN if an interrupt stopped it)."""
     nit: int
+    """Iterations, over all stages and rounds."""
     nfev: int
+    """Objective evaluations (each one simulation), failed ones included."""
     njev: int
+    """Gradients computed: one per evaluation that did not fail."""
     success: bool
+    """``status == 0``."""
     status: int
+    """0 converged (the goal met); 1 a limit reached first; 2 the search failed; 3
+    interrupted."""
     message: str
+    """How it ended in a sentence and, short of the goal, what it misses."""
     method: str
+    """The search method that ran (a :data:`~.methods.METHODS` name or ``lower_effort``)."""
     gradient: str
+    """The gradient route that ran."""
     trajectory: Trajectory
+    """The simulation at ``x``."""
     history: list[HistoryRecord]
+    """One :class:`HistoryRecord` per iteration."""
     timings: Timings
+    """Where the time went (:class:`Timings`)."""
     breakdown: dict
+    """The objective at ``x`` term by term, misses and physical report included
+    (:meth:`~casadi_keyframe.problem.ControlProblem.breakdown`)."""
     stages: list[Stage]
+    """One :class:`Stage` per stage or round."""
 
     def __post_init__(self):
         if self.status not in STATUS or self.success != (self.status == CONVERGED):

@@ -42,63 +42,20 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
           options: dict | None = None, continuation=None, resolutions=None,
           time_limit: float | None = None, stop: str | None = None, goal=None,
           shooting=None, homotopy=None) -> Result:
-    """Optimise the problem's controls.
+    """Optimise the problem's controls; a :class:`~.result.Result` (scipy's vocabulary).
 
-    ``method`` names an entry of :data:`~.methods.METHODS` (``"lbfgsb"``, ``"ipopt"``);
-    ``gradient`` a route name or strategy; ``maxiter`` (a whole number >= 1) and ``tol``
-    (> 0) the search's limits; ``u0`` the starting controls at ``problem.dt`` (default: the
-    problem's guess, else passive); ``checkpoint`` a ``.npz`` path (or
-    :class:`~casadi_keyframe.saved.Checkpoint`) that always holds the best controls so far (at
-    ``problem.dt``, also during a coarse stage); ``options`` go to the method's library
-    (an unknown name is refused before the search, with the valid ones); ``time_limit``
-    (seconds, wall clock, over all stages) stops the search at the first iteration past it
-    (IPOPT: its ``max_wall_time``) with status 1.
-
-    ``continuation`` (the paper's section 6: optimise at a large time step, then refine) is a
-    list of time steps from coarse to fine, e.g. ``[4 * prob.dt, 2 * prob.dt]``; the
-    problem's own dt is appended if the list does not end with it.  ``u0``, if given, is
-    carried to the first stage's grid.  Each stage solves
-    ``problem.resampled(dt)`` from the previous stage's best controls carried to its grid
-    (``controls.resample``: the force in newtons stays the same function of time).
-    ``maxiter`` applies to each stage.  The result is the last stage's, at ``problem.dt``;
-    ``nit``, ``nfev`` and ``timings`` are totals over the stages, every ``history`` record
-    names its ``stage`` and ``dt``, and ``stages`` lists per stage its dt, iterations,
-    evaluations, best objective (at that dt), status, message and seconds.  An interrupt or
-    the time limit during an earlier stage ends the continuation there: the result is that
-    stage's best controls resampled to ``problem.dt`` and evaluated there, and its message
-    names the stage.
-
-    ``resolutions`` (coarse to fine in space, e.g. a cloth solved on a 12 x 12 mesh, then
-    25 x 25, then its own) lists coarser versions of the problem: problems, or dicts of
-    build overrides such as ``{"rows": 12, "cols": 12}`` for a problem built from a problem
-    file (:meth:`~.problem.ControlProblem.at_resolution`).  Each mesh, coarse to fine, is
-    solved in turn (with the ``continuation``'s time steps, if given) from the previous
-    mesh's best controls carried to it (:func:`~.transfer.carry_to_mesh`: interpolated on
-    the rest mesh, momentum and impulse kept); stages and history records name the mesh's
-    ``particles``, and the checkpoint always holds controls of ``problem`` itself.
-
-    ``homotopy`` (a third axis of stages, e.g. contact made soft and thick first) lists
-    levels of the model, each a problem or a dict of build overrides on the same particles
-    (:func:`~.stages.homotopy_levels`): every mesh is solved at each level, then as it is.
-
-    ``stop`` says when a search is done: ``"goal"`` (the default where a keyframe declares
-    a tolerance, :mod:`.goal`) once every keyframe is within its tolerance, checked at every
-    iteration (and at the start); ``"method"`` at the method's own test.  Either way a
-    stage is "converged" (status 0) only with the goal met, and a search that stopped short
-    of it says which keyframes it still misses and by how much (:func:`~.outcome.judge`).
-    ``goal`` is the problem whose keyframes judge (default ``problem``; it must have the
-    same frames, e.g. the true problem of an augmented-Lagrangian round).
-
-    ``shooting`` (a number of segments K, or :class:`~.shooting.ShootingOptions`
-    or a dict of them) runs multiple shooting first on each stage
-    (:mod:`.shooting.stage`): controls and the states at K - 1 nodes searched together,
-    the segments' defects held by multipliers; its controls then start the stage's own
-    search (unless ``polish`` is off), which stops at once if the goal is already met.  After
-    the first stage the nodes start on the run of the controls carried over (``"guess"``).
-    Its stage record says ``segments`` and the largest scaled ``defect`` left.
-
-    A simulation that fails at the starting controls raises :class:`SimulationError`;
-    during the search a failing point counts as a failed evaluation.
+    ``method``: a :data:`~.methods.METHODS` entry; ``gradient``: a route (name or object);
+    ``maxiter`` (per stage) and ``tol``: the method's limits; ``u0``: the start (default the
+    problem's guess, else passive); ``options``: the method library's own (unknown names
+    refused up front); ``time_limit``: seconds, wall clock, over all stages; ``checkpoint``:
+    a ``.npz`` path or Checkpoint that always holds the best point judged so far.  Stages,
+    coarse to fine: ``resolutions`` (coarser meshes), ``homotopy`` (levels of the model),
+    ``continuation`` (coarser time steps), each with ``shooting`` (multiple shooting, K
+    segments or its options) if given.  ``stop``: ``"goal"`` (the default where keyframes
+    declare tolerances) stops once the goal is met, ``"method"`` at the method's own test;
+    ``goal``: the problem that judges (default ``problem``).  The result is never worse than
+    the start, by the goal first and then the objective.  Each argument and stage in full:
+    ``docs/explanations/solving.md``.
     """
     options = check_settings(method, maxiter, tol, time_limit, options)
     stop = check_stop(stop, goal or problem)

@@ -1,25 +1,14 @@
 r"""Multiple shooting for keyframe problems: the horizon in K segments, the state at the
 start of each later segment an unknown, continuity between segments a constraint.
 
-One gradient through 60 steps of contact and buckling is too ill-conditioned for a local
-method; each segment's is milder, and the segments evaluate independently (in parallel,
-:mod:`.workers`).  The unknowns are the controls ``u`` and the node states ``s_1 ..
-s_{K-1}`` (their free components; pinned and attached ones follow their prescribed motion
-and are taken from a reference run).  Segment k simulates from ``s_k`` (``s_0``: the
-problem's start, with the controls' velocity change) over its steps; the frames it owns
-(its start up to the next node, the last one also the final frame) make the stitched
-trajectory the objective is evaluated on.  Each segment starts from what the step before it
-carried beyond the state (contacts released, springs taut: :mod:`.segments`) in the
-evaluation's own stitched run, so consistent nodes give the single run exactly.  The defect ``d_k = end_k - s_{k+1}`` must
-vanish; scaled by the keyframes' tolerances (``c_k = d_k / sigma``, positions and
-velocities apart) it enters as ``0.5 w |c_k + lambda_k / w|^2`` through the
-:class:`~.multipliers.Multipliers` the keyframe rounds use too.
-
-Node variables are scaled too: ``y = x / sigma_x`` and ``v / sigma_v``, so a defect as
-large as the tolerance is a unit change.  Derivatives are exact: each segment's backward
-sweep (the integrator's ``step_vjp``, reusing its forward pass's factorisations) carries
-the stitched frames' objective derivatives and the defect's weight at its end back to its
-forces and its start state.
+The unknowns are the controls and the node states' free components, scaled by the
+keyframes' tolerances (:func:`defect_scales`) so that a defect as large as the tolerance is
+a unit change; each segment starts from what the step before it carried beyond the state,
+so consistent nodes give the single run exactly.  The scaled defects enter through the
+:class:`~..multipliers.Multipliers` the keyframe rounds use too, and every derivative is
+exact: each segment's backward sweep carries the stitched frames' objective derivatives
+and its defect's weight back to its forces and its start.  The whole account:
+``docs/explanations/multiple_shooting.md``.
 """
 from __future__ import annotations
 

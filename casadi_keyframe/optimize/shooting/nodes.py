@@ -5,13 +5,10 @@
   controls an earlier stage carried over): consistent nodes, no defect;
 * ``"target"``: the state the next full keyframe asks for (every particle's position, and
   its velocity where the keyframe gives one);
-* ``"blend"``: from the passive run towards that target, linearly in time: a node at frame
-  a before a keyframe at frame f takes ``(1 - a/f)`` of the passive state and ``a/f`` of
-  the target (from the previous full keyframe's target rather than the passive run, once
-  one has passed);
+* ``"blend"``: from the passive run (or the previous full keyframe's target) towards that
+  target, linearly in time;
 * a function ``path(problem) -> (steps + 1, n, dim)`` positions: a problem's own guess of
-  the states it passes through (a cape blended in its body's frame), velocities by central
-  differences of the path.
+  the states it passes through, velocities by central differences of the path.
 
 Pinned and attached particles keep their prescribed motion (from the reference run) in
 every case; ``target`` and ``blend`` need a StateKeyframe over every particle with a

@@ -14,37 +14,32 @@ FORMULATIONS = ("lagrangian", "ipopt")
 
 @dataclass(frozen=True)
 class ShootingOptions:
-    """How multiple shooting runs (``solve(..., shooting=...)``).
-
-    * ``segments``: K, the segments the horizon is cut into (1: single shooting);
-    * ``init``: where the node states start (:mod:`.nodes`): ``"passive"``,
-      ``"guess"`` (the start controls' run: no defect), ``"target"``, ``"blend"``, or a
-      function of the problem giving a path of positions (a problem's own guess of states);
-    * ``rounds``: augmented-Lagrangian rounds at most (the stage's ``maxiter`` is shared
-      among them);
-    * ``workers``: processes sweeping the segments (1: this one); ``scheduler``: a Dask
-      scheduler's address instead;
-    * ``penalty``: factor on the defects' starting weights (1: a defect as large as the
-      tolerance costs what the keyframe's miss of that size costs); ``growth``: factor a
-      weight grows by where its defect did not shrink to a quarter;
-    * ``polish``: end with the stage's single-shooting search from the result;
-    * ``hold``: hold the StateKeyframes by multipliers too (``"lagrangian"`` only);
-    * ``formulation``: ``"lagrangian"`` (the defects held by multipliers, rounds of the
-      solve's method on the merit function) or ``"ipopt"`` (IPOPT with the defects as
-      constraints and their Jacobian by one backward sweep per row,
-      :mod:`.ipopt_form`; one run, ``rounds`` unused).
-    """
+    """How multiple shooting runs (``solve(..., shooting=...)``), field by field."""
 
     segments: int
+    """K, the segments the horizon is cut into (1: single shooting)."""
     init: str = "passive"
+    """Where the node states start (:mod:`.nodes`): ``"passive"``, ``"guess"`` (the start
+    controls' run: no defect), ``"target"``, ``"blend"``, or a function of the problem
+    giving a path of positions."""
     rounds: int = 8
+    """Augmented-Lagrangian rounds at most (the stage's ``maxiter`` shared among them)."""
     workers: int = 1
+    """Processes sweeping the segments (1: this one)."""
     scheduler: str | None = None
+    """A Dask scheduler's address, to sweep the segments on its workers instead."""
     penalty: float = 1.0
+    """Factor on the defects' starting weights (1: a defect as large as the tolerance costs
+    what the keyframe's miss of that size costs)."""
     growth: float = 10.0
+    """Factor a weight grows by where its defect did not shrink to a quarter."""
     polish: bool = True
+    """End with the stage's single-shooting search from the result."""
     hold: bool = True
+    """Hold the StateKeyframes by multipliers too (``"lagrangian"`` only)."""
     formulation: str = "lagrangian"
+    """``"lagrangian"`` (the defects held by multipliers, rounds of the solve's method) or
+    ``"ipopt"`` (IPOPT with the defects as constraints, :mod:`.ipopt_form`)."""
 
 
 def shooting_options(value) -> ShootingOptions | None:

@@ -1,0 +1,128 @@
+"""The objective as residuals, ``phi(u) = 0.5 |r(u)|^2``, linearized at a point: the matrix-free
+products ``J p`` (one tangent pass along the recorded run, the integrators' exact
+``step_jvp``) and ``J^T w`` (one backward pass with the residual cotangents as frame
+cotangents, the exact ``step_vjp``, then the controls' pullback) that a Gauss-Newton search
+needs.  ``r`` stacks every term's residual (keyframe misses, region distances, strain
+excess, control effort) in the problem's term order.
+"""
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse.linalg import LinearOperator
+
+from ..simulate import backward, tangent
+
+
+class Linearization:
+    """The residual map of ``problem`` at the controls ``u``: one simulation with records,
+    kept for the products until :meth:`release` (it holds the steps' factorisations).
+
+    * ``residual``: r(u); ``value``: 0.5 |r|^2, the objective at u;
+    * :meth:`jvp` ``(du) -> J du`` and :meth:`vjp` ``(w) -> J^T w``, exact for the scheme
+      simulated (the aligned mesh keyframe's Jacobian excepted: see ``MeshKeyframe``);
+    * :meth:`operator`: both as a scipy ``LinearOperator`` (for LSMR, ``least_squares``).
+    """
+
+    def __init__(self, problem, u):
+        self.problem = problem
+        self.u = problem.controls.check(u)
+        self.trajectory = problem.simulate(self.u)
+        terms = problem.objective_terms
+        self._state = terms.state_terms + terms.trajectory_terms
+        self._control = terms.control_terms
+        pieces = ([t.residual(self.trajectory) for t in self._state]
+                  + [t.residual(self.u, problem.controls, problem.dt) for t in self._control])
+        self._ends = np.cumsum([p.size for p in pieces])
+        self.residual = np.concatenate(pieces) if pieces else np.zeros(0)
+        self.products = 0  # Jacobian products so far, forward and transposed
+
+    @property
+    def value(self) -> float:
+        return float(0.5 * self.residual @ self.residual)
+
+    @property
+    def shape(self) -> tuple:
+        return (self.residual.size, self.u.size)
+
+    def jvp(self, du) -> np.ndarray:
+        """``J du``: the residuals' change along the controls' change ``du`` (to first order)."""
+        p = self.problem
+        du = np.asarray(du, dtype=float).ravel()
+        offset, forces = p.controls.velocity_offset(du), p.controls.external(du)
+        traj = self.trajectory
+        dx, dv = tangent(p.integrator, p.model, traj, np.zeros_like(p.x0),
+                         np.zeros_like(p.v0) if offset is None else offset,
+                         np.zeros_like(p.external) if forces is None else forces)
+        self.products += 1
+        return np.concatenate([t.residual_jvp(traj, dx, dv) for t in self._state]
+                              + [t.residual_jvp(du, p.controls, p.dt) for t in self._control])
+
+    def vjp(self, w) -> np.ndarray:
+        """``J^T w``: the controls' cotangent of the residual cotangent ``w``."""
+        p, traj = self.problem, self.trajectory
+        w = np.asarray(w, dtype=float).ravel()
+        parts = np.split(w, self._ends[:-1])
+        gx, gv = np.zeros_like(traj.x), np.zeros_like(traj.v)
+        for term, part in zip(self._state, parts):
+            term.residual_vjp(traj, part, gx, gv)
+        g_external, g0 = backward(p.integrator, p.model, traj, gx, gv)
+        out = p.controls.pullback(g_external, g0.v)
+        for term, part in zip(self._control, parts[len(self._state):]):
+            out = out + term.residual_vjp(part, p.controls, p.dt)
+        self.products += 1
+        return out
+
+    def gradient(self) -> np.ndarray:
+        """``J^T r``, the objective's gradient at u."""
+        return self.vjp(self.residual)
+
+    def operator(self) -> LinearOperator:
+        return LinearOperator(self.shape, matvec=self.jvp, rmatvec=self.vjp, dtype=float)
+
+    def release(self) -> None:
+        """Hand the run's kept factorisations back (no product after this)."""
+        self.problem.integrator.release(self.trajectory)
+
+
+class SearchSpace:
+    """Where a residual search moves: the evaluator's variables z (a smooth metric's, u =
+    S z, or the controls themselves), the bounds on u, and the Jacobian products in z.
+    ``method`` names the search in the refusal of a problem without residuals (multiple
+    shooting's merit function)."""
+
+    def __init__(self, problem, ev, method: str):
+        if not hasattr(problem, "objective_terms"):
+            raise ValueError(f"method {method!r} searches a problem's residuals, and multiple "
+                             "shooting's merit function has no residual form yet: run the "
+                             f"shooting with method 'lbfgsb', then {method!r} from its result")
+        self.problem, self.metric = problem, getattr(ev, "metric", None)
+        self.lb, self.ub = problem.bounds()
+        self.bounded = bool(np.isfinite(self.lb).any() or np.isfinite(self.ub).any())
+
+    def controls(self, z):
+        return z if self.metric is None else self.metric.smooth(z)
+
+    def products(self, lin, free=1.0, between=lambda: None):
+        """``(z -> J_z p, w -> J_z^T w)`` at ``lin``, with only the ``free`` variables moving
+        and ``between()`` run before each product."""
+        smooth = (lambda v: v) if self.metric is None else self.metric.smooth
+
+        def jvp(d):
+            between()
+            return lin.jvp(smooth(free * d))
+
+        def vjp(s):
+            between()
+            return free * smooth(lin.vjp(s))
+
+        return jvp, vjp
+
+    def free(self, z, gradient):
+        """1 where a variable may move, 0 at a bound the gradient pushes against."""
+        if not self.bounded:
+            return 1.0
+        return np.where(((z <= self.lb) & (gradient > 0)) | ((z >= self.ub) & (gradient < 0)),
+                        0.0, 1.0)
+
+    def clipped(self, z, p):
+        return p if not self.bounded else np.clip(z + p, self.lb, self.ub) - z

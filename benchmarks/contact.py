@@ -10,8 +10,12 @@ it must hold more or take springs taut), and the CPU seconds per forward step an
 gradient step (the exact adjoint of a keyframe objective at zero controls: the forward pass
 with records plus the backward pass, divided by the steps), then the costs of each contact
 model against the paper's penalty springs ("today's") where both ran, and the issue's
-checks.  One process, one BLAS thread, ``time.process_time``; the cases run in turn, each
-model's runs of a case next to each other.
+checks.  Mesh bodies: the 25 x 25 sheet at 8 m/s on an icosphere OBJ (radius 0.3 m, 2,562
+vertices) against the analytic sphere, still and rising, with the same figures for spheres
+a few tenths of a millimetre off (how much the scene itself moves with such a change), and
+the cape blend's passive fall onto the walking body as capsules, as a mesh and as a mesh
+read from a PC2 file (``--only mesh`` runs only these).  One process, one BLAS thread,
+``time.process_time``; the cases run in turn, each model's runs of a case next to each other.
 
 The cost table (``--only cost``) is the contact issue's: CPU seconds of a forward pass (no
 records), the median of ``--repeat`` rounds, each round running a case's two problems one
@@ -23,7 +27,7 @@ linear solves each took; then the targets (1.3x, 1.5x, the arch under 3.5 s).
 
     .venv/bin/python benchmarks/contact.py [--sizes 25 50] [--speeds 4 8 12]
         [--models penalty guarded constraint] [--duration 0.5] [--repeat 1]
-        [--only drops|friction|cost]
+        [--only drops|friction|cost|mesh]
 """
 import os
 
@@ -32,17 +36,19 @@ for _name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import argparse  # noqa: E402
 import statistics  # noqa: E402
+import tempfile  # noqa: E402
 import time  # noqa: E402
-
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
-from casadi_keyframe.models import COLLISIONS, ClothModel  # noqa: E402
-from casadi_keyframe.scenes.drops import (drop_model, drop_start, ground_throw,  # noqa: E402
-                                          slope_slide)
+from casadi_keyframe.models import COLLISIONS, ClothModel, Sphere  # noqa: E402
+from casadi_keyframe.scenes.body_meshes import write_body  # noqa: E402
+from casadi_keyframe.scenes.drops import (MESH_RADIUS, RISE, drop, drop_model,  # noqa: E402
+                                          drop_start, ground_throw, mesh_drop, slope_slide)
 from casadi_keyframe.state import SimulationError  # noqa: E402
 
 NOISE = 10.0  # m/s^2 rms: the perturbed point of the arch (any search iterate)
@@ -83,6 +89,55 @@ def measure(prob, repeat: int) -> dict:
             "gradient": statistics.median(gradient) / prob.steps}
 
 
+def mesh_bodies():
+    """The icosphere drops against the analytic sphere, and the cape on the body as a mesh."""
+    print("\n25 x 25 sheet at 8 m/s on an icosphere OBJ (r 0.3 m, 2,562 vertices) against "
+          "the analytic Sphere (guarded); inside: deepest particle inside the true sphere;"
+          " com: largest distance between the runs' centres of mass at any frame")
+    for rising in (False, True):
+        case = "rising at 2 m/s" if rising else "still"
+        t = time.process_time()
+        r = mesh_drop(25, 8.0, rising=rising)
+        cpu = time.process_time() - t
+        if "failed" in r:
+            print(f"  {case}: failed: {r['failed']}")
+            continue
+        frames = np.linalg.norm(r["mesh"]["com"] - r["sphere"]["com"], axis=1)
+        within = int(np.argmax(frames > 0.01)) if (frames > 0.01).any() else len(frames)
+        print(f"  {case:16s} mesh inside {1e3 * r['mesh']['inside']:5.2f} mm, stretch "
+              f"{r['mesh']['stretch']:.3f} (sphere {1e3 * r['sphere']['inside']:5.2f} mm, "
+              f"{r['sphere']['stretch']:.3f}); com {100 * r['com']:.2f} cm, within 1 cm "
+              f"to frame {within - 1} of {len(frames) - 1}; both runs {cpu:.1f} s CPU")
+        for radius, shift in ((MESH_RADIUS - 3e-4, 0.0), (MESH_RADIUS, 1e-4)):
+            print(f"    the sphere's own run against r = {1e3 * radius:.1f} mm moved "
+                  f"{1e3 * shift:.1f} mm: com {100 * sphere_spread(rising, radius, shift):.2f} cm")
+    print("\ncape_blend --set guess=passive, zero forces, 26 x 16, on the walking body:")
+    with tempfile.TemporaryDirectory() as folder:
+        for body in ("capsules", "mesh", "file"):
+            t = time.process_time()
+            if body == "file":
+                mesh = load_problem("cape_blend", guess="passive", body="mesh")
+                body = str(write_body(Path(folder) / "walker.pc2", mesh.model.colliders[0],
+                                      mesh.steps * mesh.dt, mesh.dt))
+            prob = load_problem("cape_blend", guess="passive", body=body)
+            traj = prob.simulate(prob.initial_controls())
+            report = prob.model.physical_report(traj.x, prob.dt)
+            print(f"  body={Path(body).name:12s} deepest {1e3 * report['max_penetration']:.2f} mm, "
+                  f"stretch {report['max_stretch']:.3f}, {time.process_time() - t:.1f} s CPU")
+
+
+def sphere_spread(rising, radius, shift):
+    """The largest distance between the centres of mass of the sheet dropped on the
+    analytic sphere and on one of ``radius`` moved ``shift`` m sideways."""
+    centre = np.array([0.5, 0.5, -MESH_RADIUS])
+    runs = []
+    for r, s in ((MESH_RADIUS, 0.0), (radius, shift)):
+        at = centre + [s, 0, 0]  # a still sphere is held on its surface, a moving one not
+        path = (lambda t, at=at: at + [0, 0, RISE * t]) if rising else at
+        runs.append(drop(25, Sphere(path, r), 8.0)[0].x.mean(axis=1))
+    return float(np.linalg.norm(runs[0] - runs[1], axis=1).max())
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", type=int, nargs="+", default=[25, 50])
@@ -91,12 +146,14 @@ def main():
     ap.add_argument("--duration", type=float, default=0.5)
     ap.add_argument("--dt", type=float, default=1 / 60)
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--only", choices=["drops", "friction", "cost"])
+    ap.add_argument("--only", choices=["drops", "friction", "cost", "mesh"])
     args = ap.parse_args()
     if args.only in (None, "drops"):
         drops(args)
     if args.only in (None, "friction"):
         friction(args)
+    if args.only in (None, "mesh"):
+        mesh_bodies()
     if args.only in (None, "cost"):
         cost(max(args.repeat, 3) if args.only is None else args.repeat)
 

@@ -52,8 +52,11 @@ def grid_triangles(rows: int, cols: int) -> np.ndarray:
 
 
 def body_geometry(body, t: float):
-    """``("plane", point, normal)`` or ``("round", a, b, radius)`` from ``body.geometry(t)``
-    (a sphere is a round body with ``a == b``)."""
+    """``("plane", point, normal)``, ``("round", a, b, radius)`` (a sphere is a round body
+    with ``a == b``) or ``("mesh", vertices, faces)`` from ``body.geometry(t)``."""
+    if body.kind == "mesh":
+        vertices, faces = body.geometry(t)
+        return "mesh", vertices, faces
     g = [np.asarray(p, dtype=float) for p in body.geometry(t)]
     if isinstance(body, Plane):
         return "plane", g[0], g[1]

@@ -15,7 +15,11 @@ searches stall far off or tear the cape, so the default start is a tracking gues
 forces ``SOLVE`` asks for multiple shooting.  ``contact`` > 1 makes the body's contact that
 many times softer and thicker (a homotopy level); ``collision`` how the body is touched;
 ``friction`` the Coulomb coefficient of the body and the ground (0: frictionless).
-Measurements behind these choices: ``docs/problem_notes.md``.
+``body`` what it is: its capsules ("capsules"), their surface as a triangle mesh animated per
+frame ("mesh"), or a mesh file read as the character (a PC2 cache beside its rest OBJ at one
+frame per ``dt``, or a time-sampled USD; t = 0 is the blend's start, as
+``scenes.body_meshes.write_body`` writes it).  Measurements behind these choices:
+``docs/problem_notes.md``.
 """
 from __future__ import annotations
 
@@ -25,6 +29,7 @@ from casadi_keyframe.checks import frame_at
 from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
 from casadi_keyframe.scenes.animations import fall, transition
+from casadi_keyframe.scenes.body_meshes import cape_body
 from casadi_keyframe.scenes.cape_tracking import (blend_steps, check_attached, reference_path,
                                                   tracking_guess)
 from casadi_keyframe.scenes.capes import cached_clip, cape_contacts, cape_model
@@ -63,7 +68,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
           t_a: float = 0.8, t_b: float = 0.6, window: float | None = None,
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
           temporal: float = 1e-7, guess: str = "tracking", contact: float = 1.0,
-          collision: str = DEFAULT_COLLISION, friction: float = 0.0):
+          collision: str = DEFAULT_COLLISION, friction: float = 0.0,
+          body: str = "capsules"):
     steps = blend_steps(steps, window, dt)
     fall_start = frame_at(t_a, dt, "cape_blend: t_a")
     walk_start = frame_at(t_b, dt, "cape_blend: t_b")
@@ -77,9 +83,11 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     fall_model, fall_traj, fall_motion = cached_clip("fall", rows, cols, t_a + window, dt)
     walk_model, walk_traj, walk_motion = cached_clip("walk", rows, cols, t_b + window, dt)
     motion = transition(fall_motion, walk_motion, t_a, t_b, window)
+    contacts = _contacts(rows, cols, dt, contact, friction)
     model = cape_model(character, motion.shifted(-t_a), rows=rows, cols=cols, dt=dt,
-                       contacts=_contacts(rows, cols, dt, contact, friction),
-                       collision=collision)
+                       contacts=contacts, collision=collision,
+                       body=cape_body("cape_blend", body, character, motion.shifted(-t_a),
+                                      window, dt, contacts["body"]))
     x0, v0 = fall_traj.x[fall_start], fall_traj.v[fall_start]
     target_x = walk_traj.x[walk_start + steps] + motion.offset
     target_v = walk_traj.v[walk_start + steps]

@@ -8,8 +8,9 @@ PLY vertex property, a USD point subset or primvar) and those inside ``pin_box``
 should be on its vertex of the file, which must be the cloth's mesh in another shape (same
 vertices in the same order, same faces); ``align`` compares shapes after the best rigid
 motion.  Metres, z up, gravity along -z; ``mass`` is the cloth's total in kg, ``ground`` (a
-height) and ``spheres`` (x,y,z,radius, ...) add colliders, ``dt`` is the frame time and
-``steps`` defaults to the last keyframe's frame.
+height), ``spheres`` (x,y,z,radius, ...) and ``bodies`` (mesh files: OBJ, PLY, USD, still or
+time-sampled, or a PC2 cache beside its ``NAME_rest.obj`` at one frame per ``dt``) add
+colliders, ``dt`` is the frame time and ``steps`` defaults to the last keyframe's frame.
 
 The cloth starts at rest ``wrinkle`` metres (2 mm) out of the file's shape along its
 normals: an exactly flat sheet hanging in its plane is a buckling saddle, whose exact
@@ -35,7 +36,7 @@ vertex count or other faces, a pin out of range or a frame beyond ``steps`` is r
 the option's name (exit code 2).  The Blender add-on in ``blender/`` runs this problem.
 """
 from casadi_keyframe.meshes import check_mesh
-from casadi_keyframe.scenes.mesh_cloths import (colliders_of, mesh_keyframe_problem,
+from casadi_keyframe.scenes.mesh_cloths import (bodies_of, colliders_of, mesh_keyframe_problem,
                                                  parse_keyframes, pinned_of, read_option,
                                                  refuse)
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
@@ -52,6 +53,7 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           pin_box: tuple[float, ...] | None = None, steps: int | None = None,
           dt: float = 1 / 60, mass: float = 0.3, control: str = "forces",
           ground: float | None = None, spheres: tuple[float, ...] | None = None,
+          bodies: str | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
           smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land"):
@@ -73,7 +75,9 @@ def build(cloth: str | None = None, keyframes: str | None = None,
                        pin_box)
     return mesh_keyframe_problem(cloth=sheet, keyframes=targets, steps=steps, dt=dt, mass=mass,
                                  pinned=pinned, control=control,
-                                 colliders=colliders_of(ground, spheres), weight=weight,
+                                 colliders=colliders_of(ground, spheres)
+                                 + ([] if bodies is None else bodies_of(bodies, dt)),
+                                 weight=weight,
                                  alpha=alpha, align=align, strain_limit=strain_limit,
                                  strain_weight=strain_weight, smoothing=smoothing,
                                  wrinkle=wrinkle, guess=guess)

@@ -74,3 +74,22 @@ def test_misses_described_with_scene_frames(tmp_path):
     lines = bridge.describe_misses(bridge.read_misses(tmp_path), 0.01, start_frame=1)
     assert lines == ["frame 41: 4.0 mm rms, 10.0 mm max: hit (tolerance 10 mm)",
                      "frame 81: 20.0 mm rms, 50.0 mm max: MISSED (tolerance 10 mm)"]
+
+
+def test_colliders_are_written_as_the_library_reads_bodies(tmp_path):
+    import pytest
+    pytest.importorskip("igl")
+    from casadi_keyframe.models import MeshBody
+    square = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.5)]
+    still = bridge.write_body(tmp_path, "floor", [square, square], [[0, 1, 2, 3]])
+    assert still.name == "floor.obj" and not MeshBody.from_file(still).moves
+    rising = [[(x, y, z + 0.1 * k) for x, y, z in square] for k in range(3)]
+    moving = bridge.write_body(tmp_path, "lift", rising, [[0, 1, 2, 3]])
+    assert moving.name == "lift.pc2" and (tmp_path / "lift_rest.obj").is_file()
+    body = MeshBody.from_file(moving, fps=30)
+    np.testing.assert_allclose(body.world_vertices(1 / 60), np.array(square) + [0, 0, 0.05],
+                               atol=1e-6)
+    cmd = bridge.solve_command("ckf", cloth="c.obj", targets=[(4, "t.obj")], pins=[],
+                               dt="1/30", steps=4, out="r", bodies=[still, moving])
+    assert parse_overrides(build_parser().parse_args(cmd[1:]).set)["bodies"] == \
+        f"{still},{moving}"

@@ -2,7 +2,9 @@
 
 Pick a mesh object, put its pinned vertices in a vertex group (``pins`` by default), give
 it shape keys named ``NAME@FRAME`` (or keyed to 1.0 at a frame; other mesh objects named
-``NAME@FRAME`` count too) and press Solve in the sidebar's "Keyframe Cloth" tab.  The add-on
+``NAME@FRAME`` count too) and press Solve in the sidebar's "Keyframe Cloth" tab.  The mesh
+objects of a collection named ``colliders`` are bodies the cloth touches, still or animated
+(armatures, modifiers and shape keys as evaluated at each frame).  The add-on
 writes the meshes as OBJ files (world space, metres, z up), runs ``casadi-keyframe solve
 mesh_keyframes`` with the installed library (its path in the add-on's preferences) in a
 subprocess, shows its progress and the misses, and plays the result through a Mesh Cache
@@ -34,6 +36,7 @@ bl_info = {
     "category": "Physics",
 }
 MODIFIER = "casadi_keyframe"
+COLLIDERS = "colliders"  # the collection whose mesh objects are bodies
 
 
 class CKF_Preferences(bpy.types.AddonPreferences):
@@ -122,6 +125,36 @@ def collect_targets(obj, scene):
     return sorted(found)
 
 
+def collect_bodies(scene, depsgraph, folder, steps: int, cloth=None) -> list:
+    """Write each mesh object of the ``colliders`` collection (but the ``cloth``) as a body
+    file (world space, evaluated at each frame from the scene's start over ``steps`` frames
+    and one more) and return the files."""
+    collection = bpy.data.collections.get(COLLIDERS)
+    objects = [o for o in (collection.all_objects if collection else [])
+               if o.type == "MESH" and o is not cloth]
+    if not objects:
+        return []
+    frames = {o.name: [] for o in objects}
+    polygons = {}
+    current = scene.frame_current
+    try:
+        for frame in range(scene.frame_start, scene.frame_start + steps + 2):
+            scene.frame_set(frame)
+            for o in objects:
+                evaluated = o.evaluated_get(depsgraph)
+                mesh = evaluated.to_mesh()
+                faces = [list(p.vertices) for p in mesh.polygons]
+                if polygons.setdefault(o.name, faces) != faces:
+                    raise ValueError(f"collider {o.name} changes its faces at frame {frame}: "
+                                     f"a body keeps its mesh's topology")
+                frames[o.name].append(world_points(evaluated.matrix_world, mesh.vertices))
+                evaluated.to_mesh_clear()
+    finally:
+        scene.frame_set(current)
+    return [bridge.write_body(folder, f"collider_{bpy.path.clean_name(o.name)}",
+                              frames[o.name], polygons[o.name]) for o in objects]
+
+
 def work_folder(settings, obj) -> Path:
     if settings.folder:
         return Path(bpy.path.abspath(settings.folder))
@@ -163,10 +196,11 @@ def prepare(context):
         path.write_text(bridge.obj_text(pts, polygons, f"{name}: result frame {frame}"))
         files.append((frame, path))
     steps = settings.steps or max(f for f, _ in files)
+    bodies = collect_bodies(scene, context.evaluated_depsgraph_get(), folder, steps, obj)
     command = bridge.solve_command(
         preferences(context).executable, cloth=cloth, targets=files, pins=pins,
         dt=bridge.fps_fraction(scene.render.fps, scene.render.fps_base), steps=steps,
-        out=folder / "result", maxiter=settings.maxiter)
+        out=folder / "result", maxiter=settings.maxiter, bodies=bodies)
     return command, folder / "result"
 
 

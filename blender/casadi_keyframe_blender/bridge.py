@@ -1,6 +1,7 @@
 """What the add-on does outside Blender's API, in plain Python (no bpy, no numpy), so it can
-be tested without Blender: mesh files written for the solver, the solve's command line, the
-progress lines it prints, its misses, and point caches carried into an object's local space.
+be tested without Blender: mesh files written for the solver (the cloth, its targets, the
+colliders), the solve's command line, the progress lines it prints, its misses, and point
+caches carried into an object's local space.
 
 The add-on never imports casadi_keyframe: it runs the user's ``casadi-keyframe`` command (the
 path in the add-on's preferences) in a subprocess and reads the files it leaves.
@@ -27,6 +28,20 @@ def obj_text(vertices, polygons, comment: str = "") -> str:
     return "\n".join(lines) + "\n"
 
 
+def write_body(folder, name: str, frames, polygons) -> Path:
+    """A collider's mesh file for the solver from ``frames`` (per scene frame from the
+    start, a list of world (x, y, z)): ``NAME.obj`` if it never moves, else the point cache
+    ``NAME.pc2`` (one sample per frame) beside its rest mesh ``NAME_rest.obj``."""
+    folder = Path(folder)
+    if all(frame == frames[0] for frame in frames[1:]):
+        path = folder / f"{name}.obj"
+        path.write_text(obj_text(frames[0], polygons, f"collider {name}, world space"))
+        return path
+    (folder / f"{name}_rest.obj").write_text(
+        obj_text(frames[0], polygons, f"collider {name} at the start, world space"))
+    return write_pc2(folder / f"{name}.pc2", frames)
+
+
 def frame_from_name(name: str):
     """The frame a target's name asks for (``"wave@40"`` -> 40), or None."""
     match = _TARGET.match(name.strip())
@@ -41,14 +56,17 @@ def fps_fraction(fps: int, fps_base: float) -> str:
 
 
 def solve_command(executable: str, *, cloth, targets, pins, dt: str, steps: int, out,
-                  maxiter: int | None = None, extra=()) -> list[str]:
+                  maxiter: int | None = None, bodies=(), extra=()) -> list[str]:
     """The ``casadi-keyframe solve mesh_keyframes`` command line: ``targets`` is a list of
-    ``(frame, file)``; the result is also exported as a PC2 point cache."""
+    ``(frame, file)``, ``bodies`` the colliders' mesh files (:func:`write_body`); the result
+    is also exported as a PC2 point cache."""
     keyframes = ",".join(f"{frame}:{path}" for frame, path in sorted(targets))
     args = [str(executable), "solve", PROBLEM, "--set", f"cloth={cloth}", "--set",
             f"keyframes={keyframes}", "--set", f"dt={dt}", "--set", f"steps={int(steps)}"]
     if pins:
         args += ["--set", "pins=" + ",".join(str(int(i)) for i in sorted(pins)) + ","]
+    if bodies:
+        args += ["--set", "bodies=" + ",".join(str(b) for b in bodies)]
     if maxiter:
         args += ["--maxiter", str(int(maxiter))]
     return args + ["--out", str(out), "--export", "pc2", "--no-animation", "--no-viewer",

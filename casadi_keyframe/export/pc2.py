@@ -8,16 +8,15 @@ vertices in the same order, which is what the modifier needs.
 """
 from __future__ import annotations
 
-import struct
 from pathlib import Path
 
 import numpy as np
 
+from ..meshes.point_cache import HEADER, MAGIC, read_pc2
 from ..saved import atomic_path
 from .obj import write_obj
 
-MAGIC = b"POINTCACHE2\0"
-_HEADER = struct.Struct("<12siiffi")
+__all__ = ["MAGIC", "read_pc2", "write_cache", "write_pc2"]
 
 
 def write_pc2(path, positions, *, start: float = 0.0, rate: float = 1.0) -> Path:
@@ -27,24 +26,9 @@ def write_pc2(path, positions, *, start: float = 0.0, rate: float = 1.0) -> Path
         raise ValueError(f"a point cache holds (samples, points, 3) positions, got {pos.shape}")
     samples, points, _ = pos.shape
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
-        f.write(_HEADER.pack(MAGIC, 1, points, float(start), float(rate), samples))
+        f.write(HEADER.pack(MAGIC, 1, points, float(start), float(rate), samples))
         f.write(pos.tobytes())
     return Path(path)
-
-
-def read_pc2(path) -> tuple[np.ndarray, float, float]:
-    """``(positions (samples, points, 3) float32, start, rate)`` of a PC2 file."""
-    data = Path(path).read_bytes()
-    if len(data) < _HEADER.size:
-        raise ValueError(f"{path} is too short for a PC2 header")
-    magic, version, points, start, rate, samples = _HEADER.unpack_from(data)
-    if magic != MAGIC or version != 1:
-        raise ValueError(f"{path} is not a PC2 version 1 file (header {magic!r}, {version})")
-    expected = _HEADER.size + 12 * points * samples
-    if len(data) != expected:
-        raise ValueError(f"{path} holds {len(data)} bytes, its header promises {expected}")
-    pos = np.frombuffer(data, dtype="<f4", offset=_HEADER.size).reshape(samples, points, 3)
-    return pos, start, rate
 
 
 def write_cache(scene, folder) -> list[Path]:

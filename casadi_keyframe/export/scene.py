@@ -27,9 +27,10 @@ def points3(x) -> np.ndarray:
 
 @dataclass
 class Body:
-    """A collider: ``kind`` "plane" (``a`` a point, ``b`` the normal) or "round" (a capsule
+    """A collider: ``kind`` "plane" (``a`` a point, ``b`` the normal), "round" (a capsule
     from ``a`` to ``b``, a sphere when they coincide, of ``radius``), per frame
-    ``(frames, 3)``; ``moving`` says whether it changes over the frames."""
+    ``(frames, 3)``, or "mesh" (``a`` its vertices per frame ``(frames, v, 3)``, ``b`` its
+    faces); ``moving`` says whether it changes over the frames."""
 
     name: str
     kind: str
@@ -50,8 +51,9 @@ def bodies(model, times, prefix: str = "") -> list[Body]:
         geo = [body_geometry(body, t) for t in times]
         kind = geo[0][0]
         radius = np.array([g[3] if kind == "round" else 0.0 for g in geo])
+        b = geo[0][2] if kind == "mesh" else np.array([g[2] for g in geo])
         out.append(Body(f"{prefix}{type(body).__name__}{i}", kind, np.array([g[1] for g in geo]),
-                        np.array([g[2] for g in geo]), radius, moves(body, list(times))))
+                        b, radius, moves(body, list(times))))
     return out
 
 

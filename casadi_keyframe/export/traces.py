@@ -52,6 +52,8 @@ def bodies_mesh(body_list, n: int, mid, half, k: int = 6):
         m = n if body.moving else 0
         if body.kind == "plane":
             v, t = plane_patch(body.a[m], body.b[m], mid, half), np.array([[0, 1, 2], [0, 2, 3]])
+        elif body.kind == "mesh":
+            v, t = body.a[m], body.b
         else:
             grid = capsule_grid(body.a[m], body.b[m], body.radius[m], k)
             v, t = grid.reshape(-1, 3), grid_triangles(*grid.shape[:2])

@@ -185,6 +185,8 @@ class _Writer:
             where = f"{path}/{prim_name(body.name)}"
             if body.kind == "plane":
                 self._plane(where, body)
+            elif body.kind == "mesh":
+                self.mesh(where, body.a if body.moving else body.a[:1], BODY, faces=body.b)
             else:
                 self._round(where, body)
 

@@ -61,6 +61,8 @@ def _extent(panel) -> tuple[np.ndarray, np.ndarray]:
         if b.kind == "round":
             r = b.radius[:, None]
             pts += [b.a - r, b.a + r, b.b - r, b.b + r]
+        elif b.kind == "mesh":
+            pts.append(b.a.reshape(-1, 3))
         else:  # the plane's point below the middle
             normal = b.b / np.linalg.norm(b.b, axis=1, keepdims=True)
             pts.append(middle - np.sum((middle - b.a) * normal, 1, keepdims=True) * normal)

@@ -444,7 +444,7 @@ class LinearizedBackwardEuler(Integrator):
         X, V, E = (ca.SX.sym(s, d, n) for s in "XVE")
         dt, S = ca.SX.sym("dt"), ca.SX.sym("S", n_s)
         scene, decided = S[:n_scene], S[n_s - n_decided:]
-        f = ca.vec(model.symbolic_forces(X, V, scene))
+        f = ca.vec(model.symbolic_forces(X, V, scene, *([decided] if n_decided else [])))
         K, D = model.symbolic_jacobians(X, V, scene, decided if n_decided else None)
         mass = np.repeat(model.masses, d)
         A = ca.diag(ca.DM(mass)) - dt * D - dt * dt * K

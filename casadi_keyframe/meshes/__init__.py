@@ -7,12 +7,15 @@ triangulated by a fan from their first corner (so two files of the same polygons
 same triangles whatever their shapes; the mesh carries a notice saying so), and refused with
 a :class:`MeshError` naming the file and the fix when a mesh is non-manifold, has degenerate
 faces or vertices no face uses.  :func:`pin_indices` turns vertex indices, a named vertex set
-or a box into pinned particles.
+or a box into pinned particles.  :func:`read_animated` reads a body's mesh with its per-frame
+vertices (USD time samples, a PC2 cache and its rest mesh); :mod:`.distance` finds closest
+points on it (libigl, the ``bodies`` extra).
 """
+from .animation import Animated, read_animated
 from .checks import MeshError, check_mesh, triangulate
 from .mesh import Mesh
 from .pins import PinBox, pin_indices
 from .readers import FORMATS, read_mesh
 
-__all__ = ["FORMATS", "Mesh", "MeshError", "PinBox", "check_mesh", "pin_indices", "read_mesh",
-           "triangulate"]
+__all__ = ["Animated", "FORMATS", "Mesh", "MeshError", "PinBox", "check_mesh", "pin_indices",
+           "read_animated", "read_mesh", "triangulate"]

@@ -144,27 +144,12 @@ def _read_usd(path: Path):
     except ImportError:
         raise ImportError("reading USD meshes needs usd-core: pip install "
                           "casadi_keyframe[usd] (or pip install usd-core)") from None
-    stage = Usd.Stage.Open(str(path)) if _opens(path) else None
-    if stage is None:
-        raise MeshError(f"{path}: cannot be read as USD")
-    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
-    if len(meshes) != 1:
-        raise MeshError(f"{path}: holds {len(meshes)} meshes; give a file with exactly one "
-                        f"(the cloth, or one target shape)" + (
-                            f": {', '.join(str(p.GetPath()) for p in meshes[:4])}"
-                            if meshes else ""))
-    prim, time = meshes[0], Usd.TimeCode.EarliestTime()
+    stage, prim = _usd_mesh(path)
+    time = Usd.TimeCode.EarliestTime()
     mesh = UsdGeom.Mesh(prim)
-    points = np.asarray(mesh.GetPointsAttr().Get(time), float).reshape(-1, 3)
-    world = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
-    points = points @ world[:3, :3] + world[3, :3]  # USD matrices act on row vectors
-    notices = []
-    if UsdGeom.StageHasAuthoredMetersPerUnit(stage):  # unauthored, USD says cm: trust metres
-        points *= UsdGeom.GetStageMetersPerUnit(stage)
-    if (stage.HasAuthoredMetadata("upAxis")
-            and UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y):
-        points = np.c_[points[:, 0], -points[:, 2], points[:, 1]]
-        notices.append(f"{path}: the stage is y up; turned to z up as the cloth is simulated")
+    points, turned = _usd_points(stage, prim, time)
+    notices = ([f"{path}: the stage is y up; turned to z up as the cloth is simulated"]
+               if turned else [])
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], int)
     flat = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(time) or [], int)
     if counts.sum() != flat.size:
@@ -172,6 +157,53 @@ def _read_usd(path: Path):
                         f"its face indices are {flat.size}")
     polygons = np.split(flat, np.cumsum(counts)[:-1]) if counts.size else []
     return points, polygons, _usd_groups(prim, len(points)), notices + _quads(path, counts)
+
+
+def _usd_mesh(path: Path):
+    """``(stage, prim)``: the stage in ``path`` and its one mesh."""
+    from pxr import Usd, UsdGeom
+    stage = Usd.Stage.Open(str(path)) if _opens(path) else None
+    if stage is None:
+        raise MeshError(f"{path}: cannot be read as USD")
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if len(meshes) != 1:
+        raise MeshError(f"{path}: holds {len(meshes)} meshes; give a file with exactly one "
+                        f"(the cloth, one target shape or one body)" + (
+                            f": {', '.join(str(p.GetPath()) for p in meshes[:4])}"
+                            if meshes else ""))
+    return stage, meshes[0]
+
+
+def _usd_points(stage, prim, time) -> tuple[np.ndarray, bool]:
+    """``(points, turned)``: the mesh's points at ``time`` in the world, in metres, z up
+    (``turned``: the stage was y up)."""
+    from pxr import UsdGeom
+    points = np.asarray(UsdGeom.Mesh(prim).GetPointsAttr().Get(time), float).reshape(-1, 3)
+    world = np.asarray(UsdGeom.Xformable(prim).ComputeLocalToWorldTransform(time))
+    points = points @ world[:3, :3] + world[3, :3]  # USD matrices act on row vectors
+    if UsdGeom.StageHasAuthoredMetersPerUnit(stage):  # unauthored, USD says cm: trust metres
+        points *= UsdGeom.GetStageMetersPerUnit(stage)
+    turned = (stage.HasAuthoredMetadata("upAxis")
+              and UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.y)
+    if turned:
+        points = np.c_[points[:, 0], -points[:, 2], points[:, 1]]
+    return points, turned
+
+
+def usd_frames(path) -> tuple[np.ndarray, np.ndarray] | None:
+    """``(times (k,) s from the first sample, points (k, v, 3))`` of the one mesh of a USD
+    file whose points or own transform are time-sampled (None if neither is): each sample
+    placed as :func:`read_mesh` places the first (world, metres, z up)."""
+    from pxr import UsdGeom
+    stage, prim = _usd_mesh(Path(path))
+    codes = set(UsdGeom.Mesh(prim).GetPointsAttr().GetTimeSamples())
+    for op in UsdGeom.Xformable(prim).GetOrderedXformOps():
+        codes |= set(op.GetAttr().GetTimeSamples())
+    if len(codes) < 2:
+        return None
+    codes = sorted(codes)
+    frames = np.array([_usd_points(stage, prim, code)[0] for code in codes])
+    return (np.asarray(codes) - codes[0]) / stage.GetTimeCodesPerSecond(), frames
 
 
 def _opens(path: Path) -> bool:

@@ -3,7 +3,7 @@
 from .base import (BlockJacobians, ForceDerivatives, ForceJacobians, Model, PhysicalReport,
                    StepHold, Surface)
 from .cloth import ClothModel, ClothParams
-from .colliders import Capsule, Contact, Plane, Sphere
+from .colliders import Capsule, Contact, MeshBody, Plane, Sphere
 from .collisions import COLLISIONS, DEFAULT_COLLISION
 from .constraints import Attachment
 from .flock import FlockModel, FlockParams, wander_forces
@@ -11,6 +11,6 @@ from .interaction import Interaction, PairInteraction, ParticleInteraction, Sten
 
 __all__ = ["Attachment", "BlockJacobians", "COLLISIONS", "Capsule", "ClothModel", "ClothParams",
            "Contact", "DEFAULT_COLLISION", "FlockModel", "FlockParams", "ForceDerivatives",
-           "ForceJacobians", "Interaction", "Model", "PairInteraction", "ParticleInteraction",
+           "ForceJacobians", "Interaction", "MeshBody", "Model", "PairInteraction", "ParticleInteraction",
            "PhysicalReport", "Plane", "Sphere", "StencilInteraction", "StepHold", "Surface",
            "wander_forces"]

@@ -1,6 +1,6 @@
 r"""Bodies a cloth collides with: :class:`Plane`, :class:`Sphere`, :class:`Capsule` (a segment
-swept by a sphere), triangle meshes (:class:`MeshBody`), and :class:`Contact`, the parameters
-of touching one.
+swept by a sphere), triangle meshes (:class:`MeshBody`, still or per-frame), and
+:class:`Contact`, the parameters of touching one.
 
 A body is geometry only: its signed distance ``phi`` (negative inside), outward unit normal
 and surface velocity at a point, as CasADi expressions (:meth:`Body.surface`) of the point
@@ -89,7 +89,7 @@ class Body:
 
     kind = "body"
     GEOMETRY: dict = {}
-    local = False  # True: the geometry differs per point (a mesh: its closest feature's plane)
+    local = False  # True: the geometry differs per point (a mesh: its closest feature)
 
     def __init__(self, contact: Contact | None, motion=None):
         self.contact = Contact() if contact is None else contact
@@ -111,8 +111,12 @@ class Body:
 
     def local_geometry(self, x: np.ndarray, t: float) -> list[np.ndarray]:
         """The geometry at time t as one row per point of ``x`` ``(n, 3)``: the same row
-        for every point here (a mesh gives each point the plane of its closest feature)."""
+        for every point here (a mesh gives each point its closest feature)."""
         return [np.broadcast_to(g, (len(x), np.size(g))) for g in self.geometry(t)]
+
+    def parts(self) -> tuple:
+        """The bodies contact acts on one by one: this one (a mesh: each of its pieces)."""
+        return (self,)
 
     @property
     def moves(self) -> bool:
@@ -236,6 +240,178 @@ class Capsule(Body):
 
     def endpoints(self, t: float):
         return self.placed(self.a, t), self.placed(self.b, t)
+
+
+def _feature_surface(x, point, edge, normal, flat, side, velocity, spread):
+    r = x - point
+    d = r - edge * ca.dot(edge, r)  # from the feature's line (an edge) or point (a vertex)
+    size = ca.sqrt(ca.dot(d, d) + flat)  # exact off a plane (the normal is a unit vector)
+    phi = flat * ca.dot(normal, r) + (1 - flat) * side * size
+    n = flat * normal + (1 - flat) * side * d / size
+    return phi, n, velocity + ca.mtimes(ca.reshape(spread, 3, 3).T, r)
+
+
+class MeshBody(Body):
+    """A triangle mesh: ``vertices`` ``(v, 3)`` and ``faces`` ``(f, 3)``, still, or moving
+    through ``frames`` ``(k, v, 3)`` at ``times`` ``(k,)`` s (or ``fps``; linear between
+    frames, held before the first and after the last), in the body's own coordinates, which
+    ``motion`` places.  A mesh of several pieces is their union.
+
+    Each point's geometry is its closest feature (:mod:`~..meshes.distance`, libigl):
+    ``point`` its closest point, ``flat`` 1 on a face (``normal`` the face's), 0 on an edge
+    (``edge`` its direction) or a vertex, ``side`` the sign, and the surface's velocity
+    there, ``velocity`` and its ``spread`` over the feature (3 x 3).  Within the feature the
+    distance is smooth and differentiated; the feature is the point's choice, so across a
+    switch the distance and normal are continuous and the normal's derivative is that of
+    the feature chosen.  :meth:`geometry` gives the vertices in the world and the faces.
+    """
+
+    kind = "mesh"
+    GEOMETRY = {"point": 3, "edge": 3, "normal": 3, "flat": 1, "side": 1, "velocity": 3,
+                "spread": 9}
+    local = True
+    surface = staticmethod(_feature_surface)
+    KEPT = 8  # shapes and queries remembered (a step asks at t and t + dt, several times)
+
+    def __init__(self, vertices, faces, frames=None, *, fps: float | None = None, times=None,
+                 contact=None, motion=None, source=None):
+        super().__init__(contact, motion)
+        from ..meshes.distance import pieces, require_igl
+        require_igl()
+        self.vertices, self.faces = _checked_mesh(vertices, faces)
+        self.frames, self.times = _checked_frames(frames, fps, times, len(self.vertices))
+        self.pieces = pieces(self.faces, len(self.vertices))
+        self.source = source
+        self._shapes, self._rows = {}, {}
+
+    @classmethod
+    def from_file(cls, path, *, rest=None, fps: float | None = None, contact=None,
+                  motion=None) -> "MeshBody":
+        """The body in a mesh file: OBJ, PLY, USD (still or time-sampled), or a PC2 cache
+        with its rest OBJ (``rest``, default ``NAME_rest.obj``) at ``fps`` frames per second
+        (:func:`~..meshes.read_animated`)."""
+        from ..meshes import read_animated
+        found = read_animated(path, rest=rest, fps=fps)
+        return cls(found.mesh.vertices, found.mesh.faces, found.frames, times=found.times,
+                   contact=contact, motion=motion, source=path)
+
+    def parts(self) -> tuple:
+        """Each piece as a body of its own (the hold chooses among them per particle, and a
+        step that ends inside another piece is revised on that piece), or this one."""
+        if len(self.pieces) == 1:
+            return (self,)
+        out = []
+        for piece in self.pieces:
+            used, faces = np.unique(self.faces[piece], return_inverse=True)
+            out.append(MeshBody(self.vertices[used], faces.reshape(-1, 3),
+                                None if self.frames is None else self.frames[:, used],
+                                times=self.times, contact=self.contact, motion=self.motion,
+                                source=self.source))
+        return tuple(out)
+
+    def __getstate__(self):  # the trees are rebuilt where the body is unpickled
+        return {**vars(self), "_shapes": {}, "_rows": {}}
+
+    @property
+    def moves(self) -> bool:
+        return self.motion is not None or self.frames is not None
+
+    def _local_vertices(self, t: float) -> np.ndarray:
+        if self.frames is None:
+            return self.vertices
+        s = np.interp(t, self.times, np.arange(len(self.times)))
+        k = min(int(s), len(self.times) - 2)
+        return self.frames[k] + (s - k) * (self.frames[k + 1] - self.frames[k])
+
+    def _shape(self, t: float):
+        from ..meshes.distance import MeshShape
+        key = None if self.frames is None else float(t)
+        if key not in self._shapes:
+            _forget(self._shapes, self.KEPT)
+            self._shapes[key] = MeshShape(self._local_vertices(t), self.faces, self.pieces)
+        return self._shapes[key]
+
+    def _placement(self, t: float):
+        if self.motion is None:
+            return np.eye(3), np.zeros(3)
+        R, p = self.motion(t)
+        return np.asarray(R, float), np.asarray(p, float)
+
+    def world_vertices(self, t: float) -> np.ndarray:
+        """The vertices in the world at time t."""
+        R, p = self._placement(t)
+        return self._local_vertices(t) @ R.T + p
+
+    def geometry(self, t):
+        return [self.world_vertices(t), self.faces]
+
+    def parameters(self, t):
+        return np.zeros(0)  # per point: local_geometry
+
+    def local_geometry(self, x, t):
+        x = np.ascontiguousarray(x, dtype=float)
+        key = (float(t), x.shape, x.tobytes())
+        if key not in self._rows:
+            _forget(self._rows, self.KEPT)
+            self._rows[key] = self._features(x, float(t))
+        return self._rows[key]
+
+    def _features(self, x, t):
+        R, p = self._placement(t)
+        found = self._shape(t).closest((x - p) @ R)
+        if self.moves:
+            ahead, behind = self.world_vertices(t + STEP), self.world_vertices(t - STEP)
+            corner = ((ahead - behind) / (2 * STEP))[found.corners]  # (k, 3, 3)
+        else:
+            corner = np.zeros(found.corners.shape + (3,))
+        velocity = np.einsum("ki,kia->ka", found.weights, corner)
+        spread = np.einsum("kia,kib->kab", corner, found.gradients @ R.T)
+        return [found.point @ R.T + p, found.edge @ R.T, found.normal @ R.T,
+                found.flat[:, None].astype(float), found.side[:, None], velocity,
+                spread.reshape(len(x), 9)]
+
+
+def _forget(cache: dict, kept: int) -> None:
+    while len(cache) >= kept:
+        cache.pop(next(iter(cache)))
+
+
+def _checked_mesh(vertices, faces):
+    v = np.asarray(vertices, dtype=float)
+    f = np.asarray(faces)
+    if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3 or not np.isfinite(v).all():
+        raise ValueError(f"MeshBody vertices must be (v, 3) finite numbers, v >= 3, got an "
+                         f"array of shape {v.shape}")
+    if (f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or f.dtype.kind not in "iu"
+            or f.min() < 0 or f.max() >= len(v)):
+        raise ValueError(f"MeshBody faces must be (f, 3) vertex indices in 0..{len(v) - 1}, "
+                         f"got an array of shape {f.shape}")
+    area = np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    if (area <= 1e-12 * area.max()).any():
+        raise ValueError(f"MeshBody: {int((area <= 1e-12 * area.max()).sum())} face(s) have "
+                         "no area; remove them (Blender: Mesh > Clean Up > Degenerate "
+                         "Dissolve)")
+    return v, f.astype(np.int64)
+
+
+def _checked_frames(frames, fps, times, count):
+    """``(frames (k, v, 3), times (k,))`` validated, or ``(None, None)`` for a still mesh."""
+    if frames is None:
+        return None, None
+    frames = np.asarray(frames, dtype=float)
+    if frames.ndim != 3 or frames.shape[1:] != (count, 3) or not np.isfinite(frames).all():
+        raise ValueError(f"MeshBody frames must be (k, {count}, 3) finite vertices, got an "
+                         f"array of shape {frames.shape}")
+    if times is None:
+        if fps is None or not fps > 0:
+            raise ValueError("MeshBody frames need their times: give fps (frames per second) "
+                             "or times (s)")
+        times = np.arange(len(frames)) / float(fps)
+    times = np.asarray(times, dtype=float)
+    if times.shape != (len(frames),) or len(frames) < 2 or (np.diff(times) <= 0).any():
+        raise ValueError(f"MeshBody frames need at least 2 frames at increasing times, one "
+                         f"time per frame; got {len(frames)} frames, times {times.shape}")
+    return frames, times
 
 
 @functools.lru_cache(maxsize=None)

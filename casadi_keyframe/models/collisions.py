@@ -38,6 +38,7 @@ def collision_families(collision: str, bodies: tuple, n: int, jit: bool | None, 
     penalty, hold, layer = LAWS[check_collision(collision)]
     if not bodies:
         return ()
+    bodies = tuple(part for body in bodies for part in body.parts())  # a mesh's pieces
     springs = tuple(BodyPenalty(body, n, jit) for body in bodies) if penalty else ()
     layers = [body.contact.thickness if layer is None or body.moves else layer
               for body in bodies]

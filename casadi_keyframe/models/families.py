@@ -272,13 +272,14 @@ class FamilyModel(BlockJacobians, StepHold):
             yield family, S[at:at + size], mine
             at, decided = at + size, decided + size_d
 
-    def symbolic_forces(self, X, V, S=None):
-        """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k)
-        and S the :meth:`scene_parameters` (default: those at t = 0).  Pair families act over
-        every pair they might (self-contact: all unjoined pairs): for small systems."""
+    def symbolic_forces(self, X, V, S=None, decisions=None):
+        """:meth:`forces` as a CasADi expression; X, V are ``3 x n`` (column k = particle k),
+        S the :meth:`scene_parameters` (default: those at t = 0) and ``decisions`` the
+        step's (:meth:`decision_parameters`; None: nothing).  Pair families act over every
+        pair they might (self-contact: all unjoined pairs): for small systems."""
         out = 0
-        for family, part, _ in self.scene_parts(S):
-            out += family.symbolic_forces(X, V, part)
+        for family, part, mine in self.scene_parts(S, decisions):
+            out += family.symbolic_forces(X, V, part, mine)
         return out
 
     def symbolic_jacobians(self, X, V, S=None, decisions=None):

@@ -44,7 +44,7 @@ class GravityAndDrag(Interaction):
     def linearization_jvp(self, x, v, t, w, q, dt, dx, dv, found):
         return -(dt * self.air_drag * (self.masses[:, None] * dv))
 
-    def symbolic_forces(self, X, V, S):
+    def symbolic_forces(self, X, V, S, decisions=None):
         mass = ca.repmat(ca.DM(self.masses).T, 3, 1)
         return ca.DM(self.gravity.T) - self.air_drag * V * mass
 

@@ -290,7 +290,7 @@ class BodyHold(Interaction):
                 if found is not None:
                     pick = found.body == b
                     rows[found.particles[pick]] = found.geometry[pick, :rows.shape[1]]
-                geometry.append(rows.T.ravel())
+                geometry.append(rows.ravel())  # ca.reshape(., g, n) is column-major
             else:
                 geometry.append(layer.parameters(t, dt))
         extra = [] if self.coulomb is None else [self.coulomb.parameters(found)]
@@ -367,7 +367,7 @@ class BodyHold(Interaction):
     def linearization_jvp(self, x, v, t, w, q, dt, dx, dv, found):
         return None
 
-    def symbolic_forces(self, X, V, S):
+    def symbolic_forces(self, X, V, S, decisions=None):
         return ca.SX.zeros(3, X.shape[1])
 
     def symbolic_blocks(self, X, V, S, decisions=None):

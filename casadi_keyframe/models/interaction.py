@@ -165,8 +165,9 @@ class Interaction:
         """The derivative of ``dt f + dt^2 K w + dt D q`` along ``(dx, dv)``, ``(n, 3)``."""
         raise NotImplementedError
 
-    def symbolic_forces(self, X, V, S):
-        """:meth:`forces` as a ``3 x n`` CasADi expression (S: :meth:`parameters`)."""
+    def symbolic_forces(self, X, V, S, decisions=None):
+        """:meth:`forces` as a ``3 x n`` CasADi expression (S: :meth:`parameters`; decisions:
+        what the step decided, :meth:`decision_parameters`, for a law that takes them)."""
         raise NotImplementedError
 
     def symbolic_blocks(self, X, V, S, decisions=None) -> FamilyBlocks:
@@ -250,7 +251,7 @@ class PairInteraction(Interaction):
         out = self.kernels[kind].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i], *params)
         return i, j, (list(out) if isinstance(out, (list, tuple)) else [out])
 
-    def symbolic_forces(self, X, V, S):
+    def symbolic_forces(self, X, V, S, decisions=None):
         i, j, (f,) = self._symbolic("force", X, V)
         return ca.mtimes(f, pair_incidence(i, j, self.n))
 
@@ -262,8 +263,8 @@ class PairInteraction(Interaction):
 class ParticleInteraction(Interaction):
     """A law of one particle, ``(x, v, *columns) -> f``, over every particle; its Jacobian
     blocks are diagonal.  Subclasses give :meth:`columns` (the kernels' inputs after
-    ``x, v`` at time t, one row per particle) and :meth:`parameters`, and
-    :meth:`split_parameters` for the symbolic route."""
+    ``x, v`` at time t, one row per particle; :meth:`columns_at` when they depend on x too)
+    and :meth:`parameters`, and :meth:`symbolic_columns` for the symbolic route."""
 
     def __init__(self, kernels: dict, n: int, jit: bool | None):
         self.kernels, self.n = kernels, n
@@ -272,38 +273,45 @@ class ParticleInteraction(Interaction):
     def columns(self, t: float) -> list:
         raise NotImplementedError
 
-    def symbolic_columns(self, S) -> list:
-        """The kernels' inputs after ``x, v`` from this family's symbolic parameters S,
-        as columns (each repeated over the particles by the kernel's map)."""
+    def columns_at(self, x, t: float, found) -> list:
+        """The kernels' inputs after ``x, v`` at positions x and time t, given ``found``
+        (what the family found or decided there): :meth:`columns` here."""
+        return self.columns(t)
+
+    def symbolic_columns(self, S, decisions=None) -> list:
+        """The kernels' inputs after ``x, v`` from this family's symbolic parameters S (and
+        the step's ``decisions``), as columns: one for all particles (repeated by the
+        kernel's map) or one per particle."""
         raise NotImplementedError
 
     def forces(self, x, v, t, found):
-        return self.mapped["force"](x, v, *self.columns(t))[0]
+        return self.mapped["force"](x, v, *self.columns_at(x, t, found))[0]
 
     def blocks(self, x, v, t, kinds, found):
-        columns = self.columns(t)
+        columns = self.columns_at(x, t, found)
         return FamilyBlocks(particles=tuple(b for k in kinds
                                             for b in self.mapped[k](x, v, *columns)))
 
     def linearization_vjp(self, x, v, t, lam, w, q, dt, found):
-        return tuple(self.mapped["vjp"](x, v, *self.columns(t), lam, w, q,
+        return tuple(self.mapped["vjp"](x, v, *self.columns_at(x, t, found), lam, w, q,
                                         np.full((self.n, 1), dt)))
 
     def linearization_jvp(self, x, v, t, w, q, dt, dx, dv, found):
-        return self.mapped["jvp"](x, v, *self.columns(t), w, q, np.full((self.n, 1), dt),
-                                  dx, dv)[0]
+        return self.mapped["jvp"](x, v, *self.columns_at(x, t, found), w, q,
+                                  np.full((self.n, 1), dt), dx, dv)[0]
 
-    def _symbolic(self, kind, X, V, S):
+    def _symbolic(self, kind, X, V, S, decisions=None):
         n = X.shape[1]
-        columns = [ca.repmat(c, 1, n) for c in self.symbolic_columns(S)]
+        columns = [c if c.shape[1] == n else ca.repmat(c, 1, n)
+                   for c in self.symbolic_columns(S, decisions)]
         out = self.kernels[kind].map(n)(X, V, *columns)
         return list(out) if isinstance(out, (list, tuple)) else [out]
 
-    def symbolic_forces(self, X, V, S):
-        return self._symbolic("force", X, V, S)[0]
+    def symbolic_forces(self, X, V, S, decisions=None):
+        return self._symbolic("force", X, V, S, decisions)[0]
 
     def symbolic_blocks(self, X, V, S, decisions=None):
-        return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S)))
+        return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S, decisions)))
 
 
 class StencilInteraction(Interaction):
@@ -360,7 +368,7 @@ class StencilInteraction(Interaction):
         out = self.kernels[kind].map(P)(*stacked, *params)
         return list(out) if isinstance(out, (list, tuple)) else [out]
 
-    def symbolic_forces(self, X, V, S):
+    def symbolic_forces(self, X, V, S, decisions=None):
         (f,) = self._symbolic("force", X, V)
         return ca.mtimes(ca.reshape(f, 3, self.stencils.size),
                          stencil_incidence(self.stencils, self.n))

@@ -58,29 +58,65 @@ def body_kernels(body_type: type) -> dict[str, ca.Function]:
 
 
 class BodyPenalty(ParticleInteraction):
-    """The penalty contact of every particle with one :class:`~.colliders.Body`."""
+    """The penalty contact of every particle with one :class:`~.colliders.Body`.  On a body
+    whose geometry differs per point (a mesh: each particle's closest feature), a step
+    decides each particle's feature at its start, and the symbolic step takes them as its
+    decisions."""
 
     name = "body penalty"
     role = "contact"
 
     def __init__(self, body: Body, n: int, jit: bool | None = None):
         if not isinstance(body, Body):
-            raise ValueError(f"colliders must be Plane, Sphere or Capsule bodies, got {body!r}")
+            raise ValueError(f"colliders must be bodies (Plane, Sphere, Capsule, MeshBody), "
+                             f"got {body!r}")
         super().__init__(body_kernels(type(body)), n, jit)
         self.body = body
+        self.width = sum(body.GEOMETRY.values())
 
     def columns(self, t):
         """The geometry at time t and the contact gains, one row per particle."""
         columns = [np.broadcast_to(g, (self.n, np.size(g))) for g in self.body.geometry(t)]
         return columns + [np.broadcast_to(self.body.contact.gains, (self.n, 4))]
 
+    def columns_at(self, x, t, found):
+        """:meth:`columns`; on a mesh, each particle's feature (the step's, decided at x)."""
+        if not self.body.local:
+            return self.columns(t)
+        same = found is not None and (found[0] is x or np.array_equal(found[0], x))
+        rows = found[1] if same else self.body.local_geometry(x, t)
+        return [*rows, np.broadcast_to(self.body.contact.gains, (self.n, 4))]
+
+    def decide(self, step, carried):
+        """On a mesh: ``(x, rows)``, each particle's feature at the step's start."""
+        if not self.body.local:
+            return None
+        return step.x, self.body.local_geometry(step.x, step.t)
+
+    def decision_parameters(self, found, t, dt):
+        """On a mesh, the rows of :meth:`decide` (one column of the symbolic step's per
+        particle); else none."""
+        if not self.body.local:
+            return np.zeros(0)
+        if found is None:
+            return np.zeros(self.n * self.width)
+        return np.hstack(found[1]).ravel()
+
     def parameters(self, t):
         return self.body.parameters(t)
 
-    def symbolic_columns(self, S):
+    def symbolic_columns(self, S, decisions=None):
+        if self.body.local:
+            if decisions is None:
+                raise ValueError(f"the symbolic step of penalty contact on a {self.body.kind} "
+                                 "body needs the step's decisions (each particle's feature): "
+                                 "its CasADi route is LinearizedBackwardEuler's")
+            G = ca.reshape(decisions, self.width, self.n)
+        else:
+            G = S
         parts, at = [], 0
         for size in self.body.GEOMETRY.values():
-            parts.append(S[at:at + size])
+            parts.append(G[at:at + size, :])
             at += size
         return parts + [ca.DM(self.body.contact.gains)]
 

@@ -98,6 +98,8 @@ class Box:
         for kind, a, b, *r in (g for frame in bodies for g in frame):
             if kind == "round":
                 pts.append(np.array([a - r[0], a + r[0], b - r[0], b + r[0]]))
+            elif kind == "mesh":
+                pts.append(a)
         lo, hi = _extent(pts)
         self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1e-3)
         for kind, a, b, *_ in (g for frame in bodies for g in frame):
@@ -202,8 +204,8 @@ class ClothPanel:
             lit = 0.75 + 0.25 * shade(x[faces], "white")[:, :1]
             colors = [np.c_[lit * np.asarray(vertex_rgb)[faces].mean(1), np.ones(len(faces))]]
         for kind, a, b, *r in self._bodies:
-            if kind == "round":
-                quads = grid_quads(capsule_grid(a, b, r[0], 8))
+            if kind in ("round", "mesh"):
+                quads = grid_quads(capsule_grid(a, b, r[0], 8)) if kind == "round" else a[b]
                 polys += list(quads)
                 colors.append(shade(quads, BODY_RGB))
         self.colors = np.vstack(colors)  # the cloth's faces first, then the bodies' quads

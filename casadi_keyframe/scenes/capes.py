@@ -67,7 +67,8 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
                width: float = 0.6, length: float = 1.0, mass: float = 0.4,
                attach_width: float = 0.44, params: ClothParams | None = None,
                dt: float = 1 / 60, lead: float | None = None, contacts: dict | None = None,
-               collision: str = DEFAULT_COLLISION, jit: bool | None = None) -> ClothModel:
+               collision: str = DEFAULT_COLLISION, jit: bool | None = None,
+               body: list | None = None) -> ClothModel:
     """The cape as a :class:`ClothModel` on ``character`` moving through ``animation``.
 
     Rest shape: a ``width`` x ``length`` sheet in the xz plane, top row (row 0) along x at
@@ -76,7 +77,8 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
     under the paper's penalty springs, which see the body at a step's start, looking a step
     ahead kept a particle on a moving limb level with it; the default guard checks where the
     body is at the step's end).  ``contacts``: see :func:`cape_contacts`; ``collision``: how
-    the body and the ground are touched (:class:`ClothModel`).
+    the body and the ground are touched (:class:`ClothModel`); ``body``: colliders in place
+    of the character's capsules (its mesh: :mod:`.body_meshes`).
     """
     if int(rows) != rows or int(cols) != cols or rows < 2 or cols < 2:
         raise ValueError(f"a cape needs rows >= 2 and cols >= 2, got {rows} x {cols}")
@@ -91,7 +93,8 @@ def cape_model(character: Character, animation: Animation, *, rows: int = 26, co
     if contacts is None:
         spacing = min(width / (cols - 1), length / (rows - 1))
         contacts = cape_contacts(mass / (rows * cols), spacing, dt)
-    bodies = character.capsules(animation, contacts["body"], lead=lead or 0.0)
+    bodies = (character.capsules(animation, contacts["body"], lead=lead or 0.0)
+              if body is None else list(body))
     path = character.shoulder_points(animation, x_top[attached])
     return ClothModel.grid(int(rows), int(cols), width=width, height=length, mass=mass,
                            params=params or CAPE_PARAMS, plane="xz", origin=(-width / 2, 0, 0),

@@ -7,25 +7,36 @@ The sheet is ``size`` m square, 0.3 kg, ``rows x rows`` particles, lying flat (o
 straight down at ``speed`` m/s.  Bodies: the ground (a plane), a sphere and a horizontal
 capsule under the sheet's centre, still, rising into the sheet at 2 m/s ("rising sphere",
 "rising capsule") or swinging up into it about one end at 3 rad/s ("swinging capsule").
+:func:`mesh_drop` drops the sheet on an icosphere read from an OBJ file (a
+:class:`~..models.colliders.MeshBody`) and on the analytic sphere it approximates.
 
 :func:`slope_slide` and :func:`ground_throw` are friction's analytic checks.
 """
 from __future__ import annotations
 
+from pathlib import Path
+from tempfile import TemporaryDirectory
+
 import numpy as np
 
+from ..export.obj import write_obj
 from ..integrators import LinearizedBackwardEuler
-from ..models import DEFAULT_COLLISION, Capsule, ClothModel, ClothParams, Contact, Plane, Sphere
+from ..models import (DEFAULT_COLLISION, Capsule, ClothModel, ClothParams, Contact, MeshBody,
+                      Plane, Sphere)
 from ..simulate import simulate
 from ..state import SimulationError
 
 BODIES = ("ground", "sphere", "capsule", "rising sphere", "rising capsule", "swinging capsule")
 RISE = 2.0  # m/s
 SWING = 3.0  # rad/s
+MESH_RADIUS = 0.3  # m: the icosphere's
 
 
-def drop_model(rows: int, body: str, collision: str, size: float = 1.0):
-    """The sheet and ``body`` ("ground", "sphere" or "capsule") under its centre."""
+def drop_model(rows: int, body, collision: str, size: float = 1.0):
+    """The sheet and ``body`` (one of :data:`BODIES`, or a body) under its centre."""
+    if not isinstance(body, str):
+        return ClothModel.grid(rows, rows, width=size, height=size, plane="xy", mass=0.3,
+                               colliders=[body], collision=collision)
     if body not in BODIES:
         raise ValueError(f"drop: body must be one of {BODIES}, got {body!r}")
     centre = np.array([size / 2, size / 2, 0.0])
@@ -61,7 +72,7 @@ def drop_start(model, speed: float, tilt: float = 0.0, gap: float = 0.03):
     return x, v
 
 
-def drop(rows: int, body: str, speed: float, *, tilt: float = 0.0,
+def drop(rows: int, body, speed: float, *, tilt: float = 0.0,
          collision: str = DEFAULT_COLLISION, dt: float = 1 / 60, duration: float = 0.5,
          solver: str = "auto"):
     """Simulate a drop: ``(problem-free trajectory or None, report)``; the report has the
@@ -76,6 +87,43 @@ def drop(rows: int, body: str, speed: float, *, tilt: float = 0.0,
     except SimulationError as err:
         return None, {"failed": str(err)}
     return traj, model.physical_report(traj.x, dt)
+
+
+def icosphere_file(folder, radius: float = MESH_RADIUS, subdivisions: int = 4) -> Path:
+    """An icosphere of ``radius`` about the origin (2,562 vertices at 4 subdivisions) written
+    as an OBJ file in ``folder``."""
+    import trimesh
+    ball = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
+    return write_obj(Path(folder) / f"icosphere_{subdivisions}.obj", ball.vertices, ball.faces)
+
+
+def mesh_drop(rows: int, speed: float, *, rising: bool = False,
+              collision: str = DEFAULT_COLLISION, dt: float = 1 / 60, duration: float = 0.5,
+              subdivisions: int = 4) -> dict:
+    """The sheet dropped at ``speed`` onto an icosphere of radius :data:`MESH_RADIUS` read
+    from an OBJ file (still, or rising at :data:`RISE` by its motion), and onto the analytic
+    :class:`Sphere`: per run the deepest particle inside the true sphere over all frames
+    (``inside``, m), the largest stretch, and the largest distance between the two runs'
+    centres of mass at any frame (``com``, m); ``failed`` if a run blew up."""
+    centre = np.array([0.5, 0.5, -MESH_RADIUS])
+    place = ((lambda t: centre + [0, 0, RISE * t]) if rising else (lambda t: centre))
+    with TemporaryDirectory() as folder:
+        mesh = MeshBody.from_file(icosphere_file(folder, subdivisions=subdivisions),
+                                  motion=lambda t: (np.eye(3), place(t)))
+    if not rising:  # a still body: no motion, so the hold is on its surface as the sphere's
+        mesh = MeshBody(mesh.vertices + centre, mesh.faces, source=mesh.source)
+    out = {}
+    for name, body in (("mesh", mesh), ("sphere", Sphere(place if rising else centre,
+                                                        MESH_RADIUS))):
+        traj, report = drop(rows, body, speed, collision=collision, dt=dt, duration=duration)
+        if traj is None:
+            return {"failed": f"{name}: {report['failed']}"}
+        gap = [MESH_RADIUS - np.linalg.norm(x - place(k * dt), axis=1).min()
+               for k, x in enumerate(traj.x)]
+        out[name] = {"inside": max(gap), "stretch": report["max_stretch"],
+                     "com": traj.x.mean(axis=1)}
+    out["com"] = float(np.linalg.norm(out["mesh"]["com"] - out["sphere"]["com"], axis=1).max())
+    return out
 
 
 def slope_slide(mu: float, angle: float = 20.0, collision: str = DEFAULT_COLLISION,

@@ -2,7 +2,7 @@
 option that gave it (what ``problems/mesh_keyframes.py`` builds from its overrides).
 
 The option names in messages are the problem file's: ``cloth``, ``keyframes``, ``pins``,
-``pin_group``, ``pin_box``, ``steps``, ``spheres``.
+``pin_group``, ``pin_box``, ``steps``, ``spheres``, ``bodies``.
 """
 from __future__ import annotations
 
@@ -16,7 +16,7 @@ from ..loading import OverrideError
 from ..objectives import MeshKeyframe
 from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
 from ..models import ClothModel
-from ..models.colliders import Plane, Sphere
+from ..models.colliders import MeshBody, Plane, Sphere
 from ..objectives import Smoothness, StrainLimit
 from ..views import ClothView
 from .cape_tracking import tracking_forces
@@ -129,6 +129,23 @@ def colliders_of(ground, spheres) -> list:
     return bodies
 
 
+def bodies_of(files, dt: float) -> list:
+    """A :class:`MeshBody` per mesh file of ``files`` ("body.obj,arm.pc2": OBJ, PLY, USD, or
+    a PC2 cache beside its ``NAME_rest.obj``, one cache frame per ``dt``)."""
+    out = []
+    for item in (p.strip() for p in str(files).split(",")):
+        if not item:
+            raise refuse("bodies", "give mesh files separated by commas, e.g. "
+                                   "bodies=body.obj,arm.pc2")
+        try:
+            out.append(MeshBody.from_file(Path(item).expanduser(), fps=1 / dt))
+        except (MeshError, ImportError, ValueError) as err:
+            message = str(err)
+            raise refuse("bodies", message if item in message else f"{item}: {message}") \
+                from None
+    return out
+
+
 def wrinkled(model, depth: float) -> np.ndarray:
     """The cloth's rest positions moved ``depth`` metres along each vertex's normal times
     ``sin(pi a) sin(pi b)``, (a, b) the vertex's place in the mesh's two widest directions
@@ -201,8 +218,8 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
                          x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls,
                          view=ClothView(camera=(15, -30)),
-                         inputs=[m.source for m in (cloth, *(t.mesh for t in terms))
-                                 if m is not None and m.source is not None])
+                         inputs=[m.source for m in (cloth, *(t.mesh for t in terms), *colliders)
+                                 if getattr(m, "source", None) is not None])
     if guess == "none" or control != "forces":
         return prob
     return prob.with_guess(tracking_guess(prob, land=guess == "land"))

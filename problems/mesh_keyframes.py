@@ -44,7 +44,7 @@ from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
 SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
 RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
           "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
-          "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "control": ("forces", "velocity"),
+          "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "rest_band": "[0, 1)", "control": ("forces", "velocity"),
           "guess": ("land", "track", "none")}
 
 
@@ -56,7 +56,8 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           bodies: str | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
-          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land"):
+          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land",
+          rest_band: float = 0.0):
     if cloth is None:
         if keyframes is not None:
             raise refuse("keyframes", "targets need the cloth they shape: give cloth=FILE too")
@@ -80,4 +81,4 @@ def build(cloth: str | None = None, keyframes: str | None = None,
                                  weight=weight,
                                  alpha=alpha, align=align, strain_limit=strain_limit,
                                  strain_weight=strain_weight, smoothing=smoothing,
-                                 wrinkle=wrinkle, guess=guess)
+                                 wrinkle=wrinkle, guess=guess, rest_band=rest_band)

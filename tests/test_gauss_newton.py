@@ -140,7 +140,8 @@ def test_a_jump_in_the_objective_collapses_the_region_and_fails_honestly(race):
 
 
 @pytest.mark.parametrize("method", RESIDUAL_METHODS)
-def test_multiple_shooting_is_refused_with_what_to_do(race, method):
-    with pytest.raises(ValueError, match="no residual form yet: run the shooting with method "
-                                         "'lbfgsb'"):
-        solve(race, method, shooting=2, maxiter=2, quiet=True)
+def test_multiple_shooting_runs_on_the_merit_s_residuals(race, method):
+    start = race.objective(race.initial_controls())
+    r = solve(race, method, shooting={"segments": 2, "rounds": 1}, maxiter=3, quiet=True,
+              stop="method")
+    assert r.stages[0]["segments"] == 2 and r.stages[0]["nit"] > 0 and r.fun < start

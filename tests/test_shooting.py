@@ -15,6 +15,7 @@ from casadi_keyframe.optimize.multipliers import Multipliers
 from casadi_keyframe.optimize.shooting import Shooting
 from casadi_keyframe.optimize.shooting.merit import ShootingMerit
 from casadi_keyframe.optimize.shooting.nodes import initial_nodes
+from casadi_keyframe.optimize.shooting.placement import growth_spans, step_growth
 from casadi_keyframe.optimize.shooting.segments import boundaries
 from casadi_keyframe.optimize.shooting.workers import LocalPool, Serial
 from casadi_keyframe.scenes.sheets import hanging_sheet
@@ -129,6 +130,58 @@ def test_the_merit_and_its_gradient_match_casadi_and_central_differences(K):
         slope = (shooting.evaluate(z + h * d, runner, mult)[0]
                  - shooting.evaluate(z - h * d, runner, mult)[0]) / (2 * h)
         assert g @ d == pytest.approx(slope, rel=1e-5)
+
+
+def test_segments_placed_by_growth_share_it_equally():
+    assert growth_spans(np.ones(12), 3) == [(0, 4), (4, 8), (8, 12)]  # no growth: equal
+    ratios = np.ones(20)
+    ratios[:5] = 10.0  # all the growth in the first five steps
+    spans = growth_spans(ratios, 3)
+    assert spans[0][0] == 0 and spans[-1][1] == 20 and spans[1][0] <= 3 and spans[2][0] <= 5
+    assert all(b > a for a, b in spans)
+    prob = sheet_problem(ground=False)
+    u = 0.05 * np.random.default_rng(0).standard_normal(prob.size)
+    growth = step_growth(prob, u)
+    assert growth.shape == (STEPS,) and np.all(growth > 0)
+    r = solve(prob, "lbfgsb", shooting={"segments": 3, "place": "growth", "rounds": 1},
+              maxiter=2, quiet=True, stop="method")
+    assert "by growth" in r.stages[0]["message"]
+
+
+@pytest.mark.parametrize("collision", ["guarded", "penalty"])
+def test_the_merit_s_residual_form_is_exact(collision):
+    """Half its squared residual is the merit, ``J^T r`` its gradient, ``J`` and ``J^T`` pass
+    the dot test and ``J d`` is the residuals' central difference."""
+    prob = sheet_problem(collision=collision)
+    rng = np.random.default_rng(7)
+    shooting, z, mult = random_point(prob, 3, rng)
+    runner = Serial(prob, shooting.spans)
+    f, g, _ = shooting.evaluate(z, runner, mult)
+    merit = ShootingMerit(prob, shooting, runner, mult)
+    lin = merit.linearize(z)
+    try:
+        assert lin.value == pytest.approx(f, rel=1e-12)
+        np.testing.assert_allclose(lin.vjp(lin.residual), g, rtol=1e-9, atol=1e-9 * np.abs(
+            g).max())
+        d, w = rng.standard_normal(z.size), rng.standard_normal(lin.residual.size)
+        jd = lin.jvp(d)
+        assert jd @ w == pytest.approx(d @ lin.vjp(w), rel=1e-9)
+        h = 1e-6
+        plus, minus = merit.linearize(z + h * d), merit.linearize(z - h * d)
+        difference = (plus.residual - minus.residual) / (2 * h)
+        plus.release(), minus.release()
+        assert np.linalg.norm(difference - jd) <= 1e-5 * np.linalg.norm(jd)
+    finally:
+        lin.release()
+
+
+def test_gauss_newton_runs_multiple_shooting():
+    prob = sheet_problem(collision="penalty")
+    start = prob.objective(prob.initial_controls())
+    r = solve(prob, "gauss-newton", shooting={"segments": 3, "init": "guess", "rounds": 1},
+              maxiter=3, quiet=True, stop="method")
+    assert r.stages[0]["segments"] == 3 and r.stages[0]["nit"] > 0
+    assert r.fun < 0.5 * start
 
 
 @pytest.mark.parametrize("collision", ["guarded", "penalty"])

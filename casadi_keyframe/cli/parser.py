@@ -221,7 +221,9 @@ def add_shooting_options(s, whole) -> None:
                    help="multiple shooting's options: init=passive|guess|target|blend (where "
                         "the node states start), workers=N (processes sweeping the segments, "
                         "default 1), rounds=N, formulation=lagrangian|ipopt (the defects as "
-                        "IPOPT's constraints), penalty=X, growth=X, polish=True|False")
+                        "IPOPT's constraints), penalty=X, growth=X, polish=True|False, "
+                        "place=equal|growth (segments of equal length or of equal backward "
+                        "growth)")
     s.add_argument("--scheduler", metavar="ADDRESS",
                    help="sweep the segments on the running Dask cluster at ADDRESS (e.g. "
                         "tcp://10.0.0.5:8786) instead of local processes")

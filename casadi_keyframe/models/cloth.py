@@ -39,6 +39,9 @@ class ClothParams:
     stiffness ``k_b``, N m^2.  ``damping``: along-spring damping c, N s/m.  ``air_drag``:
     drag per unit mass, 1/s.  ``gravity``: m/s^2.  ``eps``: length regularisation, m.
     ``blowup_stretch``: a spring this many times its rest length means a step has failed.
+    ``rest_band``: the strain band below rest over which the linearized step's spring
+    stiffness turns smoothly from the buckling slope to the tension stiffness
+    (:func:`~.springs.rest_lack`; the force law is unchanged); 0, the paper's step.
     """
 
     stretch: float = 500.0
@@ -49,6 +52,7 @@ class ClothParams:
     gravity: tuple = (0.0, 0.0, -9.81)
     eps: float = 1e-6
     blowup_stretch: float = 5.0
+    rest_band: float = 0.0
 
     def __post_init__(self):
         for name in ("stretch", "shear", "bend", "damping", "air_drag"):
@@ -57,6 +61,8 @@ class ClothParams:
                 raise ValueError(f"ClothParams.{name} must be non-negative and finite, got {value}")
         if not self.eps > 0:
             raise ValueError(f"ClothParams.eps must be positive, got {self.eps}")
+        if not 0 <= self.rest_band < 1:
+            raise ValueError(f"ClothParams.rest_band must be in [0, 1), got {self.rest_band}")
         if not self.blowup_stretch > 1:
             raise ValueError(f"ClothParams.blowup_stretch must be > 1, got {self.blowup_stretch}")
         g = tuple(float(c) for c in self.gravity)
@@ -116,7 +122,8 @@ class ClothModel(FamilyModel, Model, PhysicalReport, Surface):
         set_("attachments", self.constraints.attachments)
         spring_family = ChoiKoSprings(springs, n, stiffness=(params.stretch, params.shear,
                                                              params.bend),
-                                      damping=params.damping, eps=params.eps, jit=jit)
+                                      damping=params.damping, eps=params.eps,
+                                      rest_band=params.rest_band, jit=jit)
         self_family = (() if self_contact is None else
                        (SelfPenalty(self_contact, np.stack([springs.i, springs.j], 1), n, jit),))
         set_("families", check_families((

@@ -80,7 +80,7 @@ def sinc_inverse(s: np.ndarray) -> np.ndarray:
     return np.sqrt(np.maximum(sinc_inverse_squared(np.asarray(s, dtype=float)), 0.0))
 
 
-def spring_law(d, dv, L, k_t, k_b, c, taut, eps: float):
+def spring_law(d, dv, L, k_t, k_b, c, taut, eps: float, band: float = 0.0):
     """``(f_i, K)`` of one spring as CasADi expressions (see the module docstring): the force
     on particle i and the stiffness ``K ~ df_i/dd`` the implicit step uses.
 
@@ -98,27 +98,57 @@ def spring_law(d, dv, L, k_t, k_b, c, taut, eps: float):
     in which one end stops and the other does not, as when a cloth hits a body, stretches it
     unchecked; the step finds the springs it overstretched (:data:`TAUT_MARGIN`) and solves
     again with them taut.  The force is the law's either way.
+
+    ``band`` > 0 (:attr:`~.cloth.ClothParams.rest_band`) makes K continuous in the state:
+    see :func:`rest_lack`.  ``band = 0`` is the paper's step.
     """
     r = ca.sqrt(ca.dot(d, d) + eps ** 2)
     u = d / r
-    m = ca.if_else(r >= L * (1 - REST_TOLERANCE), k_t * (r - L),
-                   -k_b * 4 * sinc_inverse_squared(r / L) / L ** 2)
+    tension = r >= L * (1 - REST_TOLERANCE)
+    m = ca.if_else(tension, k_t * (r - L), buckling_magnitude(r, L, k_b))
     force = m * u + c * ca.dot(dv, u) * u
     transverse = ca.fmax(m, 0) * (ca.SX.eye(3) / r - ca.mtimes(d, d.T) / r ** 3)
-    stiffness = ca.if_else(taut > 0.5, k_t * ca.SX.eye(3),
-                           ca.mtimes(u, ca.jacobian(m, d)) + transverse)
+    radial = ca.mtimes(u, ca.jacobian(m, d))
+    if band > 0:
+        radial = radial + ca.if_else(tension, 0, rest_lack(r, L, k_t, k_b, band)) * ca.mtimes(
+            u, u.T)
+    stiffness = ca.if_else(taut > 0.5, k_t * ca.SX.eye(3), radial + transverse)
     return force, stiffness
 
 
-def spring_kernels(eps: float) -> dict[str, ca.Function]:
+def buckling_magnitude(r, L, k_b):
+    """The law's force magnitude ``-k_b kappa^2`` under compression (CasADi or numpy)."""
+    return -k_b * 4 * sinc_inverse_squared(r / L) / L ** 2
+
+
+def rest_lack(r, L, k_t, k_b, band: float):
+    """The radial stiffness a compressed spring of length ``r`` lacks against the tension
+    stiffness, ``max(k_t - m_b'(r), 0)`` (``m_b`` the buckling magnitude), blended in by a
+    smoothstep from 0 at ``(1 - band) L`` to 1 at ``L``.
+
+    The law's radial stiffness jumps at rest from ``k_t`` to the buckling slope, and the
+    linearized step takes its matrix at the step's start: a spring whose start length
+    crosses rest between two runs switches the step's matrix, so the motion is a
+    discontinuous function of the controls.  With the lack added over the band the step's
+    matrix is a continuous (C^1 along the spring) function of the state, every route
+    differentiating it exactly; the force is the law's, so this is another linearization
+    of the same model, not another model.  Bend springs (``k_t`` the buckling slope at
+    rest) lack nothing."""
+    s = ca.SX.sym("s")
+    slope = ca.substitute(ca.jacobian(buckling_magnitude(s * L, L, k_b), s), s, r / L) / L
+    t = ca.fmin(ca.fmax((r / L - (1 - band)) / band, 0), 1)
+    return t * t * (3 - 2 * t) * ca.fmax(k_t - slope, 0)
+
+
+def spring_kernels(eps: float, band: float = 0.0) -> dict[str, ca.Function]:
     """``force(d, dv, L, k_t, k_b, c, taut) -> f_i``, ``jac(...) -> (vec K, vec D)``
     (row-major) and
     the derivative kernels (see :func:`~casadi_keyframe.kernels.interaction_kernels`), K from
-    :func:`spring_law`.  As Baraff and Witkin, the damping force's position derivative (not
-    symmetric) is left out of K, so K is symmetric."""
+    :func:`spring_law` (``band``: its rest band).  As Baraff and Witkin, the damping force's
+    position derivative (not symmetric) is left out of K, so K is symmetric."""
     d, dv = ca.SX.sym("d", 3), ca.SX.sym("dv", 3)
     scalars = [ca.SX.sym(name) for name in ("L", "k_t", "k_b", "c", "taut")]
-    force, stiffness = spring_law(d, dv, *scalars, eps)
+    force, stiffness = spring_law(d, dv, *scalars, eps, band)
     return interaction_kernels("cloth_spring", d, dv, scalars, force, stiffness)
 
 
@@ -157,7 +187,8 @@ class ChoiKoSprings(PairInteraction):
     """The cloth's springs as a family: the Choi-Ko law over fixed pairs.
 
     ``stiffness`` is ``(stretch, shear, bend)`` of :class:`~.cloth.ClothParams`, ``damping``
-    the along-spring damping c, ``eps`` the length regularisation.  What a step decides for
+    the along-spring damping c, ``eps`` the length regularisation, ``rest_band`` the
+    step's rest band (:func:`rest_lack`; 0: the paper's step).  What a step decides for
     them (its ``found``) is which springs it takes taut (:func:`spring_law`): a
     :class:`TautSprings`, or None for none."""
 
@@ -165,8 +196,8 @@ class ChoiKoSprings(PairInteraction):
     role = "internal"
 
     def __init__(self, springs: Springs, n: int, *, stiffness: tuple, damping: float,
-                 eps: float, jit: bool | None = None):
-        super().__init__(spring_kernels(eps), n, jit)
+                 eps: float, rest_band: float = 0.0, jit: bool | None = None):
+        super().__init__(spring_kernels(eps, rest_band), n, jit)
         stretch, shear, bend = stiffness
         self.springs = springs
         k_t = np.choose(springs.kind, [stretch, shear, 0.0]).astype(float)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..interrupts import check
 from .outcome import CONVERGED, FAILED, LIMIT
-from .residuals import Linearization, SearchSpace
+from .residuals import SearchSpace
 
 DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
             "maxfun": None, "gtol": 1e-10, "plane": True}
@@ -213,7 +213,7 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
     """One step of the trust region from z: ``(z, radius, f before, f after, cut)``, ``cut``
     the step's and the full step's lengths where the region cut it to a tenth or less;
     raises :class:`_Ended` where the search ends."""
-    lin = Linearization(problem, space.controls(z))
+    lin = space.linearize(z)
     counts.linearizations += 1
     try:
         f = lin.value

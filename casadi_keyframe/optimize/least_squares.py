@@ -22,7 +22,7 @@ from scipy.sparse.linalg import LinearOperator
 
 from ..interrupts import check
 from .outcome import CONVERGED, FAILED, LIMIT
-from .residuals import Linearization, SearchSpace
+from .residuals import SearchSpace
 
 OPTIONS = ("max_nfev", "ftol", "xtol", "gtol", "x_scale", "lsmr_maxiter")
 
@@ -37,18 +37,22 @@ class _Stop(Exception):
 
 class _Residuals:
     """scipy's ``fun`` and ``jac`` in the search's variables: the last point's
-    linearization kept for its Jacobian, the simulations and products counted."""
+    linearization, and the one its Jacobian operator was made at (scipy keeps using that
+    operator while it tries points), kept for their products; simulations and products
+    counted."""
 
     def __init__(self, space, between):
-        self.space, self.between, self.lin = space, between, None
+        self.space, self.between = space, between
+        self.lin = self.z = self.jac_lin = None
         self.simulations = self.products = 0
 
-    def at(self, z) -> Linearization:
+    def at(self, z):
         z = np.asarray(z, dtype=float)
         if self.lin is None or not np.array_equal(self.z, z):
-            self.release()
+            if self.lin is not self.jac_lin:
+                self._drop(self.lin)
             self.between()
-            self.lin, self.z = Linearization(self.space.problem, self.space.controls(z)), z.copy()
+            self.lin, self.z = self.space.linearize(z), z.copy()
             self.simulations += 1
         return self.lin
 
@@ -57,14 +61,22 @@ class _Residuals:
 
     def jacobian(self, z, *_):
         lin = self.at(z)
+        if self.jac_lin is not lin:
+            self._drop(self.jac_lin)
+            self.jac_lin = lin
         jvp, vjp = self.space.products(lin, 1.0, self.between)
         return LinearOperator(lin.shape, matvec=jvp, rmatvec=vjp, dtype=float)
 
+    def _drop(self, lin) -> None:
+        if lin is not None:
+            self.products += lin.products
+            lin.release()
+
     def release(self) -> None:
-        if self.lin is not None:
-            self.products += self.lin.products
-            self.lin.release()
-            self.lin = None
+        self._drop(self.lin)
+        if self.jac_lin is not self.lin:
+            self._drop(self.jac_lin)
+        self.lin = self.jac_lin = None
 
     def tagged(self, message: str) -> str:
         return (f"{message} [least_squares: {self.simulations} linearizations, "

@@ -86,21 +86,27 @@ class Linearization:
 
 class SearchSpace:
     """Where a residual search moves: the evaluator's variables z (a smooth metric's, u =
-    S z, or the controls themselves), the bounds on u, and the Jacobian products in z.
-    ``method`` names the search in the refusal of a problem without residuals (multiple
-    shooting's merit function)."""
+    S z, the controls themselves, or multiple shooting's controls and nodes), the bounds on
+    them, and the Jacobian products in z.  ``method`` names the search in a refusal."""
 
     def __init__(self, problem, ev, method: str):
-        if not hasattr(problem, "objective_terms"):
-            raise ValueError(f"method {method!r} searches a problem's residuals, and multiple "
-                             "shooting's merit function has no residual form yet: run the "
-                             f"shooting with method 'lbfgsb', then {method!r} from its result")
+        merit = getattr(getattr(ev, "ev", ev), "merit", None)
+        self.merit = merit if hasattr(merit, "linearize") else None
+        if self.merit is None and not hasattr(problem, "objective_terms"):
+            raise ValueError(f"method {method!r} searches residuals; {problem!r} has none")
         self.problem, self.metric = problem, getattr(ev, "metric", None)
         self.lb, self.ub = problem.bounds()
         self.bounded = bool(np.isfinite(self.lb).any() or np.isfinite(self.ub).any())
 
     def controls(self, z):
         return z if self.metric is None else self.metric.smooth(z)
+
+    def linearize(self, z):
+        """The residual map at z: a :class:`Linearization` of the problem's controls, or
+        the merit's own (multiple shooting's)."""
+        if self.merit is not None:
+            return self.merit.linearize(z)
+        return Linearization(self.problem, self.controls(z))
 
     def products(self, lin, free=1.0, between=lambda: None):
         """``(z -> J_z p, w -> J_z^T w)`` at ``lin``, with only the ``free`` variables moving

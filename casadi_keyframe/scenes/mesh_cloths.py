@@ -15,7 +15,7 @@ from ..controls import InitialVelocity, StepForces
 from ..loading import OverrideError
 from ..objectives import MeshKeyframe
 from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
-from ..models import ClothModel
+from ..models import ClothModel, ClothParams
 from ..models.colliders import MeshBody, Plane, Sphere
 from ..objectives import Smoothness, StrainLimit
 from ..views import ClothView
@@ -199,14 +199,16 @@ def tracking_guess(prob, land: bool = True) -> np.ndarray:
 
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
-                          smoothing=None, wrinkle=0.0, guess="land"):
+                          smoothing=None, wrinkle=0.0, guess="land", rest_band=0.0):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
     strain limit and a small control cost; with ``guess`` "land" or "track" (per-step
     forces) the search starts from :func:`tracking_guess` with or without its landings,
-    with "none" from zero forces."""
-    model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders)
+    with "none" from zero forces; ``rest_band`` the springs' rest band in the step
+    (:class:`~..models.ClothParams`)."""
+    model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders,
+                                 params=ClothParams(rest_band=rest_band))
     steps = max(f for f, _ in keyframes) if steps is None else steps
     terms = targets_of(model, keyframes, steps, weight=weight, align=align, cloth=cloth)
     free = np.flatnonzero(model.free_mask()[::3])

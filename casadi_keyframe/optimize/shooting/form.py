@@ -24,12 +24,14 @@ class Shooting:
 
     ``reference``: a trajectory of the problem (any controls) whose frames give the
     prescribed components of the node states; ``scales``: ``(sigma_x, sigma_v)``, the
-    defects' units (default :func:`defect_scales`).
+    defects' units (default :func:`defect_scales`); ``spans``: the segments' ``(first,
+    last)`` frames (default ``segments`` equal ones, :func:`~.segments.boundaries`).
     """
 
-    def __init__(self, problem, segments: int, reference: Trajectory, scales=None):
+    def __init__(self, problem, segments: int, reference: Trajectory, scales=None,
+                 spans=None):
         self.problem = problem
-        self.spans = boundaries(problem.steps, segments)
+        self.spans = boundaries(problem.steps, segments) if spans is None else list(spans)
         self.K = len(self.spans)
         n, dim = problem.model.n, problem.model.dim
         self.free = np.asarray(problem.model.free_mask(), bool).reshape(n, dim)
@@ -61,6 +63,13 @@ class Shooting:
             x[self.free], v[self.free] = sx * y, sv * w
             nodes.append(State(x, v))
         return u, nodes
+
+    def unpack_change(self, dz):
+        """``(du, [(dx, dv), ...])``: a change of z as the controls' change and each node's
+        state change (full arrays, zero in the prescribed components)."""
+        sx, sv = self.sigma
+        du, rest = dz[:self.m], dz[self.m:].reshape(self.K - 1, 2, self.nf)
+        return du, [(self._full(sx * y), self._full(sv * w)) for y, w in rest]
 
     def bounds(self):
         lb, ub = self.problem.bounds()
@@ -119,6 +128,17 @@ class Shooting:
                                           for k, (cx, cv) in enumerate(c))
             weighed = [(mult.gradient((k, "x"), cx), mult.gradient((k, "v"), cv))
                        for k, (cx, cv) in enumerate(c)]
+        grad = self.pull_back(runner, gx, gv, weighed)
+        grad[:self.m] += g_control
+        info = {"objective": value + control, "keyframe_error": value, "defects": c,
+                "trajectory": traj}
+        return merit, grad, info
+
+    def pull_back(self, runner, gx, gv, weighed) -> np.ndarray:
+        """d/dz of the stitched frames' cotangents ``gx, gv`` (``(steps + 1, n, dim)``) and
+        the scaled defects' ``weighed`` (``(w_x, w_v)`` per defect), through the segments'
+        last forward passes (``runner``): one backward sweep per segment."""
+        p, (sx, sv) = self.problem, self.sigma
         pulls = [(self._full(wx / sx), self._full(wv / sv)) for wx, wv in weighed]
         cotangents = []
         for k, (a, b) in enumerate(self.spans):
@@ -128,14 +148,12 @@ class Shooting:
             cotangents.append((gxk, gvk))
         pulled = runner.backward(cotangents)
         g_ext = np.concatenate([g for g, _ in pulled])
-        grad = [p.controls.pullback(g_ext, pulled[0][1].v) + g_control]
+        grad = [p.controls.pullback(g_ext, pulled[0][1].v)]
         for k in range(1, self.K):
             start = pulled[k][1]
             grad += [sx * (start.x[self.free] - pulls[k - 1][0][self.free]),
                      sv * (start.v[self.free] - pulls[k - 1][1][self.free])]
-        info = {"objective": value + control, "keyframe_error": value, "defects": c,
-                "trajectory": traj}
-        return merit, np.concatenate(grad), info
+        return np.concatenate(grad)
 
     def sweep(self, runner, starts, ext) -> list:
         """Each segment's frames ``(x, v)`` from ``starts`` under ``ext``, each starting

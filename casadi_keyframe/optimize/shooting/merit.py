@@ -5,6 +5,7 @@ it."""
 from __future__ import annotations
 
 from ..goal import verdict
+from .residuals import ShootingLinearization
 
 
 class ShootingMerit:
@@ -22,6 +23,11 @@ class ShootingMerit:
     def __call__(self, z):
         """``(merit, gradient, info)`` at ``z`` (see :meth:`~.form.Shooting.evaluate`)."""
         return self.shooting.evaluate(z, self.runner, self.mult)
+
+    def linearize(self, z):
+        """Its residual form at z (:class:`~.residuals.ShootingLinearization`), for a
+        residual search."""
+        return ShootingLinearization(self, z)
 
     def describe(self, z, f, info):
         """``(controls, objective, keyframe error, {"defect": ...})`` of an evaluated point:

@@ -10,6 +10,7 @@ import numpy as np
 from .nodes import INITS
 
 FORMULATIONS = ("lagrangian", "ipopt")
+PLACES = ("equal", "growth")
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,9 @@ class ShootingOptions:
     formulation: str = "lagrangian"
     """``"lagrangian"`` (the defects held by multipliers, rounds of the solve's method) or
     ``"ipopt"`` (IPOPT with the defects as constraints, :mod:`.ipopt_form`)."""
+    place: str = "equal"
+    """Where the segments meet: ``"equal"`` (equal lengths) or ``"growth"`` (an equal share
+    of the backward growth measured on the start's run each, :mod:`.placement`)."""
 
 
 def shooting_options(value) -> ShootingOptions | None:
@@ -63,6 +67,9 @@ def shooting_options(value) -> ShootingOptions | None:
     if opts.formulation not in FORMULATIONS:
         raise ValueError(f"shooting formulation must be one of {', '.join(FORMULATIONS)}, got "
                          f"{opts.formulation!r}")
+    if opts.place not in PLACES:
+        raise ValueError(f"shooting place must be one of {', '.join(PLACES)}, got "
+                         f"{opts.place!r}")
     if not callable(opts.init) and opts.init not in INITS:
         raise ValueError(f"shooting init must be one of {', '.join(INITS)} or a function of "
                          f"the problem giving a path of positions, got {opts.init!r}")

@@ -33,6 +33,7 @@ from .form import Shooting
 from .merit import ShootingMerit, true_objective
 from .nodes import initial_nodes, reference_run
 from .options import ShootingOptions
+from .placement import growth_spans, step_growth
 from .workers import segment_runner
 
 
@@ -47,7 +48,9 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
     final problem (``origin``) for the checkpoint."""
     t = time.perf_counter()
     reference = reference_run(problem, u0)
-    shooting = Shooting(problem, opts.segments, reference)
+    spans = (growth_spans(step_growth(problem, u0), opts.segments) if opts.place == "growth"
+             else None)
+    shooting = Shooting(problem, opts.segments, reference, spans=spans)
     mult = None if opts.formulation == "ipopt" else Multipliers(
         _start_weights(shooting, opts.penalty), growth=opts.growth, always=False)
     runner = segment_runner(problem, shooting.spans, opts.workers, opts.scheduler, origin)
@@ -73,10 +76,18 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
     fun = true_objective(problem, u, info)[1] if info else np.nan
     record = stage_record(
         problem, stage, nit=len(search.history) - first, fun=fun, status=status,
-        message=f"multiple shooting, {opts.segments} segments, {rounds} rounds: {message}",
+        message=f"multiple shooting, {opts.segments} segments{_placed(shooting, opts)}, "
+                f"{rounds} rounds: {message}",
         seconds=time.perf_counter() - t, **ev.counts(), segments=opts.segments,
         defect=shooting.defect_size(info.get("defects", [])))
     return record, u, shooting.problem
+
+
+def _placed(shooting, opts) -> str:
+    """`` (at frames 12, 30, ...)`` where the segments were placed by growth."""
+    if opts.place != "growth":
+        return ""
+    return f" (at frames {', '.join(str(a) for a, _ in shooting.spans[1:])}, by growth)"
 
 
 def _start_weights(shooting, penalty) -> dict:

@@ -19,7 +19,9 @@ gradient grows by orders of magnitude per second on fine meshes
 (``control``: ``velocity`` for initial velocities only; ``smoothing`` metres searches in a
 metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
 ``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
-``strain_weight``).  With per-step forces the search starts from ``guess``: "land" (the
+``strain_weight``).  ``rest_band`` > 0 makes the linearized step's spring stiffness turn
+smoothly across rest over that strain band (``ClothParams.rest_band``; 0, the default, is
+the paper's step).  With per-step forces the search starts from ``guess``: "land" (the
 default), a PD controller that pulls the cloth from target to target and lands on each at
 rest by two inverse steps, whatever force holding a target's shape takes; "track", the PD
 controller alone, gentle but lagging; "none", zero forces

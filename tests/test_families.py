@@ -34,7 +34,7 @@ class Tether(ParticleInteraction):
     def parameters(self, t):
         return np.asarray(self.anchor) + t * np.asarray(self.drift)
 
-    def symbolic_columns(self, S):
+    def symbolic_columns(self, S, decisions=None):
         return [S, ca.DM(self.gains)]
 
 

@@ -51,6 +51,7 @@ CASES = {
     "walkthrough": ("mesh_keyframes", lambda f: walkthrough(f)),
     "walkthrough-track": ("mesh_keyframes", lambda f: walkthrough(f, "track")),
     "walkthrough-none": ("mesh_keyframes", lambda f: walkthrough(f, "none")),
+    "mesh12": ("mesh_keyframes", lambda f: {}),
     "mesh12-none": ("mesh_keyframes", lambda f: {"guess": "none"}),
     "mesh12-track": ("mesh_keyframes", lambda f: {"guess": "track"}),
     "cloth_shapes": ("cloth_shapes", lambda f: {}),

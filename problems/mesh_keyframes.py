@@ -21,13 +21,17 @@ metric smooth over the mesh).  The objective: each keyframe at ``weight`` per pa
 ``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
 ``strain_weight``).  ``rest_band`` > 0 makes the linearized step's spring stiffness turn
 smoothly across rest over that strain band (``ClothParams.rest_band``; 0, the default, is
-the paper's step).  With per-step forces the search starts from ``guess``: "land" (the
-default), a PD controller that pulls the cloth from target to target and lands on each at
-rest by two inverse steps, whatever force holding a target's shape takes; "track", the PD
-controller alone, gentle but lagging; "none", zero forces
-(``scenes.mesh_cloths.tracking_guess``).  On a fine flat sheet the objective is rough at
-the scale of a line search's steps, and L-BFGS-B often finds no better point than its start
-(a run that ends so exits with code 1, its result written).
+the paper's step).  With per-step forces the search starts from ``guess``: "aim" (the
+default), a PD controller that pulls the cloth from target to target, run again with its
+path aimed past each target by the miss the run before left (the springs' lag taken out,
+the forces still a controller's, gentle); "track", the PD controller once, gentle but
+lagging; "land", the controller landing on each target at rest by two inverse steps,
+whatever force holding a target's shape takes (a snap: a start for a search, not an answer);
+"none", zero forces (``scenes.mesh_cloths.tracking_guess``).  On a fine sheet the motion is
+so sensitive to the forces between the keyframes (the sheet buckles) that the exact
+gradient grows by many orders of magnitude over the horizon, and L-BFGS-B often finds no
+better point than its start (a run that ends short of the keyframes exits with code 1, its
+result written; ``docs/search_notes.md`` has what was measured and tried).
 
     casadi-keyframe solve mesh_keyframes --set cloth=sheet.obj \\
         --set keyframes=40:wave.obj,80:fold.obj --set pins=0,29 --out results/mine
@@ -47,7 +51,7 @@ SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
 RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
           "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
           "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "rest_band": "[0, 1)", "control": ("forces", "velocity"),
-          "guess": ("land", "track", "none")}
+          "guess": ("aim", "track", "land", "none")}
 
 
 def build(cloth: str | None = None, keyframes: str | None = None,
@@ -58,7 +62,7 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           bodies: str | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
-          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land",
+          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "aim",
           rest_band: float = 0.0):
     if cloth is None:
         if keyframes is not None:

@@ -93,7 +93,7 @@ def run_case(name, method, folder, args) -> dict:
     overrides = {**overrides(folder), **parse_overrides(args.set)}
     module = load_module(problem)
     out = Path(tempfile.mkdtemp(prefix=f"search_{name}_{method}_"))
-    extra = {} if method is None else {"method": method}
+    extra = {} if method in (None, "file") else {"method": method}
     shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
                                                           "place=growth"), None)
     spec = solve_run(module, problem, overrides, out, maxiter=args.maxiter, quiet=True,

@@ -224,8 +224,8 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
     strain limit and a small control cost; with ``guess`` "land", "track" or "aim"
     (per-step forces) the search starts from :func:`tracking_guess` with its landings,
-    without, or aimed by :data:`AIM_RUNS` learning runs, with "none" from zero forces; ``rest_band`` the springs' rest band in the step
-    (:class:`~..models.ClothParams`)."""
+    without, or aimed by :data:`AIM_RUNS` learning runs, with "none" from zero forces;
+    ``rest_band`` the springs' rest band in the step (:class:`~..models.ClothParams`)."""
     model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders,
                                  params=ClothParams(rest_band=rest_band))
     steps = max(f for f, _ in keyframes) if steps is None else steps

@@ -125,3 +125,14 @@ def test_one_story_per_run(extra, tmp_path, capsys):
     numbers = [s["stage"] for s in summary["stages"]]
     assert numbers == sorted(set(numbers))
     assert summary["nfev"] == sum(s["nfev"] for s in summary["stages"])
+
+
+def test_a_stage_that_meets_the_goal_counts_its_own_iterations_and_the_runs():
+    """Stage messages give the run's iteration and the stage's own count, matching ``nit``."""
+    prob = load_problem("flock_path", agents=6, steps=40, tolerance=2.0)
+    result = solve(prob, maxiter=60, quiet=True, continuation=[prob.dt * 5])
+    total = 0
+    for stage in result.stages:
+        total += stage["nit"]
+        assert (f"the goal is met at iteration {total}, {stage['nit']} in this stage"
+                in stage["message"]), stage["message"]

@@ -23,11 +23,14 @@ after the other so that both see the same load: ``cloth_arch`` at 50 x 50 x 100 
 perturbed point (its guess plus white-noise forces of ``NOISE`` m/s^2 rms per particle and
 step, seed 0) under the default contact against the paper's penalty springs, and a 50 x 50
 sheet dropped at 8 m/s onto a sphere (0.5 s) against the same sheet falling freely, with the
-linear solves each took; then the targets (1.3x, 1.5x, the arch under 3.5 s).
+linear solves each took; then the targets (1.3x, 1.5x, the arch under 3.5 s).  ``--only
+reuse`` measures whether a step solved again could reuse the factor of its first solve
+(:func:`reuse`): how much of the matrix a revision changes, and CG preconditioned by the
+earlier factor against factorising again.
 
     .venv/bin/python benchmarks/contact.py [--sizes 25 50] [--speeds 4 8 12]
         [--models penalty guarded constraint] [--duration 0.5] [--repeat 1]
-        [--only drops|friction|cost|mesh]
+        [--only drops|friction|cost|mesh|reuse]
 """
 import os
 
@@ -41,9 +44,11 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
+import scipy.sparse.linalg as sla  # noqa: E402
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces  # noqa: E402
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
+from casadi_keyframe.linear import SparseCholesky, System  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
 from casadi_keyframe.models import COLLISIONS, ClothModel, Sphere  # noqa: E402
 from casadi_keyframe.scenes.body_meshes import write_body  # noqa: E402
@@ -56,13 +61,14 @@ IMPACTS = [("ground", 0), ("ground", 30), ("sphere", 0), ("capsule", 0), ("risin
            ("rising capsule", 0), ("swinging capsule", 0)]
 
 
-def drop_problem(rows, body, speed, tilt, collision, dt, duration, model=None):
-    """The drop's problem (zero controls); ``model`` replaces the sheet and its body."""
+def drop_problem(rows, body, speed, tilt, collision, dt, duration, model=None, solver="auto"):
+    """The drop's problem (zero controls); ``model`` replaces the sheet and its body,
+    ``solver`` is the integrator's linear solver."""
     model = drop_model(rows, body, collision) if model is None else model
     x0, v0 = drop_start(model, speed, tilt)
     steps = int(round(duration / dt))
     objective = StateKeyframe(steps, x=x0 - [0, 0, 0.2], position_weight=1.0 / model.n)
-    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(), x0=x0, v0=v0,
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler(solver), x0=x0, v0=v0,
                           steps=steps, dt=dt, controls=StepForces(),
                           objective=objective + Smoothness(1e-6), name="drop")
 
@@ -146,7 +152,7 @@ def main():
     ap.add_argument("--duration", type=float, default=0.5)
     ap.add_argument("--dt", type=float, default=1 / 60)
     ap.add_argument("--repeat", type=int, default=1)
-    ap.add_argument("--only", choices=["drops", "friction", "cost", "mesh"])
+    ap.add_argument("--only", choices=["drops", "friction", "cost", "mesh", "reuse"])
     args = ap.parse_args()
     if args.only in (None, "drops"):
         drops(args)
@@ -156,6 +162,8 @@ def main():
         mesh_bodies()
     if args.only in (None, "cost"):
         cost(max(args.repeat, 3) if args.only is None else args.repeat)
+    if args.only in (None, "reuse"):
+        reuse()
 
 
 def drops(args):
@@ -249,6 +257,72 @@ def cost(repeat: int):
         if new == "guarded":
             print(f"  cloth_arch 50x50x100 forward {med[new]:.2f} s (target < 3.5 s: "
                   f"{'met' if med[new] < 3.5 else 'MISSED'})", flush=True)
+
+
+
+class RecordingCholesky(SparseCholesky):
+    """CHOLMOD (the default solver here), keeping the free block of every matrix it
+    factorises, in order."""
+
+    def __init__(self):
+        super().__init__()
+        self.blocks = []
+
+    def init(self, free):
+        plan = super().init(free)
+        factor, blocks = plan.factor, self.blocks
+
+        def recording(A, keep=False):
+            blocks.append(plan.system(A).free_block.copy())
+            return factor(A, keep)
+
+        plan.factor = recording
+        return plan
+
+
+def reuse():
+    """Whether a revision could reuse its step's factor: for every step of the 50 x 50 sphere
+    drop solved again, how many rows of the free block the revision changed (a bound on the
+    rank of a CHOLMOD update), and CG on the revised matrix preconditioned by the factor of
+    the matrix before the revision (to 1e-10, right-hand side the revised matrix times a
+    seeded normal vector) against factorising the revised matrix (its analysis reused)."""
+    solver = RecordingCholesky()
+    prob = drop_problem(50, "sphere", 8.0, 0, "guarded", 1 / 60, 0.5, solver=solver)
+    traj = prob.simulate(prob.initial_controls())
+    blocks, size = solver.blocks, solver.blocks[0].shape[0]
+    starts = np.cumsum([0] + [r.solves for r in traj.records])
+    print(f"\nreuse across revisions, 50x50 sheet at 8 m/s onto a sphere: {len(blocks)} "
+          f"factorisations over {prob.steps} steps ({size} unknowns); per revision: rows of "
+          "the free block it changed, CG iterations and CPU ms with the factor before the "
+          "revision as preconditioner, CPU ms of factorising the revised matrix")
+    plan, key = SparseCholesky().init(np.ones(size, bool)), object()
+    system = lambda A: System(A, A.dot, A.dot, key)  # noqa: E731 (one pattern, one analysis)
+    plan.factor(system(blocks[0])).release()
+    rows = []
+    for n, (first, end) in enumerate(zip(starts[:-1], starts[1:])):
+        for k in range(first + 1, end):
+            old, new = blocks[k - 1], blocks[k]
+            changed = np.unique((new - old).nonzero()[0]).size
+            before = plan.factor(system(old), keep=True)
+            rhs = new @ np.random.default_rng(0).standard_normal(size)
+            count = [0]
+            t = time.process_time()
+            _, info = sla.cg(new, rhs, rtol=1e-10, maxiter=2000,
+                             M=sla.LinearOperator(new.shape, lambda r: before.solve(
+                                 np.asarray(r, float).ravel())[0], dtype=float),
+                             callback=lambda _: count.__setitem__(0, count[0] + 1))
+            cg = time.process_time() - t
+            before.release()
+            t = time.process_time()
+            plan.factor(system(new))
+            refactor = time.process_time() - t
+            rows.append((changed, count[0], cg, refactor))
+            print(f"  step {n:2d} revision {k - first}: {changed:5d} rows changed, CG "
+                  f"{count[0]:4d} iterations{'' if info == 0 else ' (not converged)'} "
+                  f"{1e3 * cg:6.1f} ms, factorising {1e3 * refactor:5.1f} ms", flush=True)
+    changed, its, cg, refactor = (np.array(c) for c in zip(*rows))
+    print(f"  median: {np.median(changed):.0f} rows changed, CG {np.median(its):.0f} iterations "
+          f"{1e3 * np.median(cg):.1f} ms against factorising {1e3 * np.median(refactor):.1f} ms")
 
 
 if __name__ == "__main__":

@@ -74,14 +74,12 @@ def misses(breakdown) -> str:
 
 
 def effort(prob, u) -> tuple[float, float]:
-    """rms and peak control acceleration per particle (m/s^2), over controlled particles
-    and steps; NaN for controls that are not forces."""
-    forces = prob.controls.external(u)
-    if forces is None:
+    """rms and peak control acceleration per particle (m/s^2, ``ControlProblem.effort``);
+    NaN for controls that are not forces."""
+    found = prob.effort(u)
+    if found is None:
         return float("nan"), float("nan")
-    idx = prob.controls.idx
-    acc = np.linalg.norm(forces[:, idx], axis=-1) / prob.model.masses[idx]
-    return float(np.sqrt(np.mean(acc ** 2))), float(acc.max())
+    return found["rms_acceleration"], found["peak_acceleration"]
 
 
 def stretch(breakdown) -> float:

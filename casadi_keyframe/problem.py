@@ -243,9 +243,10 @@ class ControlProblem:
         return float(np.vdot(gx, dx) + np.vdot(gv, dv) + self.control_cost(u)[1] @ du)
 
     def breakdown(self, u, traj: Trajectory | None = None) -> dict:
-        """Objective split into keyframe error and control cost, plus per-term misses and,
-        for a model that reports it (cloth), whether the motion stays physical
-        (``physical``: largest spring stretch, deepest penetration of a collider)."""
+        """Objective split into keyframe error and control cost, plus per-term misses,
+        for a model that reports it (cloth) whether the motion stays physical
+        (``physical``: largest spring stretch, deepest penetration of a collider), and for
+        force controls their :meth:`effort`."""
         u = self.controls.check(u)
         traj = self.simulate(u, records=False) if traj is None else traj
         keyframe = self.state_cost(traj, gradient=False)[0]
@@ -255,7 +256,23 @@ class ControlProblem:
                "misses": [t.miss(traj) for t in self.objective_terms.state_terms]}
         if isinstance(self.model, PhysicalReport):
             out["physical"] = self.model.physical_report(traj.x, traj.dt)
+        effort = self.effort(u)
+        if effort is not None:
+            out["effort"] = effort
         return out
+
+    def effort(self, u) -> dict | None:
+        """The control forces as the accelerations they give the particles they push (m/s^2,
+        force over mass): ``rms_acceleration`` over the controlled particles and steps and
+        ``peak_acceleration``, what an animator judges a motion's effort by; None for
+        controls that are not forces (initial velocities)."""
+        forces = self.controls.external(self.controls.check(u))
+        if forces is None:
+            return None
+        idx = self.controls.idx
+        acc = np.linalg.norm(forces[:, idx], axis=-1) / self.model.masses[idx]
+        return {"rms_acceleration": float(np.sqrt(np.mean(acc ** 2))),
+                "peak_acceleration": float(acc.max())}
 
     def physical_shortfall(self, traj: Trajectory) -> list[str]:
         """What ``traj`` breaks of the problem's :attr:`limits` (torn, sunk), one phrase each;

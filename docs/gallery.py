@@ -81,7 +81,7 @@ def physical(problem, trajectory, summary: dict) -> dict | None:
 
 def measure(folder: Path, commit: str) -> dict:
     """``measured.json``'s record of the run in ``folder``."""
-    from casadi_keyframe.saved import load_saved
+    from casadi_keyframe.saved import load_saved, read_run
 
     summary = json.loads((folder / "summary.json").read_text())
     run = load_saved(folder, quiet=True)
@@ -97,7 +97,8 @@ def measure(folder: Path, commit: str) -> dict:
             "method": summary.get("method"), "gradient": summary.get("gradient"),
             "stages": len(summary.get("stages", [])),
             "keyframes": keyframe_rows(run.problem, run.trajectory),
-            "physical": physical(run.problem, run.trajectory, summary)}
+            "physical": physical(run.problem, run.trajectory, summary),
+            "effort": run.problem.effort(read_run(folder)["u"])}
 
 
 def collect(name: str, results: Path, commit: str) -> bool:
@@ -175,6 +176,10 @@ def measured_section(name: str, record: dict | None) -> list[str]:
               f"`{record['gradient']}` gradient.", "", f"> {record['message']}", ""]
     lines += miss_table(record["keyframes"]) + [""]
     lines += physical_lines(record.get("physical"))
+    if record.get("effort"):
+        lines += [f"Effort: rms control acceleration "
+                  f"{record['effort']['rms_acceleration']:.3g} m/s^2 per particle, peak "
+                  f"{record['effort']['peak_acceleration']:.3g} m/s^2.", ""]
     return lines
 
 

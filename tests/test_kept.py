@@ -125,3 +125,31 @@ def test_one_story_per_run(extra, tmp_path, capsys):
     numbers = [s["stage"] for s in summary["stages"]]
     assert numbers == sorted(set(numbers))
     assert summary["nfev"] == sum(s["nfev"] for s in summary["stages"])
+    effort = summary["breakdown"]["effort"]
+    assert effort == saved.problem.effort(np.load(out / "result.npz")["u"])
+    assert f"effort: rms {effort['rms_acceleration']:.3g} m/s^2" in printed
+
+
+def test_a_stage_that_meets_the_goal_counts_its_own_iterations_and_the_runs():
+    """Stage messages give the run's iteration and the stage's own count, matching ``nit``."""
+    prob = load_problem("flock_path", agents=6, steps=40, tolerance=2.0)
+    result = solve(prob, maxiter=60, quiet=True, continuation=[prob.dt * 5])
+    total = 0
+    for stage in result.stages:
+        total += stage["nit"]
+        assert (f"the goal is met at iteration {total}, {stage['nit']} in this stage"
+                in stage["message"]), stage["message"]
+
+
+def test_effort_is_the_control_forces_over_the_pushed_particles_masses(flock):
+    """rms over controlled particles and steps, and the peak, of |force| / mass; none for
+    initial-velocity controls."""
+    prob, u = flock
+    forces = prob.controls.external(u)[:, prob.controls.idx]
+    acc = np.linalg.norm(forces, axis=-1) / prob.model.masses[prob.controls.idx]
+    effort = prob.effort(u)
+    assert effort["rms_acceleration"] == pytest.approx(np.sqrt((acc ** 2).mean()))
+    assert effort["peak_acceleration"] == acc.max() > effort["rms_acceleration"]
+    toss = load_problem("cloth_toss", rows=4, cols=4)
+    assert toss.effort(toss.initial_controls()) is None
+    assert "effort" not in toss.breakdown(toss.initial_controls())

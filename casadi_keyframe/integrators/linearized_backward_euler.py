@@ -1,74 +1,15 @@
 r"""Linearized backward Euler, eqs. (10)-(12): its step, its exact backward and tangent steps,
 and the paper's integrator-swapping backward step (13)-(15), which is APPROXIMATE.
 
-Forward step (Baraff-Witkin):  ``A dv = b`` with ``A = M - dt D - dt^2 K``,
-``b = dt (f_n + dt K v_n + e_n)``, ``K = df/dx|_n`` (at zero velocity), ``D = df/dv|_n``;
-``v_{n+1} = v_n + dv``, ``x_{n+1} = x_n + dt v_{n+1}``.  Forces, Jacobians and colliders are
-taken at ``t_n = n dt``.  Constrained components get a prescribed ``dv`` (the filter of the
-modified CG): pinned particles end the step at rest, attached ones at their path's next
-point.  The model supplies symmetric K and D (as Baraff and Witkin, the position derivative
-of spring damping is left out of K) with -K and -D positive semi-definite (the cloth clamps
-the destabilising parts of its stiffness: compressed springs' transverse term, contact
-curvature), so A is symmetric positive definite for every dt; CG and Cholesky refuse it otherwise.
-The step gathers A's free block from the model's 3x3 blocks into the pass's fixed pattern
-(:meth:`LinearizedBackwardEuler.step_system`), so a sparse Cholesky analyses it once.
-
-Swapped backward step (:meth:`swapped_step_vjp`, the "swapped" gradient route, APPROXIMATE):
-the exact adjoint of this scheme needs second derivatives of f (derivatives of K and D).
-Following the paper (eqs. 13-15) we use instead the exact adjoint of FULL backward Euler,
-eq. (9), ``v+ = v + dt M^-1 f(x+, v+, t+)``, ``x+ = x + dt v+``, which needs first derivatives
-only.  Differentiating eq. (9) puts its Jacobians at the step's END state: the backward step
-from frame n+1 to frame n is
-
-    w      = a_v(n+1) + dt a_x(n+1)                   (the cotangent of v+)
-    A^T mu = w,   A = M - dt D - dt^2 K  at frame n+1  (mu = 0 on pinned and attached
-                                                        components; the set forward
-                                                        step n+1 holds projects w and A)
-    dphi/de_n = dt mu
-    a_v(n) = M mu                       + dphi/dv_n
-    a_x(n) = a_x(n+1) + dt J^T mu       + dphi/dx_n,   J = df/dx at frame n+1, all of it
-
-The paper's eqs. (13)-(15) write the same in "hat" variables; the code's ``mu`` is the
-paper's adjoint scaled by the mass matrix (``M^-1`` applied once, so unequal masses are
-right).  The two deviations from a literal reading, and why:
-
-* **n+1 indexing.**  The matrix at frame n+1 is what differentiating eq. (9) gives, and it
-  is the very matrix forward step n+1 factorised (same state, same particles held), so the
-  backward pass reuses that factor and costs about one forward pass.
-* **K in A, J in the update.**  A holds the model's clamped stiffness K (compressed springs'
-  transverse term and contact curvature left out, damping's position derivative left out),
-  so it stays symmetric positive definite for CG and Cholesky and is the forward factor.  The
-  position adjoint takes the true force Jacobian J: with K there too, every step would drop
-  the same destabilising terms, and the error would not shrink as dt does.  J in A as well
-  (indefinite: a direct solve), or the step's start state, changed the gradient by about
-  1 % or made it worse when measured.
-
-The cost of the mix: where J's destabilising part is large against ``m / dt^2`` (penalty
-springs on curved bodies, whose curvature and damping terms grow with the contact stiffness,
-the sliding speed and 1 / radius), nothing in A damps what the update adds: the backward
-pass grows every step, up to overflow, while the simulation is fine (see ``health``).
-
-For smooth forces the two schemes agree through second order in dt, so each step's adjoint
-carries the paper's O(dt^3) local error; that bound is asymptotic in ``dt sqrt(k/m)``, and at
-animation steps (stiff springs and contact, springs buckling or touching within a step) the
-error is larger and of lower order.  It is exact for forces linear in x and v.  The
-"adjoint" route (below) is exact at the same cost; ``casadi-keyframe study swap-validity``
-maps where the swap suffices.
-
-Exact backward step (:meth:`step_vjp`, the "adjoint" route): the exact adjoint of the
-linearized scheme by hand: the same solve with A per step plus per-spring contractions of
-the force laws' second and third derivatives, so it costs little more than the swapped one
-and, unlike CasADi's unrolled graph, fits any cloth size.  Step n solves
-``R = b(x, v, e) - A(x, v) dv = 0``; with ``w = a_v + dt a_x`` (the cotangent of dv) and
-``A^T lam = w`` (A of step n): ``dphi/de_n = dt lam``, ``a_x(n) = a_x + d_x[lam . R]``,
-``a_v(n) = w + d_v[lam . R]``, the second derivatives hidden in
-``d_x[lam . (dt^2 K (v + dv) + dt D dv)]`` contracted by the model
-(:meth:`linearization_vjp`).
-
-Tangent step (:meth:`step_jvp`): the same relation forward,
-``A ddv = dt de + dt^2 K dv_n + d[dt f + dt^2 K w + dt D q](dx_n, dv_n)`` with ``w = v_{n+1}``
-and ``q = dv`` held (the model's :meth:`linearization_jvp`), then ``dv_{n+1} = dv_n + ddv``,
-``dx_{n+1} = dx_n + dt dv_{n+1}``.
+Forward (Baraff-Witkin): ``A dv = b``, ``A = M - dt D - dt^2 K``, ``b = dt (f_n + dt K v_n +
+e_n)`` at ``t_n``; pinned and attached components get a prescribed ``dv`` (the modified CG's
+filter); A's free block is gathered into the pass's fixed pattern so a sparse Cholesky
+analyses it once.  Backward: :meth:`~LinearizedBackwardEuler.step_vjp` is the exact adjoint
+of this scheme (the same solve plus the force laws' second-derivative contractions);
+:meth:`~LinearizedBackwardEuler.swapped_step_vjp` the paper's approximate one (the adjoint
+of full backward Euler, first derivatives only, at the step's end state).  Tangent:
+:meth:`~LinearizedBackwardEuler.step_jvp`.  The derivation, the swap's two deviations from
+a literal reading and what the mix costs: ``docs/explanations/linearized_step.md``.
 """
 from __future__ import annotations
 

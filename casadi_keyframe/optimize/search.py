@@ -234,12 +234,14 @@ class _Search:
         metric = search_metric(problem)
         searched, start = (ev, u0) if metric is None else (MetricView(ev, metric),
                                                           metric.unsmooth(u0))
+        before = len(self.history)
         try:
             return run(problem, searched, start, self.maxiter, self.tol, self.options,
                        lambda: ev.record(self.history, self.start, bar), self.deadline)
         except GoalReached as reached:
-            return CONVERGED, (f"converged: the goal is met at iteration {reached.iteration} "
-                               "(stop='goal')")
+            here = "" if count == 1 else f", {reached.iteration - before} in this stage"
+            return CONVERGED, (f"converged: the goal is met at iteration {reached.iteration}"
+                               f"{here} (stop='goal')")
         except KeyboardInterrupt as err:
             handled()
             signum = getattr(err, "signum", signal.SIGINT)

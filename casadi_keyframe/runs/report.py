@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ..adjoints import DEFAULT, get_gradient
 from ..optimize.outcome import FAILED, LIMIT
-from ..optimize.report import format_misses, format_physical, format_stage
+from ..optimize.report import format_effort, format_misses, format_physical, format_stage
 from ..saved import CHECKPOINT, RESULT
 
 def format_value(value) -> str:
@@ -39,6 +39,8 @@ def report(result, summary, out) -> None:
         print(f"  {format_misses([miss])}")
     if "physical" in summary["breakdown"]:
         print(f"  {format_physical(summary['breakdown']['physical'])}")
+    if "effort" in summary["breakdown"]:
+        print(f"  {format_effort(summary['breakdown']['effort'])}")
     print(f"  result written to {out}/{RESULT} and summary.json")
 
 

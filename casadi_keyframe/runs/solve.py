@@ -16,7 +16,7 @@ from types import SimpleNamespace
 
 from ..interrupts import check
 from ..optimize.outcome import INTERRUPTED
-from ..optimize.report import format_misses, format_physical
+from ..optimize.report import format_effort, format_misses, format_physical
 from ..saved import (CHECKPOINT, Checkpoint, check_inputs, check_trajectory, input_record,
                      read_run, save_result)
 from ..state import SimulationError
@@ -120,8 +120,9 @@ def _solve(spec: SolveRun, caught, done) -> int:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
     physical = f"; {format_physical(start['physical'])}" if "physical" in start else ""
+    effort = f"; {format_effort(start['effort'])}" if "effort" in start else ""
     print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
-          f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}")
+          f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}{effort}")
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
             "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient,
             **input_record(prob)}

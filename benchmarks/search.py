@@ -10,8 +10,8 @@ control force / particle mass), iterations, evaluations, CPU seconds and the exi
         --cases mesh12-none,mesh12-track --methods lbfgsb,gauss-newton
 
 ``--cases`` picks from :data:`CASES` (default: all; the README's walkthrough reads a 30 x 30
-sheet and its targets written into a temporary folder first); ``--set KEY=VALUE`` and
-``--maxiter`` and ``--time-limit`` go to every run.
+sheet and its targets written into a temporary folder first); ``--set KEY=VALUE``,
+``--maxiter``, ``--time-limit``, ``--segments`` and ``--shooting`` go to every run.
 """
 from __future__ import annotations
 
@@ -30,7 +30,7 @@ for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 
 import numpy as np  # noqa: E402
 
-from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
+from casadi_keyframe.cli.values import option_items, parse_overrides, parse_shooting  # noqa: E402
 from casadi_keyframe.saved import read_run  # noqa: E402
 from casadi_keyframe.loading import load_module  # noqa: E402
 from casadi_keyframe.runs import run_solve, solve_run  # noqa: E402
@@ -51,6 +51,7 @@ CASES = {
     "walkthrough": ("mesh_keyframes", lambda f: walkthrough(f)),
     "walkthrough-track": ("mesh_keyframes", lambda f: walkthrough(f, "track")),
     "walkthrough-none": ("mesh_keyframes", lambda f: walkthrough(f, "none")),
+    "mesh12": ("mesh_keyframes", lambda f: {}),
     "mesh12-none": ("mesh_keyframes", lambda f: {"guess": "none"}),
     "mesh12-track": ("mesh_keyframes", lambda f: {"guess": "track"}),
     "cloth_shapes": ("cloth_shapes", lambda f: {}),
@@ -90,9 +91,11 @@ def run_case(name, method, folder, args) -> dict:
     overrides = {**overrides(folder), **parse_overrides(args.set)}
     module = load_module(problem)
     out = Path(tempfile.mkdtemp(prefix=f"search_{name}_{method}_"))
-    extra = {} if method is None else {"method": method}
+    extra = {} if method in (None, "file") else {"method": method}
+    shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
+                                                          "place=growth"), None)
     spec = solve_run(module, problem, overrides, out, maxiter=args.maxiter, quiet=True,
-                     pictures=False, animation=False, viewer=False,
+                     pictures=False, animation=False, viewer=False, shooting=shooting,
                      time_limit=args.time_limit, **extra)
     prob = spec.problem
     start_u = prob.initial_controls()
@@ -129,6 +132,10 @@ def main(argv=None) -> int:
     parser.add_argument("--methods", default="lbfgsb,gauss-newton")
     parser.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--maxiter", type=int, default=None)
+    parser.add_argument("--segments", type=int, default=None,
+                        help="multiple shooting's segments for every run (1: none)")
+    parser.add_argument("--shooting", action="append", metavar="KEY=VALUE,...",
+                        help="multiple shooting's options, as solve's --shooting")
     parser.add_argument("--time-limit", type=float, default=None)
     parser.add_argument("--messages", action="store_true", help="print each run's message")
     args = parser.parse_args(argv)

@@ -19,15 +19,24 @@ gradient grows by orders of magnitude per second on fine meshes
 (``control``: ``velocity`` for initial velocities only; ``smoothing`` metres searches in a
 metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
 ``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
-``strain_weight``).  ``rest_band`` > 0 makes the linearized step's spring stiffness turn
-smoothly across rest over that strain band (``ClothParams.rest_band``; 0, the default, is
-the paper's step).  With per-step forces the search starts from ``guess``: "land" (the
-default), a PD controller that pulls the cloth from target to target and lands on each at
-rest by two inverse steps, whatever force holding a target's shape takes; "track", the PD
-controller alone, gentle but lagging; "none", zero forces
-(``scenes.mesh_cloths.tracking_guess``).  On a fine flat sheet the objective is rough at
-the scale of a line search's steps, and L-BFGS-B often finds no better point than its start
-(a run that ends so exits with code 1, its result written).
+``strain_weight``).  ``rest_band`` makes the linearized step's spring stiffness turn smoothly
+across rest over that strain band (``ClothParams.rest_band``; 0 is the paper's step): the
+motion is then a continuous function of the forces, which the search from zero forces
+needs on a buckling sheet (``SOLVE``: scipy's trust-region least squares on the exact
+residual products).  By default it is 0.05 with ``guess=none`` and 0 otherwise: along a
+controller's motion the band's steep ramp makes the exact gradient grow far faster
+backwards.  A result is simulated and judged under the step it was searched on.
+With per-step forces the search starts from ``guess``: "aim" (the
+default), a PD controller that pulls the cloth from target to target, run again with its
+path aimed past each target by the miss the run before left (the springs' lag taken out,
+the forces still a controller's, gentle); "track", the PD controller once, gentle but
+lagging; "land", the controller landing on each target at rest by two inverse steps,
+whatever force holding a target's shape takes (a snap: a start for a search, not an answer);
+"none", zero forces (``scenes.mesh_cloths.tracking_guess``).  On a fine sheet the motion is
+so sensitive to the forces between the keyframes (the sheet buckles) that the exact
+gradient grows by many orders of magnitude over the horizon, and the search often finds
+no better point than its start (a run that ends short of the keyframes exits with code 1, its
+result written; ``docs/search_notes.md`` has what was measured and tried).
 
     casadi-keyframe solve mesh_keyframes --set cloth=sheet.obj \\
         --set keyframes=40:wave.obj,80:fold.obj --set pins=0,29 --out results/mine
@@ -43,11 +52,22 @@ from casadi_keyframe.scenes.mesh_cloths import (bodies_of, colliders_of, mesh_ke
                                                  refuse)
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
 
-SOLVE = {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint"}
+ZERO_START_BAND = 0.05  # rest_band's default with guess=none
+
+
+def SOLVE(guess: str = "aim", **_) -> dict:
+    """From zero forces scipy's trust-region least squares (on the rest band's continuous
+    step, see ``rest_band``); from a controller's start, which is near the keyframes,
+    L-BFGS-B."""
+    method = "least-squares" if guess == "none" else "lbfgsb"
+    return {"method": method, "maxiter": 200, "gradient": "adjoint"}
+
+
+
 RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
           "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
           "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "rest_band": "[0, 1)", "control": ("forces", "velocity"),
-          "guess": ("land", "track", "none")}
+          "guess": ("aim", "track", "land", "none")}
 
 
 def build(cloth: str | None = None, keyframes: str | None = None,
@@ -58,8 +78,8 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           bodies: str | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
-          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "land",
-          rest_band: float = 0.0):
+          smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "aim",
+          rest_band: float | None = None):
     if cloth is None:
         if keyframes is not None:
             raise refuse("keyframes", "targets need the cloth they shape: give cloth=FILE too")
@@ -83,4 +103,6 @@ def build(cloth: str | None = None, keyframes: str | None = None,
                                  weight=weight,
                                  alpha=alpha, align=align, strain_limit=strain_limit,
                                  strain_weight=strain_weight, smoothing=smoothing,
-                                 wrinkle=wrinkle, guess=guess, rest_band=rest_band)
+                                 wrinkle=wrinkle, guess=guess,
+                                 rest_band=(ZERO_START_BAND if guess == "none" else 0.0)
+                                 if rest_band is None else rest_band)

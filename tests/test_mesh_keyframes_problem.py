@@ -138,21 +138,27 @@ def test_bad_spheres_and_box_are_refused_by_name(files, capsys):
     assert "mesh_keyframes: pin_box: " in capsys.readouterr().err
 
 
-def test_guesses_land_track_or_start_from_zero(files):
+def test_guesses_aim_land_track_or_start_from_zero(files):
     """"land" starts on both keyframes (inverse steps at each, not only the last), "track"
-    near them with far gentler forces, "none" from zero forces."""
+    near them with far gentler forces, "aim" (the default) nearer than "track" and still
+    far gentler than "land", "none" from zero forces."""
     from casadi_keyframe.loading import load_problem
 
     def start(guess):
-        prob = load_problem("mesh_keyframes", cloth=files["sheet"], guess=guess, pins=(0, 5),
-                            keyframes=f"15:{files['wave']},30:{files['fold']}")
+        extra = {} if guess is None else {"guess": guess}
+        prob = load_problem("mesh_keyframes", cloth=files["sheet"], pins=(0, 5),
+                            keyframes=f"15:{files['wave']},30:{files['fold']}", **extra)
         u = prob.initial_controls()
         misses = [m["rms_position_error"] for m in prob.breakdown(u)["misses"]]
         return prob, u, misses
 
     landed, u_land, on = start("land")
     tracked, u_track, near = start("track")
+    aimed, u_aim, nearer = start(None)
     passive, u_zero, off = start("none")
     assert max(on) < 1e-9 and not np.any(u_zero)
     assert max(near) < 0.5 * min(off) and min(near) > 1e-6
+    assert max(nearer) < max(near)
+    np.testing.assert_array_equal(u_aim, start("aim")[1])
     assert tracked.control_cost(u_track)[0] < 0.1 * landed.control_cost(u_land)[0]
+    assert aimed.control_cost(u_aim)[0] < 0.1 * landed.control_cost(u_land)[0]

@@ -25,6 +25,7 @@ from .maths import smoothstep
 
 PROBLEM = "mesh_keyframes"
 EXAMPLE = "40:wave.obj,80:fold.obj"
+AIM_RUNS = 2  # guess "aim": the tracking controller's learning runs before the one it keeps
 
 
 def refuse(option: str, message: str):
@@ -172,10 +173,12 @@ def wrinkled(model, depth: float) -> np.ndarray:
     return x + bump[:, None] * at_vertex
 
 
-def keyframe_path(x0, terms, steps: int) -> np.ndarray:
+def keyframe_path(x0, terms, steps: int, aims=None) -> np.ndarray:
     """``(steps + 1, n, 3)`` positions from ``x0`` through each keyframe's target at its
-    frame (smoothstep between them, so the path rests at each), held after the last."""
-    stops = [(0, x0)] + [(t.frame, t.position_target) for t in terms]
+    frame (or through ``aims``, one position array per term), smoothstep between them, so
+    the path rests at each; held after the last."""
+    aims = [t.position_target for t in terms] if aims is None else aims
+    stops = [(0, x0)] + [(t.frame, a) for t, a in zip(terms, aims)]
     path = np.empty((steps + 1,) + x0.shape)
     for (f0, a), (f1, b) in zip(stops, stops[1:]):
         s = smoothstep((np.arange(f0, f1 + 1) - f0) / max(f1 - f0, 1))
@@ -184,29 +187,45 @@ def keyframe_path(x0, terms, steps: int) -> np.ndarray:
     return path
 
 
-def tracking_guess(prob, land: bool = True) -> np.ndarray:
+def tracking_guess(prob, land: bool = True, aim: int = 0) -> np.ndarray:
     """Start controls of ``prob`` (per-step forces): a PD controller pulling every particle
     along :func:`keyframe_path` (``cape_tracking.tracking_forces``) and, with ``land``,
     landing on each target at rest by two inverse steps, so the search starts on its
     keyframes.  The landings hold each target's shape whatever it costs: strong forces where
-    a target stretches the cloth; the PD controller alone is gentle but lags."""
+    a target stretches the cloth; the PD controller alone is gentle but lags.  ``aim`` > 0
+    (without ``land``) runs the controller that many times more, each run's path aimed past
+    each target by the miss the run before left there (iterative learning control: the
+    springs' lag is taken out, the forces stay a controller's)."""
     terms = sorted(prob.objective_terms.state_terms, key=lambda t: t.frame)
-    stops = {t.frame: (t.position_target, np.zeros_like(prob.x0)) for t in terms
-             if land and not getattr(t, "align", False)}
-    forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps), stops=stops)
+    if land:
+        stops = {t.frame: (t.position_target, np.zeros_like(prob.x0)) for t in terms
+                 if not getattr(t, "align", False)}
+        forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps), stops=stops)
+        return forces[:, prob.controls.idx].ravel()
+    aims = [t.position_target for t in terms]
+    for _ in range(aim):
+        x = prob.simulate(_tracked(prob, terms, aims), records=False).x
+        aims = [a if getattr(t, "align", False) else a + t.position_target - x[t.frame]
+                for t, a in zip(terms, aims)]
+    return _tracked(prob, terms, aims)
+
+
+def _tracked(prob, terms, aims) -> np.ndarray:
+    """The PD controller's forces along the path through ``aims``, as ``prob``'s controls."""
+    forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps, aims))
     return forces[:, prob.controls.idx].ravel()
 
 
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
-                          smoothing=None, wrinkle=0.0, guess="land", rest_band=0.0):
+                          smoothing=None, wrinkle=0.0, guess="aim", rest_band=0.0):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
-    strain limit and a small control cost; with ``guess`` "land" or "track" (per-step
-    forces) the search starts from :func:`tracking_guess` with or without its landings,
-    with "none" from zero forces; ``rest_band`` the springs' rest band in the step
-    (:class:`~..models.ClothParams`)."""
+    strain limit and a small control cost; with ``guess`` "land", "track" or "aim"
+    (per-step forces) the search starts from :func:`tracking_guess` with its landings,
+    without, or aimed by :data:`AIM_RUNS` learning runs, with "none" from zero forces;
+    ``rest_band`` the springs' rest band in the step (:class:`~..models.ClothParams`)."""
     model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders,
                                  params=ClothParams(rest_band=rest_band))
     steps = max(f for f, _ in keyframes) if steps is None else steps
@@ -224,4 +243,5 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
                                  if getattr(m, "source", None) is not None])
     if guess == "none" or control != "forces":
         return prob
-    return prob.with_guess(tracking_guess(prob, land=guess == "land"))
+    return prob.with_guess(tracking_guess(prob, land=guess == "land",
+                                          aim=AIM_RUNS if guess == "aim" else 0))

@@ -28,7 +28,8 @@ from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 from .held_solve import adjoint_multiplier, held_q, held_rhs, projected_matrix
 
-MAX_REVISIONS = 6  # a step solved again at most this often when its end shows it chose wrong
+MAX_REVISIONS = 20  # a step solved again at most this often when its end shows it chose wrong
+# (a sheet landing at an angle lets go of a row of arriving particles per revision)
 
 
 def step_matrices(model, x, v, dt, t=0.0, with_df_dx=False, interactions=None):

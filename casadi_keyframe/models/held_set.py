@@ -14,7 +14,7 @@ particle at the step's end.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 
 import numpy as np
 
@@ -113,6 +113,21 @@ class HeldSet:
             r = r - self.friction
             return replace(self, impulse=np.einsum("ka,ka->k", self.normals, r), residual=r)
         return replace(self, impulse=np.einsum("ka,ka->k", self.normals, r))
+
+    def pulled(self, slack=0.0) -> np.ndarray:
+        """``(k,)`` bools: the members whose normal the solved step held by pulling them onto
+        the body, with an impulse below ``-slack`` (per member or one for all)."""
+        pulled = self.impulse < -np.asarray(slack)
+        return pulled & self.normal if self.frictional else pulled
+
+    def without(self, drop: np.ndarray, n: int) -> "HeldSet":
+        """The set less the members ``drop`` (``(k,)`` bools), which join ``released``
+        (``(n,)`` over the ``n`` particles)."""
+        released = np.zeros(n, bool) if self.released is None else self.released.copy()
+        released[self.particles[drop]] = True
+        sliced = {f.name: getattr(self, f.name)[~drop] for f in fields(self)
+                  if f.name != "released" and getattr(self, f.name) is not None}
+        return replace(self, **sliced, released=released)
 
     def hold_residual(self) -> np.ndarray:
         """The hold's impulse on each held particle, ``(k, 3)``."""

@@ -12,8 +12,10 @@ is moved back a fraction per step.  A particle is held when it would end the ste
 the layer moving as it does, ``dt (n . v - c) <= tolerance``, on the body it would reach
 deepest.  On a body with friction (``Contact.friction``) the hold also holds or pushes its
 tangential velocity (:mod:`.friction`, :mod:`.held_set`); without, it stays free.  One the
-hold pulled (negative impulse) is released at the next step, and stays released while it
-moves away.  The step solves ``S (A dv - b) = 0``, ``P (dv - z) = 0``
+hold pulled (negative impulse) is released and the step solved again (contact only pushes),
+unless the pull would move it less than the tolerance over the step; one still pulled when
+the step stops revising is released at the next.  A released particle stays released while
+it moves away.  The step solves ``S (A dv - b) = 0``, ``P (dv - z) = 0``
 (:mod:`~..integrators.held_solve`); its exact derivative adds those of the normals, targets
 and body velocities, which the kernels of :func:`hold_kernels` give.
 """
@@ -161,7 +163,9 @@ class BodyHold(Interaction):
     :class:`~.held_set.HeldSet` (None: nothing held).  ``layer`` (m): how far from each
     body's surface particles are held, its contact thickness by default, 0 for the surface
     itself (under penalty springs: ``collision="guarded"``, :mod:`.collisions`); ``layers``
-    gives one per body instead; ``penalty``: which bodies the penalty springs act on too."""
+    gives one per body instead; ``penalty``: which bodies the penalty springs act on too;
+    ``masses`` (kg): the particles', which say how hard a pull is (:meth:`revise`) and
+    friction's normal impulse."""
 
     name = "body hold"
     role = "contact"
@@ -175,10 +179,12 @@ class BodyHold(Interaction):
             layers = [b.contact.thickness if layer is None else layer for b in bodies]
         penalty = [False] * len(bodies) if penalty is None else penalty
         self.bodies = tuple(HeldBody(b, h, jit, p) for b, h, p in zip(bodies, layers, penalty))
+        if masses is None:
+            raise ValueError("a hold needs the particles' masses (the pulls it lets go, "
+                             "friction's normal impulse): pass masses=")
+        self.masses = np.asarray(masses, float)
         self.coulomb = None
         if any(b.friction > 0 for b in self.bodies):
-            if masses is None:
-                raise ValueError("a hold on bodies with friction needs the particles' masses")
             self.coulomb = Coulomb(self.bodies, masses, gravity, CORRECTION, jit)
 
     def decide(self, step: StepSpan, carried) -> HeldSet | None:
@@ -226,14 +232,19 @@ class BodyHold(Interaction):
     def stops(self, found, end):
         """A particle held, or one that ended in a body's contact layer."""
         touching = [end.distances(b.body).min() < b.body.contact.thickness for b in self.bodies]
-        return found is not None or any(touching)
+        return (found is not None and found.count > 0) or any(touching)
 
     def revise(self, found, end, stopped):
-        """``found`` plus the free particles the step ended deeper than a body's layer less
-        its overshoot (:data:`OVERSHOOT`) without holding them, each held as at the step's
-        start on the body it ended deepest in; with friction, the stick and slide decisions
-        the step's end refutes (:mod:`.friction`); None if nothing changes."""
+        """``found`` less the particles its solve pulled onto a body (:meth:`_pulled_off`;
+        contact only pushes, so they are released and the step solved again), plus the free
+        particles the step ended deeper than a body's layer less its overshoot
+        (:data:`OVERSHOOT`) without holding them, each held as at the step's start on the
+        body it ended deepest in; with friction, the stick and slide decisions the step's
+        end refutes (:mod:`.friction`); None if nothing changes."""
         held, n = NOTHING_HELD if found is None else found, end.x.shape[0]
+        pulled = self._pulled_off(held, end.dt)
+        if pulled.any():
+            found = held = held.without(pulled, n)
         unheld = end.free.copy()
         unheld[held.particles[held.normal] if held.frictional else held.particles] = False
         worst, body = np.zeros(n), np.full(n, -1)
@@ -243,9 +254,10 @@ class BodyHold(Interaction):
             worst[deeper], body[deeper] = depth[deeper], b
         late = np.flatnonzero(body >= 0)
         if self.coulomb is not None:
-            return self.coulomb.revise(found, end, late, body)
+            revised = self.coulomb.revise(found, end, late, body)
+            return found if revised is None and pulled.any() else revised
         if not late.size:
-            return None
+            return found if pulled.any() else None
         normals, targets = np.zeros((late.size, 3)), np.zeros(late.size)
         rows = np.zeros((late.size, max(sum(b.sizes) for b in self.bodies)))
         for b, layer in enumerate(self.bodies):
@@ -264,6 +276,15 @@ class BodyHold(Interaction):
                        np.concatenate([held.targets, targets])[order], released=released,
                        geometry=geometry[order])
 
+    def _pulled_off(self, held, dt):
+        """``(k,)``: the members the solved step pulls onto their body, each harder than a
+        pull that moves it less than its body's tolerance over the step (``m tolerance /
+        dt``: within it, it touches)."""
+        if held.impulse is None:
+            return np.zeros(held.count, bool)
+        tolerance = np.array([b.tolerance for b in self.bodies])
+        return held.pulled(self.masses[held.particles] * tolerance[held.body] / dt)
+
     def solved(self, found, residual):
         return None if found is None else found.solved(residual)
 
@@ -271,10 +292,7 @@ class BodyHold(Interaction):
         """The particles the hold pulled (released at the next step) and those it released."""
         if found is None:
             return None
-        pulled = found.impulse < 0
-        if found.frictional:
-            pulled &= found.normal
-        return found.particles[pulled], found.released
+        return found.particles[found.pulled()], found.released
 
     def decision_parameters(self, found, t, dt):
         """Which particles are held on each body (0/1, body after body), then each body's

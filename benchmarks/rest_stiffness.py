@@ -119,9 +119,9 @@ def linearity(prob, u, label: str) -> None:
 
 
 def effort(prob, u) -> str:
-    forces = prob.controls.external(u)[:, prob.controls.idx]
-    acc = np.linalg.norm(forces, axis=-1) / prob.model.masses[prob.controls.idx]
-    return f"acc rms {np.sqrt(np.mean(acc ** 2)):.1f} peak {acc.max():.1f} m/s^2"
+    found = prob.effort(u)
+    return (f"acc rms {found['rms_acceleration']:.1f} peak {found['peak_acceleration']:.1f} "
+            "m/s^2")
 
 
 def misses(prob, u) -> str:

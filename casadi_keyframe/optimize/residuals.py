@@ -13,7 +13,53 @@ from scipy.sparse.linalg import LinearOperator
 from ..simulate import backward, tangent
 
 
-class Linearization:
+class ResidualMap:
+    """What every residual map gives beside its ``residual``: the objective's value there."""
+
+    residual: np.ndarray
+
+    @property
+    def value(self) -> float:
+        return float(0.5 * self.residual @ self.residual)
+
+
+class TermResiduals:
+    """A problem's terms as one stacked residual, in its term order: the state and
+    trajectory terms' on a trajectory, then the control terms' on the controls; their
+    forward and transposed products split the same way."""
+
+    def __init__(self, problem):
+        terms = problem.objective_terms
+        self.state = terms.state_terms + terms.trajectory_terms
+        self.control = terms.control_terms
+        self.controls, self.dt = problem.controls, problem.dt
+
+    def __len__(self) -> int:
+        return len(self.state) + len(self.control)
+
+    def pieces(self, traj, u) -> list:
+        return ([t.residual(traj) for t in self.state]
+                + [t.residual(u, self.controls, self.dt) for t in self.control])
+
+    def jvp(self, traj, dx, dv, du) -> list:
+        """Each term's ``J du``, given the frames' tangents ``dx, dv`` along ``du``."""
+        return ([t.residual_jvp(traj, dx, dv) for t in self.state]
+                + [t.residual_jvp(du, self.controls, self.dt) for t in self.control])
+
+    def state_vjp(self, traj, parts, gx, gv) -> None:
+        """Add the state terms' ``J^T w`` (``parts``: the cotangents, term by term) into
+        the frame cotangents ``gx, gv``."""
+        for term, part in zip(self.state, parts):
+            term.residual_vjp(traj, part, gx, gv)
+
+    def control_vjp(self, parts, out):
+        """``out`` plus the control terms' ``J^T w`` (``parts`` as for :meth:`state_vjp`)."""
+        for term, part in zip(self.control, parts[len(self.state):len(self)]):
+            out = out + term.residual_vjp(part, self.controls, self.dt)
+        return out
+
+
+class Linearization(ResidualMap):
     """The residual map of ``problem`` at the controls ``u``: one simulation with records,
     kept for the products until :meth:`release` (it holds the steps' factorisations).
 
@@ -27,18 +73,11 @@ class Linearization:
         self.problem = problem
         self.u = problem.controls.check(u)
         self.trajectory = problem.simulate(self.u)
-        terms = problem.objective_terms
-        self._state = terms.state_terms + terms.trajectory_terms
-        self._control = terms.control_terms
-        pieces = ([t.residual(self.trajectory) for t in self._state]
-                  + [t.residual(self.u, problem.controls, problem.dt) for t in self._control])
+        self.terms = TermResiduals(problem)
+        pieces = self.terms.pieces(self.trajectory, self.u)
         self._ends = np.cumsum([p.size for p in pieces])
         self.residual = np.concatenate(pieces) if pieces else np.zeros(0)
         self.products = 0  # Jacobian products so far, forward and transposed
-
-    @property
-    def value(self) -> float:
-        return float(0.5 * self.residual @ self.residual)
 
     @property
     def shape(self) -> tuple:
@@ -54,8 +93,7 @@ class Linearization:
                          np.zeros_like(p.v0) if offset is None else offset,
                          np.zeros_like(p.external) if forces is None else forces)
         self.products += 1
-        return np.concatenate([t.residual_jvp(traj, dx, dv) for t in self._state]
-                              + [t.residual_jvp(du, p.controls, p.dt) for t in self._control])
+        return np.concatenate(self.terms.jvp(traj, dx, dv, du))
 
     def vjp(self, w) -> np.ndarray:
         """``J^T w``: the controls' cotangent of the residual cotangent ``w``."""
@@ -63,12 +101,9 @@ class Linearization:
         w = np.asarray(w, dtype=float).ravel()
         parts = np.split(w, self._ends[:-1])
         gx, gv = np.zeros_like(traj.x), np.zeros_like(traj.v)
-        for term, part in zip(self._state, parts):
-            term.residual_vjp(traj, part, gx, gv)
+        self.terms.state_vjp(traj, parts, gx, gv)
         g_external, g0 = backward(p.integrator, p.model, traj, gx, gv)
-        out = p.controls.pullback(g_external, g0.v)
-        for term, part in zip(self._control, parts[len(self._state):]):
-            out = out + term.residual_vjp(part, p.controls, p.dt)
+        out = self.terms.control_vjp(parts, p.controls.pullback(g_external, g0.v))
         self.products += 1
         return out
 

@@ -15,11 +15,12 @@ from __future__ import annotations
 import numpy as np
 
 from ...simulate import tangent
+from ..residuals import ResidualMap, TermResiduals
 from .segments import Shifted
 from .workers import Serial
 
 
-class ShootingLinearization:
+class ShootingLinearization(ResidualMap):
     """The residual map of ``merit`` (a :class:`~.merit.ShootingMerit` with multipliers) at
     ``z``: :attr:`residual`, :attr:`value`, :meth:`jvp`, :meth:`vjp`, :meth:`release`, as
     :class:`~..residuals.Linearization` gives them for a problem."""
@@ -38,23 +39,16 @@ class ShootingLinearization:
                                                                                     ext))})
         frames = [out[k][:2] for k in range(s.K)]
         self.trajectory = s.stitch(frames)
-        terms = p.objective_terms
-        self._state, self._control = terms.state_terms + terms.trajectory_terms, \
-            terms.control_terms
+        self.terms = TermResiduals(p)
         self._blocks = [(k, c) for k in range(s.K - 1) for c in ("x", "v")]
         self._root = np.array([np.sqrt(self.mult.weights[b]) for b in self._blocks])
         defects = [c for pair in s.defects(frames, nodes) for c in pair]
-        pieces = ([t.residual(self.trajectory) for t in self._state]
-                  + [t.residual(self.u, p.controls, p.dt) for t in self._control]
+        pieces = (self.terms.pieces(self.trajectory, self.u)
                   + [root * (c + self.mult.shift(b))
                      for root, c, b in zip(self._root, defects, self._blocks)])
         self._ends = np.cumsum([q.size for q in pieces])
         self.residual = np.concatenate(pieces)
         self.products = 0
-
-    @property
-    def value(self) -> float:
-        return float(0.5 * self.residual @ self.residual)
 
     @property
     def shape(self) -> tuple:
@@ -74,8 +68,7 @@ class ShootingLinearization:
             frames.append(tangent(Shifted(p.integrator, a), p.model, traj, *starts[k],
                                   forces[a:b]))
         moved = s.stitch(frames)
-        parts = ([t.residual_jvp(self.trajectory, moved.x, moved.v) for t in self._state]
-                 + [t.residual_jvp(du, p.controls, p.dt) for t in self._control])
+        parts = self.terms.jvp(self.trajectory, moved.x, moved.v, du)
         sx, sv = s.sigma
         for k, (dx, dv) in enumerate(frames[:-1]):
             node_x, node_v = starts[k + 1]
@@ -86,16 +79,13 @@ class ShootingLinearization:
 
     def vjp(self, w) -> np.ndarray:
         """``J^T w``: the residual cotangent ``w`` pulled back to z, one sweep per segment."""
-        s, p = self.shooting, self.shooting.problem
+        s = self.shooting
         parts = np.split(np.asarray(w, dtype=float).ravel(), self._ends[:-1])
         gx, gv = np.zeros_like(self.trajectory.x), np.zeros_like(self.trajectory.v)
-        for term, part in zip(self._state, parts):
-            term.residual_vjp(self.trajectory, part, gx, gv)
-        ours = len(self._state) + len(self._control)
-        scaled = [root * part for root, part in zip(self._root, parts[ours:])]
+        self.terms.state_vjp(self.trajectory, parts, gx, gv)
+        scaled = [root * part for root, part in zip(self._root, parts[len(self.terms):])]
         out = s.pull_back(self.runner, gx, gv, list(zip(scaled[::2], scaled[1::2])))
-        for term, part in zip(self._control, parts[len(self._state):ours]):
-            out[:s.m] += term.residual_vjp(part, p.controls, p.dt)
+        out[:s.m] = self.terms.control_vjp(parts, out[:s.m])
         self.products += 1
         return out
 

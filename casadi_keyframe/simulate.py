@@ -51,14 +51,17 @@ def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = 
     return traj if tangent is None else (traj, dx, dv)
 
 
-def tangent(integrator, model, traj: Trajectory, dx0, dv0, d_external):
-    """The tangent of a recorded run: ``(dx0, dv0)`` at frame 0 and ``d_external`` ``(steps,
-    n, dim)`` carried through every step's ``step_jvp`` on ``traj``'s records, without
-    stepping again (many tangents of one run); ``(dx, dv)`` per frame."""
-    dx, dv = np.empty_like(traj.x), np.empty_like(traj.v)
-    dx[0], dv[0] = dx0, dv0
+def tangent(integrator, model, traj: Trajectory, dx0, dv0, d_external, *, start: int = 0):
+    """The tangent of a recorded run: ``(dx0, dv0)`` at frame ``start`` and ``d_external``
+    ``(steps, n, dim)`` carried through every later step's ``step_jvp`` on ``traj``'s
+    records, without stepping again (many tangents of one run); ``(dx, dv)`` per frame, zero
+    before ``start`` (a change that begins there)."""
+    if not (isinstance(start, (int, np.integer)) and 0 <= start <= traj.steps):
+        raise ValueError(f"tangent: start must be a frame in 0..{traj.steps}, got {start!r}")
+    dx, dv = np.zeros_like(traj.x), np.zeros_like(traj.v)
+    dx[start], dv[start] = dx0, dv0
     work = integrator.init(model)
-    for n in range(traj.steps):
+    for n in range(start, traj.steps):
         out = integrator.step_jvp(model, traj.state(n), traj.state(n + 1), traj.record(n), n,
                                   traj.dt, State(dx[n], dv[n]), d_external[n], work)
         dx[n + 1], dv[n + 1] = out.x, out.v

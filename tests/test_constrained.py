@@ -1,8 +1,9 @@
 """lower_effort: the keyframe held as a constraint while the control cost falls.
 
 Its constraint Jacobian (adjoint sweeps seeded at the keyframe, stopped at the window) is
-checked against central differences on a smooth sheet; the method itself on a small cape
-from the problem's tracking guess, which no penalty solve improves (problems/cape_blend.py)."""
+checked against central differences on a smooth sheet (the forward products and the
+landing: tests/test_finish.py); the method itself on a small cape from the problem's
+tracking guess, which no penalty solve improves (problems/cape_blend.py)."""
 import numpy as np
 import pytest
 from test_augmented_lagrangian import swing
@@ -54,11 +55,11 @@ def test_the_control_hessian_is_the_smoothness_terms():
 
 
 def test_the_cape_keeps_its_landing_while_its_control_cost_falls():
-    """8 x 6 cape over its default 1 s: -36 % in two steps, landing 0.6 mm and 1.5 cm/s rms,
-    measured (over 0.5 s, where the tracking forces are larger, -4 %)."""
+    """8 x 6 cape over its default 1 s, held to 1 mm (its keyframe allows 6): a trial that
+    leaves the landing is landed again, and one step lowers the control cost by a third."""
     prob = load_problem("cape_blend", rows=8, cols=6)
     start = prob.control_cost(prob.initial_controls())[0]
-    result = lower_effort(prob, window=12, maxiter=2)
+    result = lower_effort(prob, window=12, maxiter=1, position_tolerance=1e-3)
     assert result.status == CONVERGED and result.nit >= 1
     assert result.breakdown["control_cost"] < 0.8 * start
     misses = KeyframeConstraint(prob, 0).misses(result.trajectory)

@@ -44,7 +44,7 @@ def cmd_show(args) -> int:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
     solve = solve_defaults(module)
     print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
-          + " (--method, --gradient, --maxiter, --rounds, --weight-growth change them)")
+          + " (--method, --gradient, --maxiter, --rounds, --weight-growth, --finish change them)")
     return 0
 
 
@@ -75,6 +75,7 @@ def cmd_solve(args) -> int:
                      weight_growth=args.weight_growth, continuation=continuation,
                      resolutions=parse_resolutions(module, args.resolution), homotopy=homotopy,
                      shooting=shooting, time_limit=args.time_limit, stop=args.stop,
+                     **({} if args.finish is None else {"finish": args.finish}),
                      resume=args.resume,
                      quiet=args.quiet,
                      animation=not args.no_animation, exports=tuple(args.export or ()),

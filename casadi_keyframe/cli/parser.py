@@ -117,6 +117,13 @@ def solve_parser(sub) -> None:
                         "tolerance (the default where the problem declares tolerances), "
                         "'method' at the method's own test; either way it converged (exit 0) "
                         "only with every keyframe within its tolerance"),
+    s.add_argument("--finish", metavar="KIND[,window=N,maxiter=N]",
+                   help="a last stage with the keyframes held as a constraint, on the controls "
+                        "of the N steps (window, default 12) just before the last keyframe: "
+                        "'land' puts keyframes still missed within their tolerances, 'effort' "
+                        "then lowers the control cost keeping them there, at most maxiter "
+                        "steps each (default 10; state keyframes and per-step forces only); "
+                        "'none' drops the problem file's")
     output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
                    help="stop the search after this wall time (over all stages and rounds); "

@@ -26,6 +26,7 @@ from ..interrupts import NAMES, handled
 from ..saved import as_checkpoint
 from ..state import SimulationError
 from .evaluator import Evaluator, MetricView, evaluate_final
+from .finish import check_finish, finish_options, run_finish
 from .goal import GoalReached, check_stop
 from .kept import Kept, kept_outcome, kept_stage
 from .methods import check_options, get_method
@@ -41,7 +42,7 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
           tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
           options: dict | None = None, continuation=None, resolutions=None,
           time_limit: float | None = None, stop: str | None = None, goal=None,
-          shooting=None, homotopy=None) -> Result:
+          shooting=None, homotopy=None, finish=None) -> Result:
     """Optimise the problem's controls; a :class:`~.result.Result` (scipy's vocabulary).
 
     ``method``: a :data:`~.methods.METHODS` entry; ``gradient``: a route (name or object);
@@ -53,12 +54,17 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
     ``continuation`` (coarser time steps), each with ``shooting`` (multiple shooting, K
     segments or its options) if given.  ``stop``: ``"goal"`` (the default where keyframes
     declare tolerances) stops once the goal is met, ``"method"`` at the method's own test;
-    ``goal``: the problem that judges (default ``problem``).  The result is never worse than
-    the start, by the goal first and then the objective.  Each argument and stage in full:
+    ``goal``: the problem that judges (default ``problem``).  ``finish``: a last stage with
+    the keyframes held as a constraint (:mod:`.finish`: ``"land"``, ``"effort"`` or its
+    options).  The result is never worse than the start, by the goal first and then the
+    objective.  Each argument and stage in full:
     ``docs/explanations/solving.md``.
     """
     options = check_settings(method, maxiter, tol, time_limit, options)
     stop = check_stop(stop, goal or problem)
+    finishing = finish_options(finish)
+    if finishing is not None:
+        check_finish(problem, finishing)
     multiple = shooting_options(shooting)
     shooting_on = multiple is not None and multiple.segments > 1
     problems = stage_problems(problem, continuation, resolutions, homotopy)
@@ -91,7 +97,11 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
         kept.offer(carry(p, ev.best_u, problem), f"stage {stages[-1]['stage']}'s best",
                    stage=stages[-1]["stage"], nit=len(search.history))
         u = carry(p, ev.best_u, problems[k + 1])
-    return _result(problem, p, ev, strategy, search, stages, kept)
+    result = _result(problem, p, ev, strategy, search, stages, kept)
+    if finishing is None or result.status == INTERRUPTED or search.time_up():
+        return result
+    left = None if search.deadline is None else search.deadline - time.perf_counter()
+    return run_finish(problem, result, finishing, kept, left)
 
 
 def _shoot(p, k, opts, start, search, stages, ev, origin):

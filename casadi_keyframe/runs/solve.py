@@ -45,6 +45,7 @@ class SolveRun:
     homotopy: list | None = None  # build overrides of the homotopy's levels (solve's homotopy=)
     time_limit: float | None = None
     stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
+    finish: object = None  # a last stage with the keyframes held (solve's finish=)
     resume: str | None = None
     quiet: bool = False
     animation: bool = True
@@ -87,6 +88,12 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=Non
                          "(--rounds, --weight-growth) do not combine: choose one")
     rounds = given or ({} if resolutions else
                        {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults})
+    finish = options.get("finish", defaults.get("finish"))
+    options["finish"] = None if finish == "none" else finish
+    if options["finish"] is not None and rounds:
+        raise ValueError("--finish holds the keyframes after one search; augmented-Lagrangian "
+                         "rounds (--rounds, --weight-growth, or the file's) hold them their "
+                         "own way: choose one (--finish none)")
     if resolutions is None:  # the file's, unless rounds are asked for
         resolutions = [] if rounds else default_resolutions(module, prob)
     return SolveRun(
@@ -167,7 +174,7 @@ def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
         return solve_augmented(spec.problem, **spec.rounds, **options,
                                resume=resumed.get("meta") if resumed else None)
     resolutions = None if resumed or not spec.resolutions else spec.resolutions
-    return solve(spec.problem, resolutions=resolutions, **options)
+    return solve(spec.problem, resolutions=resolutions, finish=spec.finish, **options)
 
 
 def resume_controls(spec: SolveRun):

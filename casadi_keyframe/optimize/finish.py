@@ -1,0 +1,175 @@
+"""A solve's last stage with its keyframes held as a constraint (``solve(..., finish=...)``).
+
+A penalty search stops where the keyframe term curves so sharply, or the dynamics switch so
+often, that it finds no descent: a little off its keyframes, or on them with more effort
+than it needs.  The finish works on the controls of the steps just before the last keyframe
+(:mod:`.constrained`): ``"land"`` puts keyframes still missed within their tolerances with
+the least change of the controls; ``"effort"`` lands them if needed, then lowers the
+control cost while they stay within their tolerances and the objective does not rise.  Its
+result replaces the search's only if it is better, by the goal first and then the
+objective (:class:`~.kept.Kept`).
+"""
+from __future__ import annotations
+
+import signal
+import time
+from dataclasses import dataclass
+
+from ..controls import StepForces
+from ..interrupts import handled
+from .constrained import land, lower_effort
+from .goal import verdict
+from .kept import kept_stage
+from .outcome import CONVERGED, INTERRUPTED, judge
+from .result import assemble
+from .window_step import KeyframeConstraint, control_hessian, factor_window
+
+KINDS = ("land", "effort")
+
+
+@dataclass(frozen=True)
+class Finish:
+    """``kind`` ("land" or "effort"), on the controls of the last ``window`` steps before
+    the last keyframe, at most ``maxiter`` kept steps each for the landing and the effort."""
+
+    kind: str = "effort"
+    window: int = 12
+    maxiter: int = 10
+
+
+def finish_options(finish) -> Finish | None:
+    """``finish`` read (None; a kind, maybe with options: ``"effort,window=20,maxiter=3"``;
+    a dict of :class:`Finish`'s fields; a Finish) and checked, naming what is wrong
+    (ValueError)."""
+    if finish is None or isinstance(finish, Finish):
+        opts = finish
+    elif isinstance(finish, str):
+        kind, *items = [item.strip() for item in finish.split(",")]
+        opts = finish_options({"kind": kind, **dict(_item(item) for item in items)})
+    elif isinstance(finish, dict):
+        unknown = sorted(set(finish) - {"kind", "window", "maxiter"})
+        if unknown:
+            raise ValueError(f"finish: unknown option(s) {unknown}; it takes kind, window "
+                             "and maxiter")
+        opts = Finish(**finish)
+    else:
+        raise ValueError(f"finish must be one of {KINDS}, a dict of kind, window and "
+                         f"maxiter, or None; got {finish!r}")
+    if opts is None:
+        return None
+    if opts.kind not in KINDS:
+        raise ValueError(f"finish: kind must be one of {KINDS} ('land': put missed keyframes "
+                         f"within their tolerances; 'effort': then lower the control cost), "
+                         f"got {opts.kind!r}")
+    for name in ("window", "maxiter"):
+        value = getattr(opts, name)
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ValueError(f"finish: {name} must be a whole number >= 1, got {value!r}")
+    return opts
+
+
+def _item(text: str) -> tuple:
+    name, sep, value = text.partition("=")
+    try:
+        if not sep:
+            raise ValueError
+        return name.strip(), int(value)
+    except ValueError:
+        raise ValueError(f"finish: expected KIND,window=N,maxiter=N, got the item {text!r}") from None
+
+
+def check_finish(problem, opts: Finish) -> None:
+    """Refuse, before any search, a problem the finish cannot hold (ValueError naming why):
+    it needs per-step forces, StateKeyframe and control terms only, and a control Hessian
+    that is positive definite on the window (Smoothness with alpha > 0)."""
+    if not isinstance(problem.controls, StepForces):
+        raise ValueError(f"finish={opts.kind!r}: {problem.name} has "
+                         f"{type(problem.controls).__name__} controls; the finish needs "
+                         "per-step forces (StepForces): drop the finish")
+    try:
+        last = max((t.frame for t in problem.objective_terms.state_terms), default=0)
+        first = KeyframeConstraint(problem, max(last - opts.window, 0)).first
+    except ValueError as err:
+        raise ValueError(f"finish={opts.kind!r}: {err}") from None
+    block = problem.size // problem.steps
+    factor_window(problem, control_hessian(problem), slice(first * block, last * block))
+
+
+def run_finish(problem, result, opts: Finish, kept, time_limit=None):
+    """The finish from ``result`` (a search's on ``problem``): the Result with its stages
+    and history after the search's, or ``result`` with the finish's stages appended and a
+    note where it ended no better (``kept`` judges; it holds the search's result)."""
+    started = time.perf_counter()
+    stages, history = list(result.stages), list(result.history)
+    runs = []
+    try:
+        u, met = result.x, _landed(problem, result.trajectory, opts.window)
+        if not met:
+            runs.append(land(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
+                             time_limit=_left(started, time_limit)))
+            u, met = runs[-1].x, runs[-1].status == CONVERGED
+        if opts.kind == "effort" and met and not _out_of_time(started, time_limit):
+            runs.append(lower_effort(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
+                                     time_limit=_left(started, time_limit),
+                                     keep_objective=True))
+    except KeyboardInterrupt as err:
+        handled()
+        who = "SIGINT" if getattr(err, "signum", signal.SIGINT) == signal.SIGINT else "a signal"
+        message = (f"{result.message}; the finish was interrupted ({who}): the search's "
+                   "result kept")
+        kept_stage(problem, stages, result.fun, INTERRUPTED, message)
+        return _with(problem, result, stages, history, INTERRUPTED, message,
+                     started - result.timings["wall_seconds"])
+    for run in runs:
+        _append(stages, history, run)
+    if not runs:
+        return result
+    last = runs[-1]
+    began = started - result.timings["wall_seconds"]
+    if not kept.offer(last.x, f"the finish ({last.method})", trajectory=last.trajectory,
+                      stage=stages[-1]["stage"], nit=len(history)):
+        message = (f"{result.message}; the finish ({last.method}) ended no better "
+                   f"({last.message}): the search's result kept")
+        kept_stage(problem, stages, result.fun, result.status, message)
+        return _with(problem, result, stages, history, result.status, message, began)
+    status, message = judge(last.status, f"finish ({last.method}): {last.message}",
+                            verdict(problem, last.trajectory))
+    stages[-1] = {**stages[-1], "status": status, "message": message,
+                  "success": status == CONVERGED}
+    return assemble(problem, last.x, fun=last.fun, jac=last.jac, status=status,
+                    message=message, method=result.method, gradient=result.gradient,
+                    stages=stages, history=history, started=began, trajectory=last.trajectory)
+
+
+def _landed(problem, trajectory, window: int) -> bool:
+    """The goal met, and the keyframes' free particles (what the finish holds) within
+    their tolerances."""
+    last = max((t.frame for t in problem.objective_terms.state_terms), default=0)
+    constraint = KeyframeConstraint(problem, max(last - window, 0))
+    return verdict(problem, trajectory).met and constraint.excess(trajectory) <= 1.0
+
+
+def _append(stages, history, run) -> None:
+    """``run``'s one stage and its history, numbered after those already there."""
+    number = stages[-1]["stage"] + 1 if stages else 0
+    stages.append({**run.stages[0], "stage": number})
+    done = history[-1]["iteration"] if history else 0
+    history.extend({**h, "stage": number, "iteration": done + h["iteration"]}
+                   for h in run.history)
+
+
+def _with(problem, result, stages, history, status, message, began):
+    """``result``'s point with the finish's stages and history and this ending."""
+    return assemble(problem, result.x, fun=result.fun, jac=result.jac, status=status,
+                    message=message, method=result.method, gradient=result.gradient,
+                    stages=stages, history=history, started=began,
+                    trajectory=result.trajectory)
+
+
+def _left(started, time_limit):
+    return None if time_limit is None else max(time_limit - (time.perf_counter() - started),
+                                               1e-3)
+
+
+def _out_of_time(started, time_limit) -> bool:
+    return time_limit is not None and time.perf_counter() - started >= time_limit

@@ -43,10 +43,13 @@ GUESSES = ("tracking", "passive")
 def SOLVE(guess: str = "tracking", **_) -> dict:
     """From the tracking guess a search that stops at the goal; from zero forces multiple
     shooting, its nodes on the blend's reference path (:func:`path`), since one gradient
-    through the whole blend stalls far off."""
-    solve = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint"}
-    return solve if guess != "passive" else {**solve, "shooting": {"segments": 6,
-                                                                   "init": path}}
+    through the whole blend stalls far off, its controls then landed by the finish's steps
+    on the last forces (no single-shooting polish: it stalls at the dynamics' kinks).
+    Either way the finish then lowers the forces with the keyframe held (``--finish``),
+    which no penalty search does from a landing."""
+    solve = {"method": "lbfgsb", "maxiter": 300, "gradient": "adjoint", "finish": "effort"}
+    return solve if guess != "passive" else {
+        **solve, "shooting": {"segments": 6, "init": path, "polish": False}}
 
 
 def path(prob):

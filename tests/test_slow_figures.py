@@ -33,7 +33,8 @@ def solve_figure(name, time_limit=None, goal=True, **overrides):
     start = time.process_time()
     result = solve(prob, method=defaults["method"], maxiter=defaults["maxiter"], quiet=True,
                    resolutions=default_resolutions(module, prob) or None,
-                   shooting=defaults.get("shooting"), time_limit=time_limit)
+                   shooting=defaults.get("shooting"), finish=defaults.get("finish"),
+                   time_limit=time_limit)
     seconds = time.process_time() - start
     TABLE.append({"figure": name, "size": prob.size, "iterations": result.nit,
                   "cpu_seconds": round(seconds, 1), "message": result.message,
@@ -95,28 +96,34 @@ def test_cloth_arch_holds_the_arch():
     assert result.breakdown["physical"]["max_stretch"] < 1.3
 
 
-def test_cape_blend_lands_on_the_walk_clip_and_stays_physical():
+def test_cape_blend_lands_on_the_walk_clip_with_less_effort_and_stays_physical():
+    """The tracking guess lands; the file's finish then lowers its forces by at least a
+    fifth with the keyframe held within its tolerance (issue 31)."""
     prob, result = solve_figure("cape_blend")
     (miss,) = result.breakdown["misses"]
-    assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 2e-2
+    assert miss["rms_position_error"] <= 6e-3 and miss["rms_velocity_error"] <= 5e-2
+    assert "finish (lower_effort)" in result.message, result.message
+    guess = prob.initial_controls()
+    assert prob.control_cost(result.x)[0] <= 0.8 * prob.control_cost(guess)[0]
+    assert result.fun <= prob.objective(guess)
     report = clip_report(prob.model, result.trajectory)
     assert report["max_stretch"] < 1.3 and report["penetration"] < 0.015, report
 
 
-def test_cape_blend_keeps_its_landing_for_less_effort():
+def test_cape_blend_keeps_its_landing_to_a_millimetre_for_less_effort():
+    """lower_effort alone, holding the landing to 1 mm (the keyframe allows 6): trials
+    that leave it are landed again (under the guarded contact the held contacts and the
+    revised steps switch with the controls)."""
     from casadi_keyframe.optimize import lower_effort
 
     prob = build_problem(load_module("cape_blend"))
     guess = prob.initial_controls()
     start = time.process_time()
-    result = lower_effort(prob, window=12, maxiter=10)
+    result = lower_effort(prob, window=12, maxiter=10, position_tolerance=1e-3)
     TABLE.append({"figure": "cape_blend lower_effort", "size": prob.size,
                   "iterations": result.nit, "cpu_seconds": round(time.process_time() - start, 1),
                   "message": result.message, "misses": result.breakdown["misses"]})
-    # under the guarded contact the landing's held contacts and revised steps switch with
-    # the controls, and the window's linearization takes one step (-7 %, where the paper's
-    # penalty springs allowed -23 %)
-    assert prob.control_cost(result.x)[0] < 0.95 * prob.control_cost(guess)[0]
+    assert prob.control_cost(result.x)[0] <= 0.8 * prob.control_cost(guess)[0]
     (miss,) = result.breakdown["misses"]
     assert miss["rms_position_error"] < 1e-3 and miss["rms_velocity_error"] < 5e-2
     report = clip_report(prob.model, result.trajectory)

@@ -17,7 +17,8 @@ single-shooting objective) from that problem's own start.
 ``--cases`` picks from :data:`CASES` (default: all but :data:`SLOW`; every shipped problem
 at its defaults, ``mesh12`` being ``mesh_keyframes``'; the README's walkthrough reads a
 30 x 30 sheet and its targets written into a temporary folder first); ``--set KEY=VALUE``,
-``--maxiter``, ``--time-limit``, ``--segments`` and ``--shooting`` go to every run.
+``--maxiter``, ``--time-limit``, ``--segments``, ``--shooting`` and ``--finish`` go to every
+run (``--finish none``: the search without the problem file's finish).
 """
 from __future__ import annotations
 
@@ -113,6 +114,8 @@ def run_case(name, method, folder, args) -> dict:
     module = load_module(problem)
     out = Path(tempfile.mkdtemp(prefix=f"search_{name}_{method}_"))
     extra = {} if method in (None, "file") else {"method": method}
+    if args.finish is not None:
+        extra["finish"] = args.finish
     shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
                                                           "place=growth"), None)
     spec = solve_run(module, problem, overrides, out, maxiter=args.maxiter, quiet=True,
@@ -175,6 +178,8 @@ def main(argv=None) -> int:
     parser.add_argument("--shooting", action="append", metavar="KEY=VALUE,...",
                         help="multiple shooting's options, as solve's --shooting")
     parser.add_argument("--time-limit", type=float, default=None)
+    parser.add_argument("--finish", default=None,
+                        help="solve's --finish for every run ('none': the search alone)")
     parser.add_argument("--messages", action="store_true", help="print each run's message")
     parser.add_argument("--radius", action="store_true",
                         help="the linearity radius and gradcheck's verdict at start and end")

@@ -84,10 +84,11 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     ``damping`` is the first trial's (it grows 4x + 1 per rejected trial, at most ``tries``
     per iteration, and shrinks 3x after a kept step); a trial off the keyframes gets up to
     ``restore`` landing steps; ``keep_objective``: a step must not raise the objective
-    either (keyframe misses traded for effort only where the objective gains).  Needs per-step forces (:class:`~casadi_keyframe.controls.
-    StepForces`), a positive definite control Hessian on the window (Smoothness with
-    ``alpha > 0``), an objective of StateKeyframe and control terms only, and a start within
-    the tolerances (:func:`land` finds one).
+    either (keyframe misses traded for effort only where the objective gains).  Needs
+    per-step forces (:class:`~casadi_keyframe.controls.StepForces`), a positive definite
+    control Hessian on the window (Smoothness with ``alpha > 0``), an objective of
+    StateKeyframe and control terms only, and a start within the tolerances (:func:`land`
+    finds one).
 
     Returns a :class:`~.result.Result` (method "lower_effort"): status 0 when no trial
     step lowers the cost within the tolerances (or ``maxiter`` steps were kept), 1 at

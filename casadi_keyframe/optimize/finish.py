@@ -75,7 +75,8 @@ def _item(text: str) -> tuple:
             raise ValueError
         return name.strip(), int(value)
     except ValueError:
-        raise ValueError(f"finish: expected KIND,window=N,maxiter=N, got the item {text!r}") from None
+        raise ValueError(f"finish: expected KIND,window=N,maxiter=N, got the item "
+                         f"{text!r}") from None
 
 
 def check_finish(problem, opts: Finish) -> None:

@@ -30,7 +30,7 @@ import scipy.sparse.linalg as spla
 from ..objectives import StateKeyframe
 from ..simulate import backward, tangent
 
-FALLBACK = (1e-3, 0.05)  # m, m/s: a row's tolerance when neither the caller nor its keyframe gives one
+FALLBACK = (1e-3, 0.05)  # m, m/s: a row's tolerance if neither caller nor keyframe gives one
 CG_RTOL = 1e-3  # the conjugate gradients' residual, relative to its right side or to the
 # residual at the tolerances: far below what the linear model holds
 
@@ -143,9 +143,9 @@ def factor_window(problem, Q, cols):
 
 class WindowStep:
     """The module docstring's step at the recorded run ``traj``: :meth:`land` and
-    :meth:`projected`, the two parts of the window's change ``d``; ``products`` counts the sweeps (one
-    tangent or adjoint pass over the window each), at most ``iterations`` conjugate
-    gradient iterations per solve."""
+    :meth:`projected`, the two parts of the window's change ``d``; ``products`` counts the
+    sweeps (one tangent or adjoint pass over the window each), at most ``iterations``
+    iterations per solve (LSMR's or the conjugate gradients')."""
 
     def __init__(self, constraint, traj, Q_window, cols, Q_diagonal, iterations: int = 60):
         self.constraint, self.traj, self.Q_window, self.cols = constraint, traj, Q_window, cols

@@ -153,3 +153,16 @@ def test_finish_and_rounds_are_refused_together(capsys):
 
     assert main(["solve", "flock_path", "--rounds", "2", "--finish", "land"]) != 0
     assert "--finish holds the keyframes after one search" in capsys.readouterr().err
+
+
+def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
+    """The effort finish starts from a landing: stopped by the clock it has still converged."""
+    import casadi_keyframe.optimize.finish as finish
+
+    real = finish.lower_effort
+    monkeypatch.setattr(finish, "lower_effort",
+                        lambda *a, **k: real(*a, **{**k, "time_limit": 1e-9}))
+    prob = tight(swing(), tolerance=5e-3)
+    result = solve(prob, maxiter=50, quiet=True, finish="effort")
+    assert result.status == CONVERGED, result.message
+    assert "finish (lower_effort): time limit reached" in result.message

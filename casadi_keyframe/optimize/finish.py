@@ -20,7 +20,7 @@ from ..interrupts import handled
 from .constrained import land, lower_effort
 from .goal import verdict
 from .kept import kept_stage
-from .outcome import CONVERGED, INTERRUPTED, judge
+from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
 from .result import assemble
 from .window_step import KeyframeConstraint, control_hessian, factor_window
 
@@ -133,7 +133,9 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
                    f"({last.message}): the search's result kept")
         kept_stage(problem, stages, result.fun, result.status, message)
         return _with(problem, result, stages, history, result.status, message, began)
-    status, message = judge(last.status, f"finish ({last.method}): {last.message}",
+    # lowering the effort starts from a landing: a time limit there does not undo the goal
+    ended = CONVERGED if last.method == "lower_effort" and last.status == LIMIT else last.status
+    status, message = judge(ended, f"finish ({last.method}): {last.message}",
                             verdict(problem, last.trajectory))
     stages[-1] = {**stages[-1], "status": status, "message": message,
                   "success": status == CONVERGED}

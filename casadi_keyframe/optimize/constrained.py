@@ -115,8 +115,9 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
             break
         if not held.lower(tries, restore):
             status = CONVERGED if held.history else FAILED
-            message = (f"no step of {tries} tried lowers the control cost with the keyframes "
-                       f"within their tolerances (damping up to {held.damping:.3g})")
+            kept = f"{len(held.history)} steps kept, then " if held.history else ""
+            message = (f"{kept}no step of {tries} tried lowers the control cost with the "
+                       f"keyframes within their tolerances (damping up to {held.damping:.3g})")
             break
     return held.result("lower_effort", status, message)
 

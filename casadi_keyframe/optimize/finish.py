@@ -137,6 +137,8 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
     ended = CONVERGED if last.method == "lower_effort" and last.status == LIMIT else last.status
     status, message = judge(ended, f"finish ({last.method}): {last.message}",
                             verdict(problem, last.trajectory))
+    if status == CONVERGED and not message.startswith("converged"):
+        message = f"converged: {message}"
     stages[-1] = {**stages[-1], "status": status, "message": message,
                   "success": status == CONVERGED}
     return assemble(problem, last.x, fun=last.fun, jac=last.jac, status=status,

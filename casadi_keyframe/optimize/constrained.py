@@ -39,8 +39,10 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     """Put the StateKeyframes of controls ``u0`` (default: the problem's start) within their
     tolerances (``position_tolerance`` m and ``velocity_tolerance`` m/s where given, else
     each keyframe's own) by landing steps on the controls of the last ``window``
-    steps before the last keyframe: each the least change, in the control cost's metric,
-    that lands the linearized keyframes, tried at most ``tries`` times, halved each time,
+    steps before the last keyframe: each the least squares landing of the linearized
+    keyframes with the least change (LSMR, in the metric of the control cost's Hessian's
+    diagonal; a miss the window cannot steer is left), tried at most ``tries`` times, halved
+    each time,
     until the largest miss over its tolerance falls (a motion within the physical limits
     staying so), until every miss is within :data:`LANDED` of its tolerance (a margin for
     what follows).  ``iterations``: LSMR iterations per step.
@@ -100,8 +102,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance,
            damping=damping, restore=restore)
     held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
-                 iterations, damping=damping)
-    held.keep_objective = keep_objective
+                 iterations, damping=damping, keep_objective=keep_objective)
     if not held.within(held.traj):
         raise ValueError(f"{problem.name}: the start misses its keyframes by "
                          f"{held.constraint.misses(held.traj)} (rms m, m/s), beyond the "
@@ -153,9 +154,10 @@ class _Held:
     reached (``u``, its ``traj`` and control ``cost``), the damping, the history and the
     counts (simulations, sweeps, failed simulations, seconds simulating)."""
 
-    def __init__(self, problem, window, tolerances, u, started, iterations, damping=0.0):
+    def __init__(self, problem, window, tolerances, u, started, iterations, damping=0.0,
+                 keep_objective=False):
         self.problem, self.started, self.iterations = problem, started, iterations
-        self.damping, self.keep_objective = damping, False
+        self.damping, self.keep_objective = damping, keep_objective
         self.last = max((t.frame for t in problem.objective_terms.state_terms), default=0)
         self.first = max(self.last - window, 0)
         self.constraint = KeyframeConstraint(problem, self.first, tolerances)
@@ -171,8 +173,8 @@ class _Held:
             raise SimulationError(f"{problem.name}: the simulation fails at the starting "
                                   "controls", None)
         self.cost = problem.control_cost(u)[0]
-        state = problem.state_cost(self.traj, gradient=False)[0]
-        self.start = (float(state + self.cost), float(state))  # objective, keyframe error
+        objective = self.objective(u, self.traj)
+        self.start = (objective, objective - float(self.cost))  # objective, keyframe error
 
     def within(self, traj, share: float = 1.0) -> bool:
         """Every row within ``share`` of its tolerance, the motion within the physical

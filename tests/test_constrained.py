@@ -76,7 +76,7 @@ def test_a_start_that_misses_is_refused():
 
 @pytest.mark.parametrize("change, message", [
     (lambda p: p.with_objective(CenterOfMassKeyframe(10, x=[0, 0.2, 0]) + Smoothness(1e-2)),
-     "StateKeyframe terms only"),
+     "StateKeyframe goals only"),
     (lambda p: p.with_controls(InitialVelocity()), "per-step forces"),
     (lambda p: p.with_objective(StateKeyframe(10, x=p.x0)), "singular on the window"),
 ])

@@ -15,13 +15,13 @@ from casadi_keyframe.optimize.window_step import KeyframeConstraint
 from casadi_keyframe.simulate import tangent
 
 
-def tight(prob, tolerance=1e-3):
-    """``prob`` (the swing) with its keyframe's tolerance ``tolerance``: its penalty search
-    stops millimetres off."""
+def tight(prob, tolerance=1e-3, strain=None):
+    """``prob`` (the swing) with its keyframe's tolerance ``tolerance`` (and a ``strain``
+    term): its penalty search stops millimetres off."""
     t = prob.objective_terms.state_terms[0]
-    return prob.with_objective(StateKeyframe(t.frame, x=t.x, position_weight=20.0,
-                                             agents=t.agents, tolerance=tolerance)
-                               + Smoothness(2e-2))
+    objective = (StateKeyframe(t.frame, x=t.x, position_weight=20.0, agents=t.agents,
+                               tolerance=tolerance) + Smoothness(2e-2))
+    return prob.with_objective(objective if strain is None else objective + strain)
 
 
 @pytest.mark.parametrize("first", [0, 4])
@@ -87,8 +87,18 @@ def test_lower_effort_keeping_the_objective_never_raises_it():
     assert prob.control_cost(result.x)[0] <= prob.control_cost(start)[0]
 
 
+def test_a_strain_penalty_is_weighed_not_held():
+    """A penalty without a tolerance is not refused: the landing holds the keyframe, the
+    objective (strain included) judges the finish."""
+    from casadi_keyframe.objectives import StrainLimit
+
+    prob = tight(swing(), strain=StrainLimit(limit=1.4))
+    result = solve(prob, maxiter=50, quiet=True, finish="land")
+    assert result.status == CONVERGED and "finish (land)" in result.message, result.message
+
+
 def test_the_finish_refuses_what_it_cannot_hold_before_searching():
-    with pytest.raises(ValueError, match="StateKeyframe terms only"):
+    with pytest.raises(ValueError, match="StateKeyframe goals only"):
         solve(load_problem("flock_path", agents=6, steps=20), finish="land", maxiter=1)
     with pytest.raises(ValueError, match="per-step forces"):
         solve(swing().with_controls(InitialVelocity()), finish="effort", maxiter=1)

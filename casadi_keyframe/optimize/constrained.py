@@ -88,9 +88,10 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     ``restore`` landing steps; ``keep_objective``: a step must not raise the objective
     either (keyframe misses traded for effort only where the objective gains).  Needs
     per-step forces (:class:`~casadi_keyframe.controls.StepForces`), a positive definite
-    control Hessian on the window (Smoothness with ``alpha > 0``), an objective of
-    StateKeyframe and control terms only, and a start within the tolerances (:func:`land`
-    finds one).
+    control Hessian on the window (Smoothness with ``alpha > 0``), goals that are
+    StateKeyframes only (a penalty without a tolerance, such as StrainLimit, is not held:
+    ``keep_objective`` weighs it), and a start within the tolerances (:func:`land` finds
+    one).
 
     Returns a :class:`~.result.Result` (method "lower_effort"): status 0 when no trial
     step lowers the cost within the tolerances (or ``maxiter`` steps were kept), 1 at

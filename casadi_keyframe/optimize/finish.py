@@ -81,7 +81,7 @@ def _item(text: str) -> tuple:
 
 def check_finish(problem, opts: Finish) -> None:
     """Refuse, before any search, a problem the finish cannot hold (ValueError naming why):
-    it needs per-step forces, StateKeyframe and control terms only, and a control Hessian
+    it needs per-step forces, goals that are StateKeyframes only, and a control Hessian
     that is positive definite on the window (Smoothness with alpha > 0)."""
     if not isinstance(problem.controls, StepForces):
         raise ValueError(f"finish={opts.kind!r}: {problem.name} has "

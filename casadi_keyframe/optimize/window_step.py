@@ -37,7 +37,8 @@ CG_RTOL = 1e-3  # the conjugate gradients' residual, relative to its right side 
 
 class KeyframeConstraint:
     """The keyframes of ``problem`` at frames after ``first`` as a residual over their free
-    particles, ``r = sqrt(weight) (state - target)`` stacked, with its Jacobian applied to a
+    particles, ``r = sqrt(weight) (state - target)`` stacked (its other goals refused; terms
+    without a tolerance, such as a strain penalty, are not held), with its Jacobian applied to a
     change of the controls (:meth:`jvp`) and its transpose to a cotangent (:meth:`vjp`), and
     each row's tolerance: ``tolerances`` (position, velocity) where given, else its
     keyframe's own, else :data:`FALLBACK`."""
@@ -46,17 +47,17 @@ class KeyframeConstraint:
         self.problem, self.first = problem, int(first)
         others = [t.label for t in (problem.objective_terms.state_terms
                                     + problem.objective_terms.trajectory_terms)
-                  if not isinstance(t, StateKeyframe)]
+                  if getattr(t, "has_tolerance", False) and not isinstance(t, StateKeyframe)]
         if others:
             raise ValueError(f"{problem.name}: holding keyframes as a constraint takes "
-                             f"StateKeyframe terms only; the objective also has {others}: "
+                             f"StateKeyframe goals only; the objective also has {others}: "
                              "remove them or solve the problem with solve()")
         model = problem.model
         free = model.free_mask().reshape(model.n, model.dim).all(axis=1)
         self.rows = []  # (frame, "x" or "v", particles, target, sqrt(weight), tolerance)
         for t in problem.objective_terms.state_terms:
-            if t.frame <= self.first:
-                continue  # the window's controls cannot move it
+            if not isinstance(t, StateKeyframe) or t.frame <= self.first:
+                continue  # not a keyframe held here, or one the window's controls cannot move
             keep = free[t.particles]
             declared = t.within or (None, None)
             for k, (kind, target, weight) in enumerate(

@@ -102,6 +102,9 @@ def test_the_finish_refuses_what_it_cannot_hold_before_searching():
         solve(load_problem("flock_path", agents=6, steps=20), finish="land", maxiter=1)
     with pytest.raises(ValueError, match="per-step forces"):
         solve(swing().with_controls(InitialVelocity()), finish="effort", maxiter=1)
+    with pytest.raises(ValueError, match=r"goals only; the objective also has \['MeshKeyframe"):
+        solve(load_problem("mesh_keyframes", guess="none"), finish="land",
+              maxiter=1)
 
 
 @pytest.mark.parametrize("finish, message", [

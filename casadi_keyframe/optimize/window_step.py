@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..objectives import StateKeyframe
+from ..objectives import MeshKeyframe, StateKeyframe
 from ..simulate import backward, tangent
 
 FALLBACK = (1e-3, 0.05)  # m, m/s: a row's tolerance if neither caller nor keyframe gives one
@@ -47,7 +47,7 @@ class KeyframeConstraint:
         self.problem, self.first = problem, int(first)
         others = [t.label for t in (problem.objective_terms.state_terms
                                     + problem.objective_terms.trajectory_terms)
-                  if getattr(t, "has_tolerance", False) and not isinstance(t, StateKeyframe)]
+                  if getattr(t, "has_tolerance", False) and not _held(t)]
         if others:
             raise ValueError(f"{problem.name}: holding keyframes as a constraint takes "
                              f"StateKeyframe goals only; the objective also has {others}: "
@@ -56,7 +56,7 @@ class KeyframeConstraint:
         free = model.free_mask().reshape(model.n, model.dim).all(axis=1)
         self.rows = []  # (frame, "x" or "v", particles, target, sqrt(weight), tolerance)
         for t in problem.objective_terms.state_terms:
-            if not isinstance(t, StateKeyframe) or t.frame <= self.first:
+            if not _held(t) or t.frame <= self.first:
                 continue  # not a keyframe held here, or one the window's controls cannot move
             keep = free[t.particles]
             declared = t.within or (None, None)
@@ -112,6 +112,12 @@ class KeyframeConstraint:
     def excess(self, traj) -> float:
         """The largest row's miss over its tolerance: at most 1 when every row holds."""
         return max(miss / tol for (_, miss), tol in zip(self.misses(traj), self.tolerances))
+
+
+def _held(term) -> bool:
+    """A goal held here: a StateKeyframe whose miss is its particles' rms distance (a mesh
+    keyframe weighs its vertices and may align its target: not held)."""
+    return isinstance(term, StateKeyframe) and not isinstance(term, MeshKeyframe)
 
 
 def _frames(traj, kind):

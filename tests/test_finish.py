@@ -10,7 +10,7 @@ from test_augmented_lagrangian import swing
 from casadi_keyframe import InitialVelocity, Smoothness, StateKeyframe, load_problem
 from casadi_keyframe.optimize import CONVERGED, solve
 from casadi_keyframe.optimize.constrained import land, lower_effort
-from casadi_keyframe.optimize.finish import finish_options
+from casadi_keyframe.optimize.finish import Finish, check_finish, finish_options
 from casadi_keyframe.optimize.window_step import KeyframeConstraint
 from casadi_keyframe.simulate import tangent
 
@@ -103,8 +103,9 @@ def test_the_finish_refuses_what_it_cannot_hold_before_searching():
     with pytest.raises(ValueError, match="per-step forces"):
         solve(swing().with_controls(InitialVelocity()), finish="effort", maxiter=1)
     with pytest.raises(ValueError, match=r"goals only; the objective also has \['MeshKeyframe"):
-        solve(load_problem("mesh_keyframes", guess="none"), finish="land",
-              maxiter=1)
+        solve(load_problem("mesh_keyframes", guess="none", align=True), finish="land",
+              maxiter=1)  # its miss is after the best rigid motion: not a position to hold
+    check_finish(load_problem("mesh_keyframes", guess="none"), Finish())  # not aligned: held
 
 
 @pytest.mark.parametrize("finish, message", [

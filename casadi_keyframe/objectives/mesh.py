@@ -148,6 +148,11 @@ class MeshKeyframe(StateKeyframe):
     def _root(self):
         return np.sqrt(self.position_weight * self._w)
 
+    @property
+    def counted(self) -> np.ndarray:
+        """Which of its particles its miss counts (vertex weight not 0; after ``bind``)."""
+        return self._w > 0
+
     def _off_rigid(self, traj, r):
         """``r`` less its part along the rigid motions of the aligned target (weighted)."""
         y, root = self.aligned_target(traj.x[self.frame]), self._root()

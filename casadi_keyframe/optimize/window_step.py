@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..objectives import MeshKeyframe, StateKeyframe
+from ..objectives import StateKeyframe
 from ..simulate import backward, tangent
 
 FALLBACK = (1e-3, 0.05)  # m, m/s: a row's tolerance if neither caller nor keyframe gives one
@@ -58,7 +58,7 @@ class KeyframeConstraint:
         for t in problem.objective_terms.state_terms:
             if not _held(t) or t.frame <= self.first:
                 continue  # not a keyframe held here, or one the window's controls cannot move
-            keep = free[t.particles]
+            keep = free[t.particles] & getattr(t, "counted", True)
             declared = t.within or (None, None)
             for k, (kind, target, weight) in enumerate(
                     (("x", t.position_target, t.position_weight),
@@ -115,9 +115,10 @@ class KeyframeConstraint:
 
 
 def _held(term) -> bool:
-    """A goal held here: a StateKeyframe whose miss is its particles' rms distance (a mesh
-    keyframe weighs its vertices and may align its target: not held)."""
-    return isinstance(term, StateKeyframe) and not isinstance(term, MeshKeyframe)
+    """A goal held here: a StateKeyframe, its miss the rms distance over its (counted)
+    particles; not a mesh keyframe that aligns its target (its miss is after a rigid
+    motion)."""
+    return isinstance(term, StateKeyframe) and not getattr(term, "align", False)
 
 
 def _frames(traj, kind):

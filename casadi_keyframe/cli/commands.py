@@ -44,7 +44,8 @@ def cmd_show(args) -> int:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
     solve = solve_defaults(module)
     print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
-          + " (--method, --gradient, --maxiter, --rounds, --weight-growth, --finish change them)")
+          + " (--method, --gradient, --maxiter, --rounds, --weight-growth, --finish change "
+            "them)")
     return 0
 
 

@@ -38,10 +38,10 @@ CG_RTOL = 1e-3  # the conjugate gradients' residual, relative to its right side 
 class KeyframeConstraint:
     """The keyframes of ``problem`` at frames after ``first`` as a residual over their free
     particles, ``r = sqrt(weight) (state - target)`` stacked (its other goals refused; terms
-    without a tolerance, such as a strain penalty, are not held), with its Jacobian applied to a
-    change of the controls (:meth:`jvp`) and its transpose to a cotangent (:meth:`vjp`), and
-    each row's tolerance: ``tolerances`` (position, velocity) where given, else its
-    keyframe's own, else :data:`FALLBACK`."""
+    without a tolerance, such as a strain penalty, are not held), with its Jacobian applied
+    to a change of the controls (:meth:`jvp`) and its transpose to a cotangent
+    (:meth:`vjp`), and each row's tolerance: ``tolerances`` (position, velocity) where
+    given, else its keyframe's own, else :data:`FALLBACK`."""
 
     def __init__(self, problem, first: int = 0, tolerances=(None, None)):
         self.problem, self.first = problem, int(first)
@@ -64,8 +64,8 @@ class KeyframeConstraint:
                     (("x", t.position_target, t.position_weight),
                      ("v", t.velocity_target, t.velocity_weight))):
                 if target is not None and weight > 0 and keep.any():
-                    tol = next(t for t in (tolerances[k], declared[k], FALLBACK[k])
-                               if t is not None)
+                    tol = next(value for value in (tolerances[k], declared[k], FALLBACK[k])
+                               if value is not None)
                     self.rows.append((t.frame, kind, t.particles[keep], target[keep],
                                       np.sqrt(weight), float(tol)))
         if not self.rows:

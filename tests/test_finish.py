@@ -180,3 +180,26 @@ def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
     result = solve(prob, maxiter=50, quiet=True, finish="effort")
     assert result.status == CONVERGED, result.message
     assert "finish (lower_effort): time limit reached" in result.message
+
+
+def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_path):
+    """Ctrl-C after the landing's first kept step: that step (it meets the goal, the search's
+    result did not) is the result and the checkpoint's, the run says it was interrupted."""
+    import casadi_keyframe.optimize.constrained as constrained
+    from casadi_keyframe.optimize import INTERRUPTED
+
+    real = constrained._Held.land
+
+    def land_then_stop(self, tries):
+        real(self, tries)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(constrained._Held, "land", land_then_stop)
+    prob = tight(swing())
+    result = solve(prob, maxiter=50, quiet=True, finish="land",
+                   checkpoint=tmp_path / "checkpoint.npz")
+    assert result.status == INTERRUPTED, result.message
+    assert "the finish was interrupted" in result.message
+    assert result.breakdown["misses"][0]["rms_position_error"] <= 1e-3  # the landed step
+    saved = np.load(tmp_path / "checkpoint.npz")
+    np.testing.assert_array_equal(saved["u"], result.x)

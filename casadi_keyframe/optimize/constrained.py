@@ -35,7 +35,7 @@ LANDED = 0.8  # land() goes on until every miss is within this share of its tole
 
 def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None = None,
          velocity_tolerance: float | None = None, maxiter: int = 10, tries: int = 4,
-         iterations: int = 60, time_limit: float | None = None) -> Result:
+         iterations: int = 60, time_limit: float | None = None, on_keep=None) -> Result:
     """Put the StateKeyframes of controls ``u0`` (default: the problem's start) within their
     tolerances (``position_tolerance`` m and ``velocity_tolerance`` m/s where given, else
     each keyframe's own) by landing steps on the controls of the last ``window``
@@ -45,7 +45,8 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     each time,
     until the largest miss over its tolerance falls (a motion within the physical limits
     staying so), until every miss is within :data:`LANDED` of its tolerance (a margin for
-    what follows).  ``iterations``: LSMR iterations per step.
+    what follows).  ``iterations``: LSMR iterations per step; ``on_keep(u, trajectory)`` is
+    called with each kept step (a checkpoint).
 
     Returns a :class:`~.result.Result` (method "land"): status 0 if it ends within the
     tolerances, else 2 when no step brings the keyframes closer, 1 at ``maxiter`` or
@@ -55,7 +56,7 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance)
     held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
-                 iterations)
+                 iterations, on_keep=on_keep)
     status, message = None, ""
     for _ in range(maxiter):
         if held.within(held.traj, LANDED):
@@ -79,7 +80,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
                  velocity_tolerance: float | None = None, maxiter: int = 10, tries: int = 6,
                  damping: float = 0.0, restore: int = 2, iterations: int = 60, u0=None,
                  time_limit: float | None = None, keep_objective: bool = False,
-                 quiet: bool = True) -> Result:
+                 on_keep=None, quiet: bool = True) -> Result:
     """Lower the control cost of ``u0`` (default: the problem's start) while every
     StateKeyframe stays within its tolerance (as for :func:`land`), by damped steps on the
     controls of the last ``window`` steps before the last keyframe (module docstring):
@@ -91,7 +92,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     control Hessian on the window (Smoothness with ``alpha > 0``), goals that are
     StateKeyframes only (a penalty without a tolerance, such as StrainLimit, is not held:
     ``keep_objective`` weighs it), and a start within the tolerances (:func:`land` finds
-    one).
+    one); ``on_keep`` as for :func:`land`.
 
     Returns a :class:`~.result.Result` (method "lower_effort"): status 0 when no trial
     step lowers the cost within the tolerances (or ``maxiter`` steps were kept), 1 at
@@ -103,7 +104,8 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance,
            damping=damping, restore=restore)
     held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
-                 iterations, damping=damping, keep_objective=keep_objective)
+                 iterations, damping=damping, keep_objective=keep_objective,
+                 on_keep=on_keep)
     if not held.within(held.traj):
         raise ValueError(f"{problem.name}: the start misses its keyframes by "
                          f"{held.constraint.misses(held.traj)} (rms m, m/s), beyond the "
@@ -156,9 +158,9 @@ class _Held:
     counts (simulations, sweeps, failed simulations, seconds simulating)."""
 
     def __init__(self, problem, window, tolerances, u, started, iterations, damping=0.0,
-                 keep_objective=False):
+                 keep_objective=False, on_keep=None):
         self.problem, self.started, self.iterations = problem, started, iterations
-        self.damping, self.keep_objective = damping, keep_objective
+        self.damping, self.keep_objective, self.on_keep = damping, keep_objective, on_keep
         self.last = max((t.frame for t in problem.objective_terms.state_terms), default=0)
         self.first = max(self.last - window, 0)
         self.constraint = KeyframeConstraint(problem, self.first, tolerances)
@@ -265,6 +267,8 @@ class _Held:
 
     def _keep(self, u, traj) -> None:
         self.u, self.traj, self.cost = u, traj, self.problem.control_cost(u)[0]
+        if self.on_keep is not None:
+            self.on_keep(u, traj)
         state = self.problem.state_cost(traj, gradient=False)[0]
         self.history.append(history_record(
             self.problem, u, objective=state + self.cost, keyframe_error=state,

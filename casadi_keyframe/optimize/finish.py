@@ -15,6 +15,8 @@ import signal
 import time
 from dataclasses import dataclass
 
+import numpy as np
+
 from ..controls import StepForces
 from ..interrupts import handled
 from .constrained import land, lower_effort
@@ -103,24 +105,25 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
     started = time.perf_counter()
     stages, history = list(result.stages), list(result.history)
     runs = []
+
+    def checkpoint(u, trajectory):  # each kept step offered: the best is on disk
+        kept.offer(u, "the finish's best step", trajectory=trajectory,
+                   stage=stages[-1]["stage"] + 1, nit=len(history))
+
     try:
         u, met = result.x, _landed(problem, result.trajectory, opts.window)
         if not met:
             runs.append(land(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
-                             time_limit=_left(started, time_limit)))
+                             time_limit=_left(started, time_limit), on_keep=checkpoint))
             u, met = runs[-1].x, runs[-1].status == CONVERGED
         if opts.kind == "effort" and met and not _out_of_time(started, time_limit):
             runs.append(lower_effort(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
                                      time_limit=_left(started, time_limit),
-                                     keep_objective=True))
+                                     keep_objective=True, on_keep=checkpoint))
     except KeyboardInterrupt as err:
         handled()
-        who = "SIGINT" if getattr(err, "signum", signal.SIGINT) == signal.SIGINT else "a signal"
-        message = (f"{result.message}; the finish was interrupted ({who}): the search's "
-                   "result kept")
-        kept_stage(problem, stages, result.fun, INTERRUPTED, message)
-        return _with(problem, result, stages, history, INTERRUPTED, message,
-                     started - result.timings["wall_seconds"])
+        return _interrupted(problem, result, stages, history, kept, err,
+                            started - result.timings["wall_seconds"])
     for run in runs:
         _append(stages, history, run)
     if not runs:
@@ -144,6 +147,20 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
     return assemble(problem, last.x, fun=last.fun, jac=last.jac, status=status,
                     message=message, method=result.method, gradient=result.gradient,
                     stages=stages, history=history, started=began, trajectory=last.trajectory)
+
+
+def _interrupted(problem, result, stages, history, kept, err, began):
+    """The Result of a finish stopped by a signal: the best point it kept (the search's
+    result, or a finish's step that beat it), its objective without a gradient."""
+    who = "SIGINT" if getattr(err, "signum", signal.SIGINT) == signal.SIGINT else "a signal"
+    message = (f"{result.message}; the finish was interrupted ({who}): {kept.where} "
+               "kept")
+    fun = problem.objective(kept.u)
+    kept_stage(problem, stages, fun, INTERRUPTED, message)
+    return assemble(problem, kept.u, fun=fun, jac=np.full(kept.u.size, np.nan),
+                    status=INTERRUPTED, message=message, method=result.method,
+                    gradient=result.gradient, stages=stages, history=history, started=began,
+                    trajectory=kept.trajectory)
 
 
 def _landed(problem, trajectory, window: int) -> bool:

@@ -203,3 +203,32 @@ def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_
     assert result.breakdown["misses"][0]["rms_position_error"] <= 1e-3  # the landed step
     saved = np.load(tmp_path / "checkpoint.npz")
     np.testing.assert_array_equal(saved["u"], result.x)
+
+
+def test_a_finish_that_ends_worse_returns_its_best_point(monkeypatch, tmp_path):
+    """The landing's kept steps are offered as it goes; if what it returns is worse (here:
+    zero forces, made up), the best point seen, a landed step, is the result and the
+    checkpoint's, and the message says it is kept."""
+    import time
+
+    import casadi_keyframe.optimize.finish as finish
+    from casadi_keyframe.optimize.result import assemble
+
+    real = finish.land
+
+    def land_then_worse(problem, **kwargs):
+        landed = real(problem, **kwargs)
+        zero = np.zeros(problem.size)
+        return assemble(problem, zero, fun=problem.objective(zero), jac=np.zeros(problem.size),
+                        status=2, message="made worse", method="land", gradient="adjoint",
+                        stages=landed.stages, history=[], started=time.perf_counter())
+
+    monkeypatch.setattr(finish, "land", land_then_worse)
+    prob = tight(swing())
+    result = solve(prob, maxiter=50, quiet=True, finish="land",
+                   checkpoint=tmp_path / "checkpoint.npz")
+    assert result.status == CONVERGED, result.message
+    assert "the finish's best step" in result.message and "is kept" in result.message
+    assert result.breakdown["misses"][0]["rms_position_error"] <= 1e-3
+    np.testing.assert_array_equal(np.load(tmp_path / "checkpoint.npz")["u"], result.x)
+    assert result.fun == pytest.approx(prob.objective(result.x), rel=1e-9)

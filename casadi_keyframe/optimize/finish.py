@@ -17,11 +17,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..adjoints import Adjoint
 from ..controls import StepForces
 from ..interrupts import handled
 from .constrained import land, lower_effort
 from .goal import verdict
-from .kept import kept_stage
+from .kept import kept_outcome, kept_stage
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
 from .result import assemble
 from .window_step import KeyframeConstraint, control_hessian, factor_window
@@ -132,10 +133,9 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
     began = started - result.timings["wall_seconds"]
     if not kept.offer(last.x, f"the finish ({last.method})", trajectory=last.trajectory,
                       stage=stages[-1]["stage"], nit=len(history)):
-        message = (f"{result.message}; the finish ({last.method}) ended no better "
-                   f"({last.message}): the search's result kept")
-        kept_stage(problem, stages, result.fun, result.status, message)
-        return _with(problem, result, stages, history, result.status, message, began)
+        status, message = kept_outcome(kept, result.status,
+                                       f"the finish ({last.method}): {last.message}")
+        return _kept(problem, result, stages, history, kept, status, message, began)
     # lowering the effort starts from a landing: a time limit there does not undo the goal
     ended = CONVERGED if last.method == "lower_effort" and last.status == LIMIT else last.status
     status, message = judge(ended, f"finish ({last.method}): {last.message}",
@@ -150,17 +150,28 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
 
 
 def _interrupted(problem, result, stages, history, kept, err, began):
-    """The Result of a finish stopped by a signal: the best point it kept (the search's
-    result, or a finish's step that beat it), its objective without a gradient."""
+    """The Result of a finish stopped by a signal: the best point kept."""
     who = "SIGINT" if getattr(err, "signum", signal.SIGINT) == signal.SIGINT else "a signal"
-    message = (f"{result.message}; the finish was interrupted ({who}): {kept.where} "
-               "kept")
-    fun = problem.objective(kept.u)
-    kept_stage(problem, stages, fun, INTERRUPTED, message)
-    return assemble(problem, kept.u, fun=fun, jac=np.full(kept.u.size, np.nan),
-                    status=INTERRUPTED, message=message, method=result.method,
-                    gradient=result.gradient, stages=stages, history=history, started=began,
-                    trajectory=kept.trajectory)
+    message = f"{result.message}; the finish was interrupted ({who}): {kept.where} kept"
+    return _kept(problem, result, stages, history, kept, INTERRUPTED, message, began,
+                 gradient=False)
+
+
+def _kept(problem, result, stages, history, kept, status, message, began, gradient=True):
+    """The Result at ``kept``'s point (the search's result, or a finish's step that beat
+    it) with a stage that says so; its gradient evaluated unless ``gradient`` is False
+    (after a signal: no more work) or it is the search's own point."""
+    u = kept.u
+    if u is result.x or np.array_equal(u, result.x):
+        fun, jac = result.fun, result.jac
+    elif gradient:
+        fun, jac = Adjoint()(problem, u)
+    else:
+        fun, jac = problem.objective(u), np.full(u.size, np.nan)
+    kept_stage(problem, stages, fun, status, message)
+    return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
+                    method=result.method, gradient=result.gradient, stages=stages,
+                    history=history, started=began, trajectory=kept.trajectory)
 
 
 def _landed(problem, trajectory, window: int) -> bool:
@@ -178,14 +189,6 @@ def _append(stages, history, run) -> None:
     done = history[-1]["iteration"] if history else 0
     history.extend({**h, "stage": number, "iteration": done + h["iteration"]}
                    for h in run.history)
-
-
-def _with(problem, result, stages, history, status, message, began):
-    """``result``'s point with the finish's stages and history and this ending."""
-    return assemble(problem, result.x, fun=result.fun, jac=result.jac, status=status,
-                    message=message, method=result.method, gradient=result.gradient,
-                    stages=stages, history=history, started=began,
-                    trajectory=result.trajectory)
 
 
 def _left(started, time_limit):

@@ -101,8 +101,8 @@ def check_finish(problem, opts: Finish) -> None:
 
 def run_finish(problem, result, opts: Finish, kept, time_limit=None):
     """The finish from ``result`` (a search's on ``problem``): the Result with its stages
-    and history after the search's, or ``result`` with the finish's stages appended and a
-    note where it ended no better (``kept`` judges; it holds the search's result)."""
+    and history after the search's; where it ends no better or is interrupted, the best
+    point ``kept`` holds (the search's result or a kept step), with a stage saying so."""
     started = time.perf_counter()
     stages, history = list(result.stages), list(result.history)
     runs = []
@@ -123,6 +123,8 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
                                      keep_objective=True, on_keep=checkpoint))
     except KeyboardInterrupt as err:
         handled()
+        for run in runs:  # those that ended before the signal
+            _append(stages, history, run)
         return _interrupted(problem, result, stages, history, kept, err,
                             started - result.timings["wall_seconds"])
     for run in runs:

@@ -31,7 +31,7 @@ def contact_sheet(integrator, **options):
         from casadi_keyframe.models import Attachment
     except ImportError:  # before the second architecture pass
         from casadi_keyframe.models.cloth import Attachment
-    from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
+    from casadi_keyframe.models.contact.colliders import Capsule, Contact, Plane, Sphere
 
     model = ClothModel.grid(
         6, 6, pinned=[5],

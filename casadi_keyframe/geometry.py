@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from .models.colliders import Plane, Sphere
+from .models.contact.colliders import Plane, Sphere
 
 
 def basis(normal):

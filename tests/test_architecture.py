@@ -182,7 +182,7 @@ def test_export_formats_go_through_one_table():
 def test_the_collision_choices_are_written_once():
     from casadi_keyframe.models import COLLISIONS
 
-    here = PACKAGE / "models" / "collisions.py"
+    here = PACKAGE / "models" / "contact" / "collisions.py"
     files = [p for p in PACKAGE.rglob("*.py") if p != here]
     files += sorted((PACKAGE.parent / "problems").glob("*.py"))
     written = [f"{p.name}: {s!r}" for p in files for s in _code_strings(p) if s in COLLISIONS

@@ -4,7 +4,7 @@ to a growth bound and known not to apply to some models (:meth:`Swapped.limits`)
 from __future__ import annotations
 
 from ..health import GROWTH_BOUND, warn_route_limits
-from ..models.penalty import BodyPenalty, SelfPenalty
+from ..models.contact.penalty import BodyPenalty, SelfPenalty
 from .adjoint import Adjoint
 
 

@@ -3,8 +3,8 @@
 from .base import (BlockJacobians, ForceDerivatives, ForceJacobians, Model, PhysicalReport,
                    StepHold, Surface)
 from .cloth import ClothModel, ClothParams
-from .colliders import Capsule, Contact, MeshBody, Plane, Sphere
-from .collisions import COLLISIONS, DEFAULT_COLLISION
+from .contact.colliders import Capsule, Contact, MeshBody, Plane, Sphere
+from .contact.collisions import COLLISIONS, DEFAULT_COLLISION
 from .constraints import Attachment
 from .flock import FlockModel, FlockParams, wander_forces
 from .interaction import Interaction, PairInteraction, ParticleInteraction, StencilInteraction

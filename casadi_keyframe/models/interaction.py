@@ -31,7 +31,7 @@ import numpy as np
 
 from ..kernels import (MappedKernel, pair_difference, pair_incidence, scatter_pairs,
                        scatter_stencils, stencil_incidence, stencil_values)
-from .colliders import signed_distances
+from .contact.colliders import signed_distances
 
 KERNELS = ("force", "jac", "df_dx", "vjp", "jvp")  # every family's, see interaction_kernels
 OUTPUTS = {"jac": 2, "df_dx": 1}  # blocks per kernel: (K, D) and J
@@ -85,7 +85,7 @@ class Interaction:
 
     ``name`` says what the family is; ``role`` what kind of force it is: "internal" (sums to
     zero: springs, bending), "external" (gravity, drag) or "contact" (bodies, self-contact);
-    ``holds`` whether its decision is a set the step's solve holds (:mod:`.hold`)."""
+    ``holds`` whether its decision is a set the step's solve holds (:mod:`.contact.hold`)."""
 
     name = "interaction"
     role = "external"

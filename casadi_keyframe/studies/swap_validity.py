@@ -23,7 +23,7 @@ from ..controls import StepForces
 from ..health import GROWTH_BOUND, GradientRouteWarning, past_bound
 from ..integrators import LinearizedBackwardEuler
 from ..models import DEFAULT_COLLISION, Capsule, ClothModel, ClothParams, Plane, Sphere
-from ..models.colliders import Contact, signed_distances
+from ..models.contact.colliders import Contact, signed_distances
 from ..objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from ..problem import ControlProblem
 from ..simulate import simulate

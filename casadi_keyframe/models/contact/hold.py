@@ -16,7 +16,7 @@ hold pulled (negative impulse) is released and the step solved again (contact on
 unless the pull would move it less than the tolerance over the step; one still pulled when
 the step stops revising is released at the next.  A released particle stays released while
 it moves away.  The step solves ``S (A dv - b) = 0``, ``P (dv - z) = 0``
-(:mod:`~..integrators.held_solve`); its exact derivative adds those of the normals, targets
+(:mod:`~...integrators.held_solve`); its exact derivative adds those of the normals, targets
 and body velocities, which the kernels of :func:`hold_kernels` give.
 """
 from __future__ import annotations
@@ -26,11 +26,11 @@ import functools
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel
+from ...kernels import MappedKernel
 from .colliders import Body
 from .friction import Coulomb
 from .held_set import NOTHING_HELD, HeldSet
-from .interaction import FamilyBlocks, Interaction, StepSpan
+from ..interaction import FamilyBlocks, Interaction, StepSpan
 
 TOLERANCE = 0.25  # of the thickness: a particle this close to the layer's surface touches it
 OVERSHOOT = 0.1  # of the thickness: a step that leaves a particle this far past it is redone

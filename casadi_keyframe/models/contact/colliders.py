@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel
+from ...kernels import MappedKernel
 
 STEP = 1e-5  # s: the central differences' half step
 
@@ -257,7 +257,7 @@ class MeshBody(Body):
     frames, held before the first and after the last), in the body's own coordinates, which
     ``motion`` places.  A mesh of several pieces is their union.
 
-    Each point's geometry is its closest feature (:mod:`~..meshes.distance`, libigl):
+    Each point's geometry is its closest feature (:mod:`~...meshes.distance`, libigl):
     ``point`` its closest point, ``flat`` 1 on a face (``normal`` the face's), 0 on an edge
     (``edge`` its direction) or a vertex, ``side`` the sign, and the surface's velocity
     there, ``velocity`` and its ``spread`` over the feature (3 x 3).  Within the feature the
@@ -276,7 +276,7 @@ class MeshBody(Body):
     def __init__(self, vertices, faces, frames=None, *, fps: float | None = None, times=None,
                  contact=None, motion=None, source=None):
         super().__init__(contact, motion)
-        from ..meshes.distance import pieces, require_igl
+        from ...meshes.distance import pieces, require_igl
         require_igl()
         self.vertices, self.faces = _checked_mesh(vertices, faces)
         self.frames, self.times = _checked_frames(frames, fps, times, len(self.vertices))
@@ -289,8 +289,8 @@ class MeshBody(Body):
                   motion=None) -> "MeshBody":
         """The body in a mesh file: OBJ, PLY, USD (still or time-sampled), or a PC2 cache
         with its rest OBJ (``rest``, default ``NAME_rest.obj``) at ``fps`` frames per second
-        (:func:`~..meshes.read_animated`)."""
-        from ..meshes import read_animated
+        (:func:`~...meshes.read_animated`)."""
+        from ...meshes import read_animated
         found = read_animated(path, rest=rest, fps=fps)
         return cls(found.mesh.vertices, found.mesh.faces, found.frames, times=found.times,
                    contact=contact, motion=motion, source=path)
@@ -324,7 +324,7 @@ class MeshBody(Body):
         return self.frames[k] + (s - k) * (self.frames[k + 1] - self.frames[k])
 
     def _shape(self, t: float):
-        from ..meshes.distance import MeshShape
+        from ...meshes.distance import MeshShape
         key = None if self.frames is None else float(t)
         if key not in self._shapes:
             _forget(self._shapes, self.KEPT)

@@ -28,7 +28,7 @@ from dataclasses import replace
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel
+from ...kernels import MappedKernel
 from .held_set import HeldSet
 
 SLIP = 1e-4  # m/s: the slip below which a slide leans on its decided direction d

@@ -17,7 +17,7 @@ Backward (the cotangent ``w`` of dv): ``mu = A_hat^-1 S w`` and ``lam = mu + P (
 solve ``(S A + P)^T lam = w``; ``mu`` takes the place of the unheld step's multiplier, and
 ``lam`` with ``q = (dv - z) - r`` weighs the normals' and targets' derivatives.  With
 friction ``P`` also holds sticking particles' tangents, and the sliding ones' lagged
-impulses join b (:mod:`~casadi_keyframe.models.contact.friction`); ``r`` is then the hold's own.  Tangent:
+impulses join b (:mod:`~casadi_keyframe.models.contact.tangential`); ``r`` is then the hold's own.  Tangent:
 with ``g`` the derivative of the residual's right side, ``d(dv) = P g + A_hat^-1 S (g - A P g)``.
 """
 from __future__ import annotations

@@ -22,6 +22,7 @@ import casadi as ca
 import numpy as np
 
 from ...kernels import MappedKernel
+from .tangential import TangentialLaw
 
 STEP = 1e-5  # s: the central differences' half step
 
@@ -31,16 +32,19 @@ class Contact:
     """How a body (or the cloth itself) is touched: ``stiffness`` N/m, ``damping`` N s/m,
     ``thickness`` m (the gap kept to the surface), ``width`` m (the penetration over which
     the penalty stiffness ramps up, see :func:`~.penalty.penalty_law`) and ``friction``, the
-    Coulomb coefficient mu (0: frictionless; see :mod:`.friction`)."""
+    Coulomb coefficient mu (0: frictionless; see :mod:`.friction`) or a tangential law (a
+    :class:`~.tangential.TangentialLaw`, e.g. ``Coulomb(mu)``)."""
 
     stiffness: float = 2000.0
     damping: float = 1.0
     thickness: float = 0.01
     width: float = 0.005
-    friction: float = 0.0
+    friction: float | TangentialLaw = 0.0
 
     def __post_init__(self):
-        for name in ("stiffness", "damping", "thickness", "width", "friction"):
+        numbers = ("stiffness", "damping", "thickness", "width")
+        numbers += () if isinstance(self.friction, TangentialLaw) else ("friction",)
+        for name in numbers:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"Contact.{name} must be non-negative and finite, got {value}")

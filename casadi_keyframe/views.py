@@ -21,7 +21,43 @@ if TYPE_CHECKING:
     from .state import Trajectory
 
 
-MARKER_KINDS = ("shape", "particles", "center", "outline", "velocity")
+
+
+class Figure:
+    """What outputs draw a marker as: a tag type that pictures and exporters key their
+    writers by (a new kind of marker drawn as an existing figure changes no output)."""
+
+
+class WholeShape(Figure):
+    """A target for every particle, in particle order: drawn with the surface's faces (a
+    wireframe) where the model has a surface, else as points."""
+
+
+class Points(Figure):
+    """Target points: some particles' targets, or a centre of mass."""
+
+
+class Outline(Figure):
+    """A region's closed outline in the plane z = 0."""
+
+
+@dataclass(frozen=True)
+class MarkerKind:
+    """A kind of :class:`Marker`: its ``name``, the :class:`Figure` outputs draw it as (None:
+    nothing to show in space) and whether its points are targets of particles' positions
+    (``particles``: a picture colours each targeted particle by its distance)."""
+
+    name: str
+    figure: type[Figure] | None
+    particles: bool = False
+
+
+SHAPE = MarkerKind("shape", WholeShape, particles=True)
+PARTICLES = MarkerKind("particles", Points, particles=True)
+CENTER = MarkerKind("center", Points)
+OUTLINE = MarkerKind("outline", Outline)
+VELOCITY = MarkerKind("velocity", None)
+MARKER_KINDS = {kind.name: kind for kind in (SHAPE, PARTICLES, CENTER, OUTLINE, VELOCITY)}
 
 # What each entry of a term's miss (StateTerm.miss) measures: (name, quantity, bound); a
 # "length" in the model's length unit, a "speed" in that per second, a "fraction" of agents.
@@ -99,28 +135,38 @@ class KeyframeGoal:
 class Marker:
     """What a keyframe term shows at its ``frame``, labelled ``label``.
 
-    ``kind`` is "shape" (a target for every particle: ``points`` is ``(n, dim)`` in particle
-    order, drawn with the surface's faces where the model has a surface), "particles" (targets
-    of some particles: ``points`` ``(k, dim)`` for ``particles``), "center" (a centre-of-mass
-    target: ``points`` ``(1, dim)``), "outline" (a region: its closed 2-D outline) or
-    "velocity" (velocity targets of ``particles`` only: nothing to show in space, ``points``
-    empty).  ``goal``, if given, is how the search's goal judges the term (:meth:`check`).
+    ``kind`` (a :class:`MarkerKind`, or its name) is :data:`SHAPE` (a target for every
+    particle: ``points`` is ``(n, dim)`` in particle order, drawn with the surface's faces
+    where the model has a surface), :data:`PARTICLES` (targets of some particles: ``points``
+    ``(k, dim)`` for ``particles``), :data:`CENTER` (a centre-of-mass target: ``points``
+    ``(1, dim)``), :data:`OUTLINE` (a region: its closed 2-D outline) or :data:`VELOCITY`
+    (velocity targets of ``particles`` only: nothing to show in space, ``points`` empty).
+    ``goal``, if given, is how the search's goal judges the term (:meth:`check`).
     """
 
     label: str
     frame: int
-    kind: str
+    kind: MarkerKind
     points: np.ndarray
     particles: np.ndarray | None = None
     goal: KeyframeGoal | None = None
 
     def __post_init__(self):
-        if self.kind not in MARKER_KINDS:
-            raise ValueError(f"a marker's kind is one of {MARKER_KINDS}, got {self.kind!r}")
+        kind = MARKER_KINDS.get(self.kind, self.kind) if isinstance(self.kind, str) else self.kind
+        if not isinstance(kind, MarkerKind):
+            raise ValueError(f"a marker's kind is one of {list(MARKER_KINDS)}, got {self.kind!r}")
+        object.__setattr__(self, "kind", kind)
         points = np.array(np.atleast_2d(self.points), dtype=float)
         points.flags.writeable = False
         object.__setattr__(self, "points", points)
         object.__setattr__(self, "frame", int(self.frame))
+
+    def targeted(self, x) -> np.ndarray | None:
+        """The positions in ``x`` ``(n, dim)`` of the particles this marker's points target,
+        in its points' order (None where they target no particle: a centre, a region)."""
+        if not self.kind.particles:
+            return None
+        return x if self.particles is None else x[self.particles]
 
     def check(self, trajectory) -> Check | None:
         """How ``trajectory`` does against this keyframe (None without a ``goal``)."""

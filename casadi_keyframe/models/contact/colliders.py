@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from ...geometry import BodyShape, Patch, Round, TriangleMesh
 from ...kernels import MappedKernel
 from .tangential import TangentialLaw
 
@@ -113,6 +114,14 @@ class Body:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
         return np.concatenate([np.ravel(g) for g in self.geometry(t)])
 
+    def shape(self, t: float) -> BodyShape:
+        """How the body looks at time t, for pictures and exports (a typed shape of
+        :mod:`casadi_keyframe.geometry`)."""
+        raise NotImplementedError
+
+    def _floats(self, t: float) -> list[np.ndarray]:
+        return [np.asarray(g, dtype=float) for g in self.geometry(t)]
+
     def local_geometry(self, x: np.ndarray, t: float) -> list[np.ndarray]:
         """The geometry at time t as one row per point of ``x`` ``(n, 3)``: the same row
         for every point here (a mesh gives each point its closest feature)."""
@@ -184,6 +193,10 @@ class Plane(Body):
         p, vp = self.moving(self.point, t)
         return [p, self.turned(self.normal, t), vp, self.spin(t)]
 
+    def shape(self, t):
+        point, normal, *_ = self._floats(t)
+        return Patch(point, normal)
+
 
 def _sphere_surface(x, center, radius, velocity, omega):
     d = x - center
@@ -208,6 +221,10 @@ class Sphere(Body):
     def geometry(self, t):
         c, vc = self.moving(self.center, t)
         return [c, np.array([self.radius]), vc, self.spin(t)]
+
+    def shape(self, t):
+        center, radius, *_ = self._floats(t)
+        return Round(center, center, float(radius[0]))
 
 
 def _capsule_surface(x, a, b, radius, va, vb, omega):
@@ -241,6 +258,10 @@ class Capsule(Body):
         length2 = max(float(ab @ ab), 1e-12)
         roll = ab * (self.spin(t) @ ab) / length2
         return [a, b, np.array([self.radius]), va, vb, np.cross(ab, vb - va) / length2 + roll]
+
+    def shape(self, t):
+        a, b, radius, *_ = self._floats(t)
+        return Round(a, b, float(radius[0]))
 
     def endpoints(self, t: float):
         return self.placed(self.a, t), self.placed(self.b, t)
@@ -348,6 +369,9 @@ class MeshBody(Body):
 
     def geometry(self, t):
         return [self.world_vertices(t), self.faces]
+
+    def shape(self, t):
+        return TriangleMesh(*self.geometry(t))
 
     def parameters(self, t):
         return np.zeros(0)  # per point: local_geometry

@@ -14,7 +14,8 @@ import numpy as np
 from ..geometry import moves
 from ..models.base import PhysicalReport, Surface
 from ..optimize.report import format_misses
-from ..views import BlendView, ClothView, FlockView, Points, WholeShape
+from ..objectives.markers import Points, WholeShape
+from ..views import BlendView, ClothView, FlockView
 
 
 def points3(x) -> np.ndarray:
@@ -60,7 +61,7 @@ def bodies(model, times, prefix: str = "") -> list[Body]:
 
 @dataclass
 class Target:
-    """A keyframe's target at ``frame``: its ``figure`` (:class:`~..views.Figure`:
+    """A keyframe's target at ``frame``: its ``figure`` (:class:`~..objectives.markers.Figure`:
     ``WholeShape``, ``points`` for every particle, drawn with the surface's faces;
     ``Points``, some particles or a centre of mass; ``Outline``, a region's closed outline
     in z = 0), which each exporter keys its writer by; ``label`` the term's."""

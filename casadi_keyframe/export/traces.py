@@ -12,7 +12,7 @@ import numpy as np
 
 from ..geometry import circle
 from ..models.topology import mesh_edges
-from ..views import Outline, Points, WholeShape
+from ..objectives.markers import Outline, Points, WholeShape
 
 CLOTH, CLIP, BLEND, AGENT, HIGHLIGHT = "#6a8fc7", "#8d9bb0", "#e1812c", "#4c72b0", "#e1812c"
 TARGET, BODY, RING, COM, REGION = "#d62728", "#9a9a9a", "#e1812c", "#7b4ea3", "#3a923a"
@@ -93,7 +93,7 @@ def _loop(go, t, faces, common):
                         line=dict(color=REGION, width=4), **common)
 
 
-# a 3-D panel's trace of each figure of a keyframe target (views.Figure)
+# a 3-D panel's trace of each figure of a keyframe target (objectives.markers.Figure)
 TARGET_TRACES = {WholeShape: _edges, Points: _diamonds, Outline: _loop}
 
 

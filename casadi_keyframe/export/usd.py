@@ -19,7 +19,7 @@ import numpy as np
 from ..geometry import Round, basis, circle
 from ..interrupts import check
 from ..saved import atomic_path
-from ..views import Outline, Points, WholeShape
+from ..objectives.markers import Outline, Points, WholeShape
 
 INSTALL = "pip install casadi_keyframe[usd]"
 CLOTH, CLIP, HIGHLIGHT, AGENT, TARGET, BODY, RING = (
@@ -252,7 +252,7 @@ class _Writer:
 
 # a shape's own prim where USD has one (else its polygons as a mesh: _Writer.polygons)
 SHAPES = {Round: _Writer.round}
-# the prim of each figure of a keyframe target (views.Figure), from its points
+# the prim of each figure of a keyframe target (objectives.markers.Figure), from its points
 TARGET_PRIMS = {WholeShape: lambda w, path, p: w.mesh(path, p[None], TARGET),
                 Points: lambda w, path, p: w.points(path, p[None], TARGET, width=0.05),
                 Outline: lambda w, path, p: w.curve(path, p, TARGET, width=0.05)}

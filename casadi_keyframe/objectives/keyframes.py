@@ -7,7 +7,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..views import CENTER, PARTICLES, SHAPE, VELOCITY, KeyframeGoal, Marker
+from .keyframe_goal import KeyframeGoal
+from .markers import CENTER, PARTICLES, SHAPE, VELOCITY, Marker
 from .tolerances import center_tolerance, keyframe_tolerance, shortfall_phrase, tolerance_pair
 from .terms import StateTerm, checked_target, particle_indices
 

@@ -7,7 +7,8 @@ import casadi as ca
 import numpy as np
 
 from ..shapes import Shape
-from ..views import OUTLINE, KeyframeGoal, Marker
+from .keyframe_goal import KeyframeGoal
+from .markers import OUTLINE, Marker
 from .terms import StateTerm, particle_indices
 
 

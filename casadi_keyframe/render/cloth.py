@@ -23,7 +23,8 @@ from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
 from ..geometry import circle
-from ..views import ClothView, Points, WholeShape, view_of
+from ..objectives.markers import Points, WholeShape
+from ..views import ClothView, view_of
 from .frames import (frame_title, grid_shape, keyframes, mass_centers, save_figure,
                      select_frames, snapshot_frames, write_gif)
 from .targets import (camera_direction, colorbar, distance_colors, distance_scale, distances,
@@ -233,7 +234,7 @@ class ClothPanel:
         self.dynamic.append(self.ax.scatter(*marker.points.T, marker="x", s=40, c=TARGET,
                                             zorder=3, alpha=alpha, depthshade=False))
 
-    # how each figure of a keyframe marker is drawn (views.Figure); others are not drawn
+    # how each figure of a keyframe marker is drawn (objectives.markers.Figure); others are not drawn
     FIGURES = {WholeShape: _wireframe, Points: _crosses}
 
     def show_targets(self, n: int, *, ahead: bool = True):

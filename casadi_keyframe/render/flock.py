@@ -18,7 +18,8 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.patches import Polygon
 
-from ..views import FlockView, Outline, Points, view_of
+from ..objectives.markers import Outline, Points
+from ..views import FlockView, view_of
 from .frames import (frame_title, grid_shape, keyframes, mass_centers, save_figure,
                      select_frames, snapshot_frames, write_gif)
 from .verdicts import LARGE, SMALL, say_checks, stack_height, titled

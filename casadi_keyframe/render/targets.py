@@ -72,8 +72,8 @@ def target_camera(points_list, default) -> tuple[float, float]:
 
 
 def distances(marker, x) -> np.ndarray | None:
-    """Each targeted particle's distance to its target in metres (:meth:`..views.Marker.
-    targeted`: a whole shape's every particle, else those it names), or None for a marker
+    """Each targeted particle's distance to its target in metres (:meth:`..objectives.markers.
+    Marker.targeted`: a whole shape's every particle, else those it names), or None for a marker
     that targets no particle positions (a centre of mass)."""
     targeted = marker.targeted(np.asarray(x, float))
     return None if targeted is None else np.linalg.norm(targeted - marker.points, axis=1)

@@ -192,3 +192,55 @@ def test_the_collision_choices_are_written_once():
               and {getattr(e, "value", None) for e in n.elts} <= set(COLLISIONS)]
     assert tuples == [], f"the collision choices listed again: {tuples}; use models.COLLISIONS"
     assert all("DEFAULT_COLLISION" not in w for w in written)
+
+
+BODY_KINDS = {"plane", "round", "mesh"}  # the body shapes' old names (geometry's types now)
+
+
+def kind_branches(source: str, names) -> list[int]:
+    """The lines where ``source`` knows a kind by its name: a comparison with one of
+    ``names`` written as a string (``kind == "plane"``, ``kind in ("round", "mesh")``), a
+    ``match`` case on one, or a table keyed by one."""
+    def named(node):
+        if isinstance(node, ast.Constant):
+            return node.value in names
+        return isinstance(node, (ast.Tuple, ast.List, ast.Set)) and any(map(named, node.elts))
+
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare) and any(map(named, [node.left, *node.comparators])):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.MatchValue) and named(node.value):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.Dict) and any(k is not None and named(k) for k in node.keys):
+            lines.append(node.lineno)
+    return sorted(lines)
+
+
+def _outputs() -> list[Path]:
+    return sorted((PACKAGE / "render").glob("*.py")) + sorted((PACKAGE / "export").glob("*.py"))
+
+
+def test_pictures_and_exports_know_no_body_kind_by_name():
+    found = {p.relative_to(PACKAGE).as_posix(): lines for p in _outputs()
+             if (lines := kind_branches(p.read_text(), BODY_KINDS))}
+    assert found == {}, (f"branches on a body's kind by name {found}: ask its shape "
+                         f"(geometry.BodyShape) or key a table by the shape's type")
+
+
+def test_pictures_and_exports_know_no_marker_kind_by_name():
+    from casadi_keyframe.objectives.markers import MARKER_KINDS
+
+    found = {p.relative_to(PACKAGE).as_posix(): lines for p in _outputs()
+             if (lines := kind_branches(p.read_text(), set(MARKER_KINDS)))}
+    assert found == {}, (f"branches on a marker's kind by name {found}: ask its kind or key "
+                         f"a table by its figure (objectives.markers.Figure)")
+
+
+def test_the_kind_check_sees_a_branch_by_name():
+    source = ('if body.kind == "plane":\n    pass\n'
+              'x = [b for b in bodies if b.kind in ("round", "mesh")]\n'
+              'TABLE = {"mesh": 1}\n'
+              'match kind:\n    case "round":\n        pass\n'
+              'ok = record.get("round") == before.get("round")\n')
+    assert kind_branches(source, BODY_KINDS) == [1, 3, 4, 6]

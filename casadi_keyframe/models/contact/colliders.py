@@ -114,6 +114,10 @@ class Body:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
         return np.concatenate([np.ravel(g) for g in self.geometry(t)])
 
+    def signed_distances(self, x: np.ndarray, t: float) -> np.ndarray:
+        """Every point's signed distance to the surface at time t (:func:`signed_distances`)."""
+        return signed_distances(self, x, t)
+
     def shape(self, t: float) -> BodyShape:
         """How the body looks at time t, for pictures and exports (a typed shape of
         :mod:`casadi_keyframe.geometry`)."""

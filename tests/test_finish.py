@@ -172,10 +172,11 @@ def test_finish_and_rounds_are_refused_together(capsys):
 def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
     """The effort finish starts from a landing: stopped by the clock it has still converged."""
     import casadi_keyframe.optimize.finish as finish
+    from casadi_keyframe.optimize.deadline import Deadline
 
     real = finish.lower_effort
     monkeypatch.setattr(finish, "lower_effort",
-                        lambda *a, **k: real(*a, **{**k, "time_limit": 1e-9}))
+                        lambda *a, **k: real(*a, **{**k, "deadline": Deadline.start(1e-9)}))
     prob = tight(swing(), tolerance=5e-3)
     result = solve(prob, maxiter=50, quiet=True, finish="effort")
     assert result.status == CONVERGED, result.message

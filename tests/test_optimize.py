@@ -39,6 +39,7 @@ def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
     import casadi as ca
     import scipy.sparse as sp
 
+    from casadi_keyframe.optimize.deadline import Deadline
     from casadi_keyframe.optimize.ipopt import search
 
     def ev(x):
@@ -58,8 +59,8 @@ def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
 
     seen = []
     free = (np.full(4, -np.inf), np.full(4, np.inf))
-    status, message, x = search(ev, np.zeros(4), free, 50, 1e-10, {}, seen.append, None,
-                                constraints=Lines())
+    status, message, x = search(ev, np.zeros(4), free, 50, 1e-10, {}, seen.append,
+                                Deadline.start(), constraints=Lines())
     assert status == CONVERGED, message
     assert seen and all(s.shape == (4,) for s in seen)  # each iterate handed over
     np.testing.assert_allclose(x, [0.5, 0.5, 0.2, -0.4], atol=1e-8)

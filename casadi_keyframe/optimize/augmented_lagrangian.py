@@ -16,12 +16,11 @@ targets) get multipliers; other terms stay as they are.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..adjoints import get_gradient
 from ..saved import as_checkpoint
+from .deadline import Deadline
 from .evaluator import evaluate_final
 from .kept import Kept, kept_outcome, kept_stage
 from .goal import check_stop, verdict
@@ -57,21 +56,19 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     u = problem.initial_controls() if u0 is None else problem.controls.check(u0)
     checkpoint = as_checkpoint(options.pop("checkpoint", None))
     stop = check_stop(options.pop("stop", None), problem)
-    history, stages, start = [], [], time.perf_counter()
+    history, stages, deadline = [], [], Deadline.start(time_limit)
     kept = Kept(problem, problem, hard.checkpoint(checkpoint, first), by_objective=False)
     kept.offer(u, "its start")
     res = None
     for k in range(first, max(rounds, first + 1)):
-        left = None if time_limit is None else max(time_limit - (time.perf_counter() - start),
-                                                   1e-3)
-        res = solve(hard.problem(), u0=u, time_limit=left, goal=problem, stop=stop,
+        res = solve(hard.problem(), u0=u, time_limit=deadline.left(), goal=problem, stop=stop,
                     checkpoint=hard.checkpoint(checkpoint, k), **options)
         u, traj = res.x, res.trajectory  # the dynamics do not depend on the keyframes' aim
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
         stages.append(_round(problem, k, hard.scale, res))
         kept.offer(u, f"round {k}'s result", trajectory=traj, stage=k, nit=len(history))
-        if (res.status == INTERRUPTED or _time_up(time_limit, start)
+        if (res.status == INTERRUPTED or deadline.passed()
                 or (stop == "goal" and verdict(problem, traj).met)):
             break
         hard.update(traj, multipliers)
@@ -83,14 +80,13 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
     if earlier:
         kept_stage(problem, stages, f, status, message)
-    if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and _time_up(time_limit,
-                                                                                   start):
+    if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and deadline.passed():
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
                                   f"{stages[-1]['stage']} of 0..{rounds - 1}; last: "
                                   f"{res.message}")
     return assemble(problem, u, fun=f, jac=g, status=status, message=message,
                     method=res.method, gradient=res.gradient, stages=stages, history=history,
-                    started=start, trajectory=traj)
+                    started=deadline.started, trajectory=traj)
 
 
 def _round(problem, k, scale, res) -> dict:
@@ -106,6 +102,3 @@ def _round(problem, k, scale, res) -> dict:
                         weight_scale=scale, control_cost=breakdown["control_cost"],
                         misses=breakdown["misses"])
 
-
-def _time_up(time_limit, start) -> bool:
-    return time_limit is not None and time.perf_counter() - start >= time_limit

@@ -17,13 +17,12 @@ of the piecewise smooth dynamics is put back, not thrown away.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..adjoints import Adjoint
 from ..controls import StepForces
 from ..state import SimulationError
+from .deadline import Deadline, now
 from .outcome import CONVERGED, FAILED, LIMIT
 from .result import Result, assemble, history_record, stage_record
 from .window_step import KeyframeConstraint, WindowStep, control_hessian, factor_window
@@ -35,7 +34,8 @@ LANDED = 0.8  # land() goes on until every miss is within this share of its tole
 
 def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None = None,
          velocity_tolerance: float | None = None, maxiter: int = 10, tries: int = 4,
-         iterations: int = 60, time_limit: float | None = None, on_keep=None) -> Result:
+         iterations: int = 60, time_limit: float | None = None, on_keep=None,
+         deadline: Deadline | None = None) -> Result:
     """Put the StateKeyframes of controls ``u0`` (default: the problem's start) within their
     tolerances (``position_tolerance`` m and ``velocity_tolerance`` m/s where given, else
     each keyframe's own) by landing steps on the controls of the last ``window``
@@ -46,13 +46,14 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     until the largest miss over its tolerance falls (a motion within the physical limits
     staying so), until every miss is within :data:`LANDED` of its tolerance (a margin for
     what follows).  ``iterations``: LSMR iterations per step; ``on_keep(u, trajectory)`` is
-    called with each kept step (a checkpoint).
+    called with each kept step (a checkpoint); ``deadline``: a solve's
+    :class:`~.deadline.Deadline`, in place of ``time_limit``.
 
     Returns a :class:`~.result.Result` (method "land"): status 0 if it ends within the
     tolerances, else 2 when no step brings the keyframes closer, 1 at ``maxiter`` or
     ``time_limit`` (s).
     """
-    started = time.perf_counter()
+    started, deadline = now(), deadline or Deadline.start(time_limit)
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance)
     held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
@@ -61,8 +62,8 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     for _ in range(maxiter):
         if held.within(held.traj, LANDED):
             break
-        if _out_of_time(started, time_limit):
-            status, message = LIMIT, f"time limit reached ({time_limit:g} s)"
+        if deadline.passed():
+            status, message = LIMIT, f"time limit reached ({deadline.limit:g} s)"
             break
         if not held.land(tries):
             status, message = FAILED, (f"no landing step of {tries} tried brings the keyframes "
@@ -80,7 +81,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
                  velocity_tolerance: float | None = None, maxiter: int = 10, tries: int = 6,
                  damping: float = 0.0, restore: int = 2, iterations: int = 60, u0=None,
                  time_limit: float | None = None, keep_objective: bool = False,
-                 on_keep=None, quiet: bool = True) -> Result:
+                 on_keep=None, quiet: bool = True, deadline: Deadline | None = None) -> Result:
     """Lower the control cost of ``u0`` (default: the problem's start) while every
     StateKeyframe stays within its tolerance (as for :func:`land`), by damped steps on the
     controls of the last ``window`` steps before the last keyframe (module docstring):
@@ -99,7 +100,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     ``time_limit`` (seconds), 2 when the first iteration keeps no step; ``history`` has one
     record per kept step, ``stages`` one stage, ``njev`` counts the sweeps over the window.
     """
-    started = time.perf_counter()
+    started, deadline = now(), deadline or Deadline.start(time_limit)
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance,
            damping=damping, restore=restore)
@@ -114,8 +115,8 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
                          "guess, a solve's result, land())")
     status, message = CONVERGED, f"{maxiter} steps kept (maxiter)"
     for _ in range(maxiter):
-        if _out_of_time(started, time_limit):
-            status, message = LIMIT, f"time limit reached ({time_limit:g} s)"
+        if deadline.passed():
+            status, message = LIMIT, f"time limit reached ({deadline.limit:g} s)"
             break
         if not held.lower(tries, restore):
             status = CONVERGED if held.history else FAILED
@@ -130,9 +131,6 @@ def _said(misses) -> str:
     units = {"x": "m", "v": "m/s"}
     return ", ".join(f"{miss:.3g} {units[kind]}" for kind, miss in misses)
 
-
-def _out_of_time(started, time_limit) -> bool:
-    return time_limit is not None and time.perf_counter() - started >= time_limit
 
 
 def _check(problem, **settings) -> None:
@@ -255,7 +253,7 @@ class _Held:
 
     def _simulate(self, u):
         """A trial's trajectory, or None if its simulation fails (counted and timed)."""
-        t = time.perf_counter()
+        t = now()
         self.nfev += 1
         try:
             return self.problem.simulate(u)
@@ -263,7 +261,7 @@ class _Held:
             self.failures += 1
             return None
         finally:
-            self.seconds += time.perf_counter() - t
+            self.seconds += now() - t
 
     def _keep(self, u, traj) -> None:
         self.u, self.traj, self.cost = u, traj, self.problem.control_cost(u)[0]
@@ -273,7 +271,7 @@ class _Held:
         self.history.append(history_record(
             self.problem, u, objective=state + self.cost, keyframe_error=state,
             iteration=len(self.history) + 1, stage=0,
-            seconds=time.perf_counter() - self.started, nfev=self.nfev,
+            seconds=now() - self.started, nfev=self.nfev,
             control_cost=self.cost, damping=self.damping,
             misses=self.constraint.misses(traj)))
 
@@ -284,7 +282,7 @@ class _Held:
                    f"before frame {self.last}")
         stage = stage_record(self.problem, 0, nit=len(self.history), nfev=self.nfev,
                              njev=self.sweeps, fun=f, status=status, message=message,
-                             seconds=time.perf_counter() - self.started,
+                             seconds=now() - self.started,
                              evaluation_seconds=self.seconds,
                              failed_simulations=self.failures, start=self.start)
         return assemble(self.problem, self.u, fun=f, jac=jac, status=status, message=message,

@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import copy
 import signal
-import time
 
 import numpy as np
 
@@ -15,6 +14,7 @@ from ..adjoints import get_gradient
 from ..health import GrowthLog
 from ..interrupts import check
 from ..state import SimulationError, Trajectory
+from .deadline import now
 from .goal import GoalReached, verdict
 from .result import history_record
 
@@ -128,7 +128,7 @@ class Evaluator:
         u = np.array(u, dtype=float).ravel()
         if self.last_u is not None and np.array_equal(u, self.last_u):
             return self.last
-        t = time.perf_counter()
+        t = now()
         try:
             check()  # a signal caught by interrupts.catching stops the search here
             f, g, info = self.merit(u)
@@ -145,7 +145,7 @@ class Evaluator:
         except KeyboardInterrupt as err:  # IPOPT would swallow it: remember, then re-raise
             self.interrupted = getattr(err, "signum", signal.SIGINT)
             raise
-        self.seconds += time.perf_counter() - t
+        self.seconds += now() - t
         self.nfev += 1
         self.last_u, self.last, self.last_info = u, (f, g), info
         met = info is not None and self.merit.meets(self.goal, info)
@@ -209,17 +209,18 @@ class Evaluator:
             return self.merit.describe(self.best_u, self.best_f, self.best_info)
         return self.merit.describe(self.last_u, self.last[0], self.last_info)
 
-    def record(self, history, start, bar=None, **extra):
+    def record(self, history, clock, bar=None, **extra):
         """Append one iteration (at the :attr:`report` point) to ``history``, ``extra`` its
-        optional keys; the checkpoint gets the best controls on the final grid (``u``), their
-        objective at this stage's time step (``fun``), the iterations so far (``nit``), the
-        ``stage`` and its ``stage_dt``."""
+        optional keys, its time read from ``clock`` (the call's :class:`~.deadline.Deadline`);
+        the checkpoint gets the best controls on the final grid (``u``), their objective at
+        this stage's time step (``fun``), the iterations so far (``nit``), the ``stage`` and
+        its ``stage_dt``."""
         u, objective, keyframe, more = self._described(self.report)
         growth = {} if self.health.last is None else {"gradient_growth": self.health.last}
         history.append(history_record(
             self.problem, u, objective=objective, keyframe_error=keyframe,
             iteration=len(history) + 1, stage=self.stage,
-            seconds=time.perf_counter() - start, nfev=self.nfev, **growth, **extra, **more))
+            seconds=clock.elapsed(), nfev=self.nfev, **growth, **extra, **more))
         self.keep(nit=len(history))
         if bar is not None:
             bar.update(1)

@@ -12,7 +12,6 @@ objective (:class:`~.kept.Kept`).
 from __future__ import annotations
 
 import signal
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +20,7 @@ from ..adjoints import Adjoint
 from ..controls import StepForces
 from ..interrupts import handled
 from .constrained import land, lower_effort
+from .deadline import Deadline
 from .goal import verdict
 from .kept import kept_outcome, kept_stage
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
@@ -99,11 +99,12 @@ def check_finish(problem, opts: Finish) -> None:
     factor_window(problem, control_hessian(problem), slice(first * block, last * block))
 
 
-def run_finish(problem, result, opts: Finish, kept, time_limit=None):
-    """The finish from ``result`` (a search's on ``problem``): the Result with its stages
-    and history after the search's; where it ends no better or is interrupted, the best
-    point ``kept`` holds (the search's result or a kept step), with a stage saying so."""
-    started = time.perf_counter()
+def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = None):
+    """The finish from ``result`` (a search's on ``problem``), until the solve's
+    ``deadline``: the Result with its stages and history after the search's; where it ends
+    no better or is interrupted, the best point ``kept`` holds (the search's result or a kept
+    step), with a stage saying so."""
+    deadline = deadline or Deadline.start()
     stages, history = list(result.stages), list(result.history)
     runs = []
 
@@ -115,24 +116,22 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
         u, met = result.x, _landed(problem, result.trajectory, opts.window)
         if not met:
             runs.append(land(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
-                             time_limit=_left(started, time_limit), on_keep=checkpoint))
+                             deadline=deadline, on_keep=checkpoint))
             u, met = runs[-1].x, runs[-1].status == CONVERGED
-        if opts.kind == "effort" and met and not _out_of_time(started, time_limit):
+        if opts.kind == "effort" and met and not deadline.passed():
             runs.append(lower_effort(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
-                                     time_limit=_left(started, time_limit),
-                                     keep_objective=True, on_keep=checkpoint))
+                                     deadline=deadline, keep_objective=True,
+                                     on_keep=checkpoint))
     except KeyboardInterrupt as err:
         handled()
         for run in runs:  # those that ended before the signal
             _append(stages, history, run)
-        return _interrupted(problem, result, stages, history, kept, err,
-                            started - result.timings["wall_seconds"])
+        return _interrupted(problem, result, stages, history, kept, err, deadline.started)
     for run in runs:
         _append(stages, history, run)
     if not runs:
         return result
-    last = runs[-1]
-    began = started - result.timings["wall_seconds"]
+    last, began = runs[-1], deadline.started
     if not kept.offer(last.x, f"the finish ({last.method})", trajectory=last.trajectory,
                       stage=stages[-1]["stage"], nit=len(history)):
         status, message = kept_outcome(kept, result.status,
@@ -192,11 +191,3 @@ def _append(stages, history, run) -> None:
     history.extend({**h, "stage": number, "iteration": done + h["iteration"]}
                    for h in run.history)
 
-
-def _left(started, time_limit):
-    return None if time_limit is None else max(time_limit - (time.perf_counter() - started),
-                                               1e-3)
-
-
-def _out_of_time(started, time_limit) -> bool:
-    return time_limit is not None and time.perf_counter() - started >= time_limit

@@ -17,8 +17,6 @@ evaluator runs for its bookkeeping.
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ..interrupts import check
@@ -170,15 +168,15 @@ def _to_sphere(p, d, radius) -> float:
 
 def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point),
-    calling ``on_iteration()`` after each step taken; stop at ``deadline``
-    (``time.perf_counter()``, or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
+    calling ``on_iteration()`` after each step taken; stop once the call's
+    :class:`~.deadline.Deadline` has passed.  Returns ``(status, message)`` (:mod:`.outcome`)."""
     space, counts = SearchSpace(problem, ev, "gauss-newton"), _Counts()
     opts = {**DEFAULTS, **options}
     opts["maxfun"] = opts["maxfun"] or 10 * maxiter
 
     def between():
         check()
-        if deadline is not None and time.perf_counter() >= deadline:
+        if deadline.passed():
             raise _Ended(LIMIT, "time limit reached before converging")
 
     z, radius = np.array(u0, dtype=float), opts["radius"]

@@ -19,7 +19,6 @@ import functools
 import io
 import re
 import signal
-import time
 
 import casadi as ca
 import numpy as np
@@ -185,12 +184,12 @@ class IterationHook(ca.Callback):
 
 
 def ipopt_options(maxiter, tol, options, deadline) -> dict:
-    """IPOPT's options for a search: limited-memory Hessian, silent, ``deadline`` (a
-    ``perf_counter`` time or None) as ``max_wall_time``, the user's ``options`` last."""
+    """IPOPT's options for a search: limited-memory Hessian, silent, the time the
+    :class:`~.deadline.Deadline` leaves as ``max_wall_time``, the user's ``options`` last."""
     ipopt = {"hessian_approximation": "limited-memory", "max_iter": maxiter, "tol": tol,
              "print_level": 0, "sb": "yes", "limited_memory_max_history": 20}
-    if deadline is not None:
-        ipopt["max_wall_time"] = max(deadline - time.perf_counter(), 1e-3)
+    if deadline.limit is not None:
+        ipopt["max_wall_time"] = deadline.left()
     ipopt.update(options)
     return ipopt
 

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import functools
 import re
-import time
 
 import numpy as np
 from scipy.optimize import minimize, show_options
@@ -39,8 +38,8 @@ class _TimeUp(Exception):
 
 def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), calling
-    ``on_iteration()`` after each iteration; stop at ``deadline`` (``time.perf_counter()``,
-    or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
+    ``on_iteration()`` after each iteration; stop once the call's
+    :class:`~.deadline.Deadline` has passed.  Returns ``(status, message)`` (:mod:`.outcome`)."""
     opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": tol, "gtol": 1e-10,
             "maxcor": 20}
     opts.update(options)
@@ -49,7 +48,7 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
 
     def callback(intermediate_result):
         on_iteration()
-        if deadline is not None and time.perf_counter() >= deadline:
+        if deadline.passed():
             raise _TimeUp
 
     try:

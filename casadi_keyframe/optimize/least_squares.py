@@ -14,8 +14,6 @@ over this module's defaults (``max_nfev = 10 * maxiter``, ``ftol = tol``, ``xtol
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse.linalg import LinearOperator
@@ -85,15 +83,15 @@ class _Residuals:
 
 def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with scipy's ``least_squares`` (method "trf", LSMR), evaluating
-    each accepted point with ``ev`` and calling ``on_iteration()`` after it; stop at
-    ``deadline`` (``time.perf_counter()``, or None).  Returns ``(status, message)``."""
+    each accepted point with ``ev`` and calling ``on_iteration()`` after it; stop once the
+    call's :class:`~.deadline.Deadline` has passed.  Returns ``(status, message)``."""
     space = SearchSpace(problem, ev, "least-squares")
     opts = {"max_nfev": 10 * maxiter, "ftol": tol, "xtol": 1e-10, "gtol": 1e-10,
             "x_scale": 1.0, "lsmr_maxiter": 50, **options}
 
     def between():
         check()
-        if deadline is not None and time.perf_counter() >= deadline:
+        if deadline.passed():
             raise _Stop
 
     residuals, count = _Residuals(space, between), [0]

@@ -21,7 +21,8 @@ class Method:
     * ``label``: its name in messages;
     * ``run(problem, evaluator, u0, maxiter, tol, options, on_iteration, deadline)``: one
       search from ``u0`` (in the evaluator's variables), calling ``on_iteration()`` after
-      every iteration and stopping at ``deadline`` (``time.perf_counter()``, or None);
+      every iteration and stopping once ``deadline`` (the call's :class:`~.deadline.Deadline`)
+      has passed;
       returns ``(status, message)`` (:mod:`.outcome`) or raises
       :class:`~casadi_keyframe.interrupts.Interrupted`;
     * ``option_names()``: the option names its library documents, read from the library;

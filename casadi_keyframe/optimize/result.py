@@ -13,14 +13,13 @@ convergence plot) fails at once, by name.
 from __future__ import annotations
 
 import math
-
-import time
 from dataclasses import dataclass
 from typing import TypedDict
 
 import numpy as np
 
 from ..state import Trajectory
+from .deadline import now
 from .outcome import CONVERGED, STATUS
 
 
@@ -268,10 +267,10 @@ def assemble(problem, u, *, fun: float, jac, status: int, message: str, method: 
              trajectory: Trajectory | None = None) -> Result:
     """The :class:`Result` of a call on ``problem`` that ended at the controls ``u``:
     ``nit``, ``nfev``, ``njev`` and :class:`Timings` totalled over ``stages``, ``success``
-    from ``status``, the wall time since ``started`` (``time.perf_counter()``), and the
+    from ``status``, the wall time since ``started`` (:func:`~.deadline.now`), and the
     ``trajectory`` at ``u`` (simulated unless given) with the problem's breakdown there."""
     traj = problem.simulate(u) if trajectory is None else trajectory
-    timings = {"wall_seconds": time.perf_counter() - started,
+    timings = {"wall_seconds": now() - started,
                "evaluation_seconds": sum(s["evaluation_seconds"] for s in stages),
                "failed_simulations": sum(s["failed_simulations"] for s in stages),
                "stage_seconds": [s["seconds"] for s in stages]}

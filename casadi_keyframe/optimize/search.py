@@ -12,9 +12,8 @@ from __future__ import annotations
 
 import math
 import numbers
-from dataclasses import replace
 import signal
-import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -25,6 +24,7 @@ from ..health import GradientError
 from ..interrupts import NAMES, handled
 from ..saved import as_checkpoint
 from ..state import SimulationError
+from .deadline import Deadline, now
 from .evaluator import Evaluator, MetricView, evaluate_final
 from .finish import check_finish, finish_options, run_finish
 from .goal import GoalReached, check_stop
@@ -92,16 +92,15 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
         if polish:
             ev.stage = len(stages)
             stages.append(search.run(ev.problem, ev, begin, (k, len(problems)), origin))
-        if final or stages[-1]["status"] == INTERRUPTED or search.time_up():
+        if final or stages[-1]["status"] == INTERRUPTED or search.deadline.passed():
             break
         kept.offer(carry(p, ev.best_u, problem), f"stage {stages[-1]['stage']}'s best",
                    stage=stages[-1]["stage"], nit=len(search.history))
         u = carry(p, ev.best_u, problems[k + 1])
     result = _result(problem, p, ev, strategy, search, stages, kept)
-    if finishing is None or result.status == INTERRUPTED or search.time_up():
+    if finishing is None or result.status == INTERRUPTED or search.deadline.passed():
         return result
-    left = None if search.deadline is None else search.deadline - time.perf_counter()
-    return run_finish(problem, result, finishing, kept, left)
+    return run_finish(problem, result, finishing, kept, search.deadline)
 
 
 def _shoot(p, k, opts, start, search, stages, ev, origin):
@@ -114,7 +113,7 @@ def _shoot(p, k, opts, start, search, stages, ev, origin):
     record, start, aimed = run_shooting(p, opts, start, search, len(stages), ev.goal,
                                         ev.export, origin)
     stages.append(record)
-    if opts.polish and record["status"] != INTERRUPTED and not search.time_up():
+    if opts.polish and record["status"] != INTERRUPTED and not search.deadline.passed():
         if aimed is not p:
             ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=len(stages),
                            export=ev.export, goal=ev.goal, stop=ev.stop, final=ev.final)
@@ -187,36 +186,32 @@ def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
                     method=search.method,
                     gradient=getattr(strategy, "name", type(strategy).__name__),
-                    stages=stages, history=search.history, started=search.start,
+                    stages=stages, history=search.history, started=search.deadline.started,
                     trajectory=trajectory)
 
 
 class _Search:
     """What the stages of one :func:`solve` share: the method and its settings, the
-    history, the checkpoint and the clock."""
+    history, the checkpoint and the one :class:`~.deadline.Deadline`."""
 
     def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
         self.method, self.maxiter, self.tol, self.options = method, maxiter, tol, options
         self.quiet, self.checkpoint, self.time_limit = quiet, checkpoint, time_limit
         self.stop = "method"
-        self.history, self.start = [], time.perf_counter()
-        self.deadline = None if time_limit is None else self.start + time_limit
-
-    def time_up(self) -> bool:
-        return self.deadline is not None and time.perf_counter() >= self.deadline
+        self.history, self.deadline = [], Deadline.start(time_limit)
 
     def run(self, problem, ev, u0, stage, origin: str = "the start") -> dict:
         """One method run from ``u0`` (``origin`` says what it is): the stage's
         :class:`~.result.Stage`, its objective on the stage's true targets."""
-        t, first = time.perf_counter(), len(self.history)
+        t, first = now(), len(self.history)
         status, message = self._search(problem, ev, u0, stage, origin)
-        if status == LIMIT and self.time_up():
+        if status == LIMIT and self.deadline.passed():
             message = f"time limit reached ({self.time_limit:g} s) before converging"
         status, message = judge(status, message, ev.verdict())
         ev.keep(nit=len(self.history))
         return stage_record(problem, ev.stage, nit=len(self.history) - first,
                             fun=ev.best_objective(), status=status, message=message,
-                            seconds=time.perf_counter() - t, start=ev.start, **ev.counts(),
+                            seconds=now() - t, start=ev.start, **ev.counts(),
                             **ev.health.stage_fields())
 
     def _search(self, problem, ev, u0, stage, origin):
@@ -247,7 +242,7 @@ class _Search:
         before = len(self.history)
         try:
             return run(problem, searched, start, self.maxiter, self.tol, self.options,
-                       lambda: ev.record(self.history, self.start, bar), self.deadline)
+                       lambda: ev.record(self.history, self.deadline, bar), self.deadline)
         except GoalReached as reached:
             here = "" if count == 1 else f", {reached.iteration - before} in this stage"
             return CONVERGED, (f"converged: the goal is met at iteration {reached.iteration}"

@@ -16,13 +16,12 @@ Its points go through the optimizer's own :class:`~.evaluator.Evaluator`, of the
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ...interrupts import handled
 from ...objectives import StateKeyframe
 from ...state import SimulationError
+from ..deadline import now
 from ..evaluator import Evaluator
 from ..goal import GoalReached
 from ..methods import get_method
@@ -46,7 +45,7 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
     ``search`` is the solve's shared state (method, limits, history, checkpoint, clock),
     ``goal`` the problem whose keyframes judge, ``export`` maps controls to the solve's
     final problem (``origin``) for the checkpoint."""
-    t = time.perf_counter()
+    t = now()
     reference = reference_run(problem, u0)
     spans = (growth_spans(step_growth(problem, u0), opts.segments) if opts.place == "growth"
              else None)
@@ -78,7 +77,7 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
         problem, stage, nit=len(search.history) - first, fun=fun, status=status,
         message=f"multiple shooting, {opts.segments} segments{_placed(shooting, opts)}, "
                 f"{rounds} rounds: {message}",
-        seconds=time.perf_counter() - t, **ev.counts(), segments=opts.segments,
+        seconds=now() - t, **ev.counts(), segments=opts.segments,
         defect=shooting.defect_size(info.get("defects", [])))
     return record, u, shooting.problem
 
@@ -119,14 +118,14 @@ def _rounds(problem, opts, search, ev, z):
         maxiter, before = max(budget // (opts.rounds - r), 1), len(search.history)
         try:
             inner, said = run(shooting, ev, z, maxiter, search.tol, search.options,
-                              lambda r=r: ev.record(search.history, search.start, round=r),
+                              lambda r=r: ev.record(search.history, search.deadline, round=r),
                               search.deadline)
         except GoalReached:
             return CONVERGED, f"the goal is met in round {r}", r + 1
         budget -= len(search.history) - before
         z = ev.best_u
         c = ev.best_info["defects"]
-        if inner == INTERRUPTED or search.time_up():
+        if inner == INTERRUPTED or search.deadline.passed():
             return (INTERRUPTED if inner == INTERRUPTED else LIMIT), said, r + 1
         if budget <= 0:
             return LIMIT, "iteration limit reached before the goal was met", r + 1
@@ -145,7 +144,7 @@ def _nlp(problem, opts, search, ev, z):
 
     def on_iteration(x):
         if ev.take(x):
-            ev.record(search.history, search.start, round=0)
+            ev.record(search.history, search.deadline, round=0)
 
     try:
         options = search.options if search.method == "ipopt" else {}

@@ -221,7 +221,7 @@ def test_a_finish_that_ends_worse_returns_its_best_point(monkeypatch, tmp_path):
         landed = real(problem, **kwargs)
         zero = np.zeros(problem.size)
         return assemble(problem, zero, fun=problem.objective(zero), jac=np.zeros(problem.size),
-                        status=2, message="made worse", method="land", gradient="adjoint",
+                        status=2, message="made worse", method="land", route=landed.route,
                         stages=landed.stages, history=[], started=time.perf_counter())
 
     monkeypatch.setattr(finish, "land", land_then_worse)

@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import CenterOfMassKeyframe, Smoothness, load_problem, solve
+from casadi_keyframe.adjoints import Evaluation
 from casadi_keyframe.optimize.evaluator import Evaluator
 from casadi_keyframe.optimize.goal import verdict
 from casadi_keyframe.saved import Checkpoint, read_run
@@ -60,7 +61,7 @@ class _Merit:
     route = None
 
     def __call__(self, u):
-        return float(u @ u), 2 * u, {"trajectory": None}
+        return Evaluation(float(u @ u), 2 * u)
 
     def meets(self, goal, info):
         return self.last[0] > 0

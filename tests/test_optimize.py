@@ -4,6 +4,7 @@ import os
 import signal
 import threading
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -91,11 +92,11 @@ def test_failed_simulations_during_the_search_are_counted_not_returned(race):
     class Fails(Adjoint):
         count = 0
 
-        def __call__(self, problem, u):
+        def evaluate(self, problem, u):
             Fails.count += 1
             if Fails.count in (3, 4):
                 raise SimulationError("blew up", 1)
-            return super().__call__(problem, u)
+            return super().evaluate(problem, u)
 
     r = solve(race, gradient=Fails(), maxiter=30, quiet=True)
     assert r.timings["failed_simulations"] >= 1 and np.isfinite(r.fun)
@@ -106,9 +107,9 @@ def test_failed_simulations_during_the_search_are_counted_not_returned(race):
 class Counting(Adjoint):
     calls = 0
 
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         Counting.calls += 1
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -196,15 +197,15 @@ def test_the_command_line_offers_the_method_table():
 class WrongSign(Adjoint):
     """The gradient's opposite: every search direction climbs."""
 
-    def __call__(self, problem, u):
-        f, g = super().__call__(problem, u)
-        return f, -g
+    def evaluate(self, problem, u):
+        found = super().evaluate(problem, u)
+        return replace(found, gradient=-found.gradient)
 
 
 class Slow(Adjoint):
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         time.sleep(0.05)
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
 
 def test_the_status_says_how_the_search_ended(race):
@@ -242,11 +243,11 @@ def test_ctrl_c_inside_ipopt_is_an_interrupt_not_an_ipopt_error(race):
     class SignalAt(Adjoint):
         calls = 0
 
-        def __call__(self, problem, u):
+        def evaluate(self, problem, u):
             SignalAt.calls += 1
             if SignalAt.calls == 8:
                 threading.Timer(0.002, os.kill, (os.getpid(), signal.SIGINT)).start()
-            return super().__call__(problem, u)
+            return super().evaluate(problem, u)
 
     r = solve(race, "ipopt", gradient=SignalAt(), maxiter=500, quiet=True)
     assert r.status == INTERRUPTED and r.message.startswith("interrupted by user (SIGINT)")

@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..adjoints import get_gradient
 from ..saved import as_checkpoint
 from .deadline import Deadline
 from .evaluator import evaluate_final
@@ -77,7 +76,7 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
     if earlier:
         u, traj = kept.u, kept.trajectory
         status, message = kept_outcome(kept, status, message)
-    f, g = evaluate_final(problem, get_gradient(options.get("gradient", "adjoint")), u)
+    f, g = evaluate_final(problem, res.route, u)
     if earlier:
         kept_stage(problem, stages, f, status, message)
     if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and deadline.passed():
@@ -85,7 +84,7 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
                                   f"{stages[-1]['stage']} of 0..{rounds - 1}; last: "
                                   f"{res.message}")
     return assemble(problem, u, fun=f, jac=g, status=status, message=message,
-                    method=res.method, gradient=res.gradient, stages=stages, history=history,
+                    method=res.method, route=res.route, stages=stages, history=history,
                     started=deadline.started, trajectory=traj)
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..adjoints import Adjoint
+from ..adjoints import get_gradient
 from ..controls import StepForces
 from ..state import SimulationError
 from .deadline import Deadline, now
@@ -35,7 +35,7 @@ LANDED = 0.8  # land() goes on until every miss is within this share of its tole
 def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None = None,
          velocity_tolerance: float | None = None, maxiter: int = 10, tries: int = 4,
          iterations: int = 60, time_limit: float | None = None, on_keep=None,
-         deadline: Deadline | None = None) -> Result:
+         deadline: Deadline | None = None, gradient=None) -> Result:
     """Put the StateKeyframes of controls ``u0`` (default: the problem's start) within their
     tolerances (``position_tolerance`` m and ``velocity_tolerance`` m/s where given, else
     each keyframe's own) by landing steps on the controls of the last ``window``
@@ -47,7 +47,8 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     staying so), until every miss is within :data:`LANDED` of its tolerance (a margin for
     what follows).  ``iterations``: LSMR iterations per step; ``on_keep(u, trajectory)`` is
     called with each kept step (a checkpoint); ``deadline``: a solve's
-    :class:`~.deadline.Deadline`, in place of ``time_limit``.
+    :class:`~.deadline.Deadline`, in place of ``time_limit``; ``gradient``: the route (name
+    or object, default the registry's) of the result's gradient.
 
     Returns a :class:`~.result.Result` (method "land"): status 0 if it ends within the
     tolerances, else 2 when no step brings the keyframes closer, 1 at ``maxiter`` or
@@ -57,7 +58,7 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance)
     held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
-                 iterations, on_keep=on_keep)
+                 iterations, on_keep=on_keep, route=get_gradient(gradient))
     status, message = None, ""
     for _ in range(maxiter):
         if held.within(held.traj, LANDED):
@@ -81,7 +82,8 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
                  velocity_tolerance: float | None = None, maxiter: int = 10, tries: int = 6,
                  damping: float = 0.0, restore: int = 2, iterations: int = 60, u0=None,
                  time_limit: float | None = None, keep_objective: bool = False,
-                 on_keep=None, quiet: bool = True, deadline: Deadline | None = None) -> Result:
+                 on_keep=None, quiet: bool = True, deadline: Deadline | None = None,
+                 gradient=None) -> Result:
     """Lower the control cost of ``u0`` (default: the problem's start) while every
     StateKeyframe stays within its tolerance (as for :func:`land`), by damped steps on the
     controls of the last ``window`` steps before the last keyframe (module docstring):
@@ -93,7 +95,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     control Hessian on the window (Smoothness with ``alpha > 0``), goals that are
     StateKeyframes only (a penalty without a tolerance, such as StrainLimit, is not held:
     ``keep_objective`` weighs it), and a start within the tolerances (:func:`land` finds
-    one); ``on_keep`` as for :func:`land`.
+    one); ``on_keep``, ``deadline`` and ``gradient`` as for :func:`land`.
 
     Returns a :class:`~.result.Result` (method "lower_effort"): status 0 when no trial
     step lowers the cost within the tolerances (or ``maxiter`` steps were kept), 1 at
@@ -106,7 +108,7 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
            damping=damping, restore=restore)
     held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
                  iterations, damping=damping, keep_objective=keep_objective,
-                 on_keep=on_keep)
+                 on_keep=on_keep, route=get_gradient(gradient))
     if not held.within(held.traj):
         raise ValueError(f"{problem.name}: the start misses its keyframes by "
                          f"{held.constraint.misses(held.traj)} (rms m, m/s), beyond the "
@@ -156,8 +158,9 @@ class _Held:
     counts (simulations, sweeps, failed simulations, seconds simulating)."""
 
     def __init__(self, problem, window, tolerances, u, started, iterations, damping=0.0,
-                 keep_objective=False, on_keep=None):
+                 keep_objective=False, on_keep=None, route=None):
         self.problem, self.started, self.iterations = problem, started, iterations
+        self.route = route
         self.damping, self.keep_objective, self.on_keep = damping, keep_objective, on_keep
         self.last = max((t.frame for t in problem.objective_terms.state_terms), default=0)
         self.first = max(self.last - window, 0)
@@ -277,7 +280,7 @@ class _Held:
 
     def result(self, method: str, status: int, message: str) -> Result:
         """The :class:`~.result.Result` at the point reached, with its one stage."""
-        f, jac = Adjoint()(self.problem, self.u)
+        f, jac = self.route(self.problem, self.u)
         message = (f"{message}; {self.sweeps} sweeps over the {self.last - self.first} steps "
                    f"before frame {self.last}")
         stage = stage_record(self.problem, 0, nit=len(self.history), nfev=self.nfev,
@@ -286,5 +289,5 @@ class _Held:
                              evaluation_seconds=self.seconds,
                              failed_simulations=self.failures, start=self.start)
         return assemble(self.problem, self.u, fun=f, jac=jac, status=status, message=message,
-                        method=method, gradient="adjoint", stages=[stage],
+                        method=method, route=self.route, stages=[stage],
                         history=self.history, started=self.started, trajectory=self.traj)

@@ -2,10 +2,11 @@
 best point, counting failed simulations, writing the history and the checkpoint) of what
 it is given to evaluate (:class:`RouteMerit`, a problem's objective by a gradient route, or
 multiple shooting's merit of stacked variables), and :class:`MetricView`, the same
-evaluator in a smooth metric's variables."""
+evaluator in a smooth metric's variables.  A merit returns an
+:class:`~casadi_keyframe.adjoints.Evaluation` whole (value, gradient, run, growth): the
+evaluator reads nothing else."""
 from __future__ import annotations
 
-import copy
 import signal
 
 import numpy as np
@@ -13,7 +14,7 @@ import numpy as np
 from ..adjoints import get_gradient
 from ..health import GrowthLog
 from ..interrupts import check
-from ..state import SimulationError, Trajectory
+from ..state import SimulationError
 from .deadline import now
 from .goal import GoalReached, verdict
 from .result import history_record
@@ -21,48 +22,42 @@ from .result import history_record
 
 class RouteMerit:
     """What a single-shooting search evaluates: ``problem``'s objective and its gradient by
-    the ``gradient`` route (a name or strategy, :attr:`route`).
+    the ``gradient`` route (a name or route, :attr:`route`).
 
-    An evaluation's ``info`` keeps the trajectory the route simulated (:func:`watched`), so
-    judging the goal (``goal``, default ``problem``: the true targets where ``problem``'s
-    keyframes aim elsewhere) costs no simulation.  A merit of other variables (multiple
-    shooting's :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
+    An evaluation keeps the run the route simulated, so judging the goal (``goal``, default
+    ``problem``: the true targets where ``problem``'s keyframes aim elsewhere) costs no
+    simulation.  A merit of other variables (multiple shooting's
+    :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
     """
 
     def __init__(self, problem, gradient, goal=None):
         self.problem, self.route = problem, get_gradient(gradient)
         self.goal = goal or problem
-        self._seen = {}
-        self._watched = watched(problem, self._seen)
 
     def __call__(self, u):
-        """``(f, gradient, info)`` at ``u``; ``info["trajectory"]``: its run, or None."""
-        self._seen.clear()
-        f, g = self.route(self._watched, u)
-        seen = self._seen.get("u")
-        kept = self._seen["trajectory"] if seen is not None and np.array_equal(seen, u) else None
-        return f, g, {"trajectory": kept}
+        """The route's :class:`~casadi_keyframe.adjoints.Evaluation` at ``u``."""
+        return self.route.evaluate(self.problem, u)
 
-    def describe(self, u, f, info):
+    def describe(self, u, f, found):
         """What an iteration's record says of an evaluated point: ``(controls, objective,
         keyframe error, extra record keys)``, of the goal's true targets."""
         control = self.goal.control_cost(u)[0]
         if self.goal is not self.problem:
-            f = self.goal.state_cost(self.run(u, info), gradient=False)[0] + control
+            f = self.goal.state_cost(self.run(u, found), gradient=False)[0] + control
         return u, f, f - control, {}
 
-    def meets(self, goal, info) -> bool:
+    def meets(self, goal, found) -> bool:
         """Whether the evaluated point meets ``goal`` (judged on the run it kept)."""
-        traj = None if info is None else info["trajectory"]
+        traj = None if found is None else found.trajectory
         return traj is not None and verdict(goal, traj).met
 
-    def may_meet(self, goal, info) -> bool:
+    def may_meet(self, goal, found) -> bool:
         """Whether the point may meet ``goal`` (the merit's cheap test before its run)."""
         return True
 
-    def run(self, u, info):
+    def run(self, u, found):
         """The controls' own run at ``u``: kept by its evaluation, or simulated now."""
-        kept = None if info is None else info["trajectory"]
+        kept = None if found is None else found.trajectory
         return self.problem.simulate(u, records=False) if kept is None else kept
 
 
@@ -131,8 +126,9 @@ class Evaluator:
         t = now()
         try:
             check()  # a signal caught by interrupts.catching stops the search here
-            f, g, info = self.merit(u)
-            self.health.seen(self.gradient)
+            info = self.merit(u)
+            f, g = info.value, info.gradient
+            self.health.seen(info.growth)
         except SimulationError as err:  # health.GradientError too: a refused gradient
             # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
             # up: measured, one iteration and "RELATIVE REDUCTION OF F"); IPOPT rejects it too
@@ -248,24 +244,6 @@ class MetricView:
     @property
     def interrupted(self):
         return self.ev.interrupted
-
-
-def watched(problem, seen: dict):
-    """A shallow copy of ``problem`` whose ``simulate`` also leaves its last controls and
-    trajectory (positions and velocities, no records) in ``seen``: the gradient routes
-    simulate through it, so the evaluator learns the trajectory of each point it asks for
-    without a simulation of its own."""
-    out = copy.copy(problem)
-    simulate = type(problem).simulate
-
-    def keeping(u=None, *, records: bool = True):
-        traj = simulate(out, u, records=records)
-        seen["u"] = None if u is None else np.array(u, dtype=float).ravel()
-        seen["trajectory"] = Trajectory(traj.x, traj.v, traj.dt)
-        return traj
-
-    out.simulate = keeping
-    return out
 
 
 def evaluate_final(problem, strategy, u):

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..adjoints import Adjoint
 from ..controls import StepForces
 from ..interrupts import handled
 from .constrained import land, lower_effort
@@ -116,12 +115,12 @@ def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = 
         u, met = result.x, _landed(problem, result.trajectory, opts.window)
         if not met:
             runs.append(land(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
-                             deadline=deadline, on_keep=checkpoint))
+                             deadline=deadline, on_keep=checkpoint, gradient=result.route))
             u, met = runs[-1].x, runs[-1].status == CONVERGED
         if opts.kind == "effort" and met and not deadline.passed():
             runs.append(lower_effort(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
                                      deadline=deadline, keep_objective=True,
-                                     on_keep=checkpoint))
+                                     on_keep=checkpoint, gradient=result.route))
     except KeyboardInterrupt as err:
         handled()
         for run in runs:  # those that ended before the signal
@@ -146,7 +145,7 @@ def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = 
     stages[-1] = {**stages[-1], "status": status, "message": message,
                   "success": status == CONVERGED}
     return assemble(problem, last.x, fun=last.fun, jac=last.jac, status=status,
-                    message=message, method=result.method, gradient=result.gradient,
+                    message=message, method=result.method, route=result.route,
                     stages=stages, history=history, started=began, trajectory=last.trajectory)
 
 
@@ -166,12 +165,12 @@ def _kept(problem, result, stages, history, kept, status, message, began, gradie
     if u is result.x or np.array_equal(u, result.x):
         fun, jac = result.fun, result.jac
     elif gradient:
-        fun, jac = Adjoint()(problem, u)
+        fun, jac = result.route(problem, u)
     else:
         fun, jac = problem.objective(u), np.full(u.size, np.nan)
     kept_stage(problem, stages, fun, status, message)
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
-                    method=result.method, gradient=result.gradient, stages=stages,
+                    method=result.method, route=result.route, stages=stages,
                     history=history, started=began, trajectory=kept.trajectory)
 
 

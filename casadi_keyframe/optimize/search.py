@@ -184,8 +184,7 @@ def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
         kept.offer(u, "the result", trajectory=trajectory, stage=stages[-1]["stage"],
                    nit=len(search.history))
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
-                    method=search.method,
-                    gradient=getattr(strategy, "name", type(strategy).__name__),
+                    method=search.method, route=strategy,
                     stages=stages, history=search.history, started=search.deadline.started,
                     trajectory=trajectory)
 

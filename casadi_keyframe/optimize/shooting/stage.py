@@ -70,15 +70,15 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
         status, message = INTERRUPTED, "interrupted; best result kept"
     finally:
         runner.close()
-    info = ev.best_info or {}
+    info = ev.best_info
     u = shooting.unpack(ev.best_u)[0] if ev.best_u is not None else u0
-    fun = true_objective(problem, u, info)[1] if info else np.nan
+    fun = true_objective(problem, u, info)[1] if info is not None else np.nan
     record = stage_record(
         problem, stage, nit=len(search.history) - first, fun=fun, status=status,
         message=f"multiple shooting, {opts.segments} segments{_placed(shooting, opts)}, "
                 f"{rounds} rounds: {message}",
         seconds=now() - t, **ev.counts(), segments=opts.segments,
-        defect=shooting.defect_size(info.get("defects", [])))
+        defect=shooting.defect_size(info.defects if info is not None else []))
     return record, u, shooting.problem
 
 
@@ -124,7 +124,7 @@ def _rounds(problem, opts, search, ev, z):
             return CONVERGED, f"the goal is met in round {r}", r + 1
         budget -= len(search.history) - before
         z = ev.best_u
-        c = ev.best_info["defects"]
+        c = ev.best_info.defects
         if inner == INTERRUPTED or search.deadline.passed():
             return (INTERRUPTED if inner == INTERRUPTED else LIMIT), said, r + 1
         if budget <= 0:
@@ -132,7 +132,7 @@ def _rounds(problem, opts, search, ev, z):
         mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},
                      **{(k, "v"): cv for k, (_, cv) in enumerate(c)}})
         if hard is not None:
-            hard.update(ev.best_info["trajectory"])
+            hard.update(ev.best_info.trajectory)
             shooting.problem = hard.problem()
     return LIMIT, f"{opts.rounds} rounds ended before the goal was met", opts.rounds
 

@@ -20,8 +20,7 @@ import numpy as np
 
 from ..saved import as_checkpoint
 from .deadline import Deadline
-from .evaluator import evaluate_final
-from .kept import Kept, kept_outcome, kept_stage
+from .kept import Kept, conclude, evaluate_final, kept_outcome
 from .goal import check_stop, verdict
 from .multipliers import KeyframeMultipliers
 from .outcome import INTERRUPTED, LIMIT
@@ -72,17 +71,16 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
             break
         hard.update(traj, multipliers)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
-    earlier = kept.u is not u  # an earlier round, or the start, was better than the last
-    if earlier:
-        u, traj = kept.u, kept.trajectory
-        status, message = kept_outcome(kept, status, message)
-    f, g = evaluate_final(problem, res.route, u)
-    if earlier:
-        kept_stage(problem, stages, f, status, message)
     if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and deadline.passed():
         status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
                                   f"{stages[-1]['stage']} of 0..{rounds - 1}; last: "
                                   f"{res.message}")
+    if kept.u is not u:  # an earlier round, or the start, was better than the last
+        status, message = kept_outcome(kept, status, message)
+        return conclude(problem, kept, res.route, status=status, message=message,
+                        stages=stages, history=history, method=res.method,
+                        started=deadline.started)
+    f, g = evaluate_final(problem, res.route, u)
     return assemble(problem, u, fun=f, jac=g, status=status, message=message,
                     method=res.method, route=res.route, stages=stages, history=history,
                     started=deadline.started, trajectory=traj)

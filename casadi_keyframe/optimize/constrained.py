@@ -23,6 +23,7 @@ from ..adjoints import get_gradient
 from ..controls import StepForces
 from ..state import SimulationError
 from .deadline import Deadline, now
+from .kept import Standing
 from .outcome import CONVERGED, FAILED, LIMIT
 from .result import Result, assemble, history_record, stage_record
 from .window_step import KeyframeConstraint, WindowStep, control_hessian, factor_window
@@ -234,11 +235,12 @@ class _Held:
         return False
 
     def _better(self, u, traj) -> bool:
-        """A lower control cost (and, with ``keep_objective``, no higher objective)."""
-        if self.problem.control_cost(u)[0] >= self.cost:
+        """A lower control cost (and, with ``keep_objective``, no higher objective), ranked
+        as every point is (:class:`~.kept.Standing`; a trial here is within the tolerances)."""
+        if not Standing(True, self.problem.control_cost(u)[0]).beats(Standing(True, self.cost)):
             return False
-        return not self.keep_objective or (self.objective(u, traj)
-                                           <= self.objective(self.u, self.traj))
+        return not self.keep_objective or Standing(True, self.objective(u, traj)).at_least(
+            Standing(True, self.objective(self.u, self.traj)))
 
     def _restored(self, u, restore: int):
         """``(u, traj)`` within the tolerances after at most ``restore`` landing steps from

@@ -17,6 +17,7 @@ from ..interrupts import check
 from ..state import SimulationError
 from .deadline import now
 from .goal import GoalReached, verdict
+from .kept import Standing
 from .result import history_record
 
 
@@ -70,8 +71,8 @@ class Evaluator:
     :class:`RouteMerit`).  ``stage`` is the stage it serves; ``export`` maps its controls to
     the final problem's grid for the checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint`
     or None; ``final``: its points are the final problem's, comparable with any other
-    there).  The best point is judged by the goal (:mod:`.goal`, the terms and limits of
-    ``goal``, default ``problem``) first, then by the merit; each iteration's record
+    there).  The best point is ranked by its :class:`~.kept.Standing`: the goal (:mod:`.goal`,
+    the terms and limits of ``goal``, default ``problem``) first, then the merit; each iteration's record
     describes the ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
     ``failed_best`` a failed evaluation stands as the best while there is no other.  With
     ``stop="goal"`` each iteration raises :class:`~.goal.GoalReached` once the best point
@@ -145,7 +146,7 @@ class Evaluator:
         self.nfev += 1
         self.last_u, self.last, self.last_info = u, (f, g), info
         met = info is not None and self.merit.meets(self.goal, info)
-        if (not met, f) < (not self.best_met, self.best_f) and (
+        if Standing(met, f).beats(Standing(self.best_met, self.best_f)) and (
                 info is not None or self.failed_best):
             self.best_u, self.best_f, self.best_g, self.best_info = u, f, g, info
             self.best_traj, self.best_met = None, met
@@ -196,7 +197,7 @@ class Evaluator:
         if self.checkpoint is None or self.best_u is None:
             return
         u, fun = self._described("best")[:2]
-        self.checkpoint.write(self.export(u), fun=float(fun), met=bool(self.best_met),
+        self.checkpoint.write(self.export(u), Standing(bool(self.best_met), float(fun)),
                               final=self.final, nit=nit, stage=self.stage,
                               stage_dt=float(self.problem.dt))
 
@@ -244,14 +245,3 @@ class MetricView:
     @property
     def interrupted(self):
         return self.ev.interrupted
-
-
-def evaluate_final(problem, strategy, u):
-    """Objective and gradient of ``problem`` at the controls ``u`` a search ends on (after a
-    continuation stage stopped early, or the last augmented-Lagrangian round); if that is
-    interrupted too, the objective alone (gradient NaN)."""
-    try:
-        f, g = strategy(problem, u)
-        return float(f), g
-    except KeyboardInterrupt:
-        return float(problem.objective(u)), np.full(u.size, np.nan)

@@ -14,14 +14,12 @@ from __future__ import annotations
 import signal
 from dataclasses import dataclass
 
-import numpy as np
-
 from ..controls import StepForces
 from ..interrupts import handled
 from .constrained import land, lower_effort
 from .deadline import Deadline
 from .goal import verdict
-from .kept import kept_outcome, kept_stage
+from .kept import conclude, kept_outcome
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
 from .result import assemble
 from .window_step import KeyframeConstraint, control_hessian, factor_window
@@ -159,19 +157,10 @@ def _interrupted(problem, result, stages, history, kept, err, began):
 
 def _kept(problem, result, stages, history, kept, status, message, began, gradient=True):
     """The Result at ``kept``'s point (the search's result, or a finish's step that beat
-    it) with a stage that says so; its gradient evaluated unless ``gradient`` is False
-    (after a signal: no more work) or it is the search's own point."""
-    u = kept.u
-    if u is result.x or np.array_equal(u, result.x):
-        fun, jac = result.fun, result.jac
-    elif gradient:
-        fun, jac = result.route(problem, u)
-    else:
-        fun, jac = problem.objective(u), np.full(u.size, np.nan)
-    kept_stage(problem, stages, fun, status, message)
-    return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
-                    method=result.method, route=result.route, stages=stages,
-                    history=history, started=began, trajectory=kept.trajectory)
+    it) with a stage that says so (:func:`~.kept.conclude`)."""
+    return conclude(problem, kept, result.route, status=status, message=message,
+                    stages=stages, history=history, method=result.method, started=began,
+                    known=(result.x, result.fun, result.jac), gradient=gradient)
 
 
 def _landed(problem, trajectory, window: int) -> bool:
@@ -189,4 +178,3 @@ def _append(stages, history, run) -> None:
     done = history[-1]["iteration"] if history else 0
     history.extend({**h, "stage": number, "iteration": done + h["iteration"]}
                    for h in run.history)
-

@@ -25,10 +25,10 @@ from ..interrupts import NAMES, handled
 from ..saved import as_checkpoint
 from ..state import SimulationError
 from .deadline import Deadline, now
-from .evaluator import Evaluator, MetricView, evaluate_final
+from .evaluator import Evaluator, MetricView
 from .finish import check_finish, finish_options, run_finish
 from .goal import GoalReached, check_stop
-from .kept import Kept, kept_outcome, kept_stage
+from .kept import Kept, conclude, evaluate_final, kept_outcome
 from .methods import check_options, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
@@ -176,13 +176,13 @@ def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
                    f"controls, carried to the problem ({stage_name(problem)}), kept")
     trajectory = problem.simulate(u)
     if kept.beats(u, trajectory):
-        u, trajectory = kept.u, problem.simulate(kept.u)
-        fun, jac = evaluate_final(problem, strategy, u)
         status, message = kept_outcome(kept, status, message)
-        kept_stage(problem, stages, fun, status, message)
-    else:  # the checkpoint holds the result too (a coarse stage's, carried, once judged here)
-        kept.offer(u, "the result", trajectory=trajectory, stage=stages[-1]["stage"],
-                   nit=len(search.history))
+        return conclude(problem, kept, strategy, status=status, message=message,
+                        stages=stages, history=search.history, method=search.method,
+                        started=search.deadline.started)
+    # the checkpoint holds the result too (a coarse stage's, carried, once judged here)
+    kept.offer(u, "the result", trajectory=trajectory, stage=stages[-1]["stage"],
+               nit=len(search.history))
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
                     method=search.method, route=strategy,
                     stages=stages, history=search.history, started=search.deadline.started,

@@ -1,5 +1,5 @@
 """scipy's trust-region reflective ``least_squares`` (LSMR on the matrix-free products,
-:class:`~casadi_keyframe.optimize.residuals.Linearization`) against the library's own
+:class:`~casadi_keyframe.optimize.residual.linearization.Linearization`) against the library's own
 trust region (``solve(..., "gauss-newton")``) on one problem, from its start: why the method
 is the library's own.  One BLAS thread, CPU time.
 
@@ -24,7 +24,7 @@ from scipy.optimize import least_squares  # noqa: E402
 from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
 from casadi_keyframe.optimize import solve  # noqa: E402
-from casadi_keyframe.optimize.residuals import Linearization  # noqa: E402
+from casadi_keyframe.optimize.residual.linearization import Linearization  # noqa: E402
 
 
 class Linearized:

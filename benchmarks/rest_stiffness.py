@@ -36,7 +36,7 @@ from casadi_keyframe.models import ClothModel  # noqa: E402
 from casadi_keyframe.models.interaction import PairInteraction  # noqa: E402
 from casadi_keyframe.models.springs import BEND, REST_TOLERANCE, sinc_inverse_squared  # noqa: E402
 from casadi_keyframe.optimize import solve  # noqa: E402
-from casadi_keyframe.optimize.residuals import Linearization  # noqa: E402
+from casadi_keyframe.optimize.residual.linearization import Linearization  # noqa: E402
 from casadi_keyframe.problem import ControlProblem  # noqa: E402
 
 

@@ -10,7 +10,7 @@ from test_augmented_lagrangian import swing
 
 from casadi_keyframe import (CenterOfMassKeyframe, InitialVelocity, Smoothness, StateKeyframe,
                              backward, load_problem)
-from casadi_keyframe.optimize.constrained import KeyframeConstraint, control_hessian, lower_effort
+from casadi_keyframe.optimize.finish import KeyframeConstraint, control_hessian, lower_effort
 from casadi_keyframe.optimize import CONVERGED
 
 

@@ -9,9 +9,8 @@ from test_augmented_lagrangian import swing
 
 from casadi_keyframe import InitialVelocity, Smoothness, StateKeyframe, load_problem
 from casadi_keyframe.optimize import CONVERGED, solve
-from casadi_keyframe.optimize.constrained import land, lower_effort
-from casadi_keyframe.optimize.finish import Finish, check_finish, finish_options
-from casadi_keyframe.optimize.window_step import KeyframeConstraint
+from casadi_keyframe.optimize.finish import (Finish, KeyframeConstraint, check_finish,
+                                             finish_options, land, lower_effort)
 from casadi_keyframe.simulate import tangent
 
 
@@ -171,7 +170,7 @@ def test_finish_and_rounds_are_refused_together(capsys):
 
 def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
     """The effort finish starts from a landing: stopped by the clock it has still converged."""
-    import casadi_keyframe.optimize.finish as finish
+    import casadi_keyframe.optimize.finish.stage as finish
     from casadi_keyframe.optimize.deadline import Deadline
 
     real = finish.lower_effort
@@ -186,7 +185,7 @@ def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
 def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_path):
     """Ctrl-C after the landing's first kept step: that step (it meets the goal, the search's
     result did not) is the result and the checkpoint's, the run says it was interrupted."""
-    import casadi_keyframe.optimize.constrained as constrained
+    import casadi_keyframe.optimize.finish.searches as constrained
     from casadi_keyframe.optimize import INTERRUPTED
 
     real = constrained._Held.land
@@ -212,7 +211,7 @@ def test_a_finish_that_ends_worse_returns_its_best_point(monkeypatch, tmp_path):
     checkpoint's, and the message says it is kept."""
     import time
 
-    import casadi_keyframe.optimize.finish as finish
+    import casadi_keyframe.optimize.finish.stage as finish
     from casadi_keyframe.optimize.result import assemble
 
     real = finish.land

@@ -41,7 +41,7 @@ def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
     import scipy.sparse as sp
 
     from casadi_keyframe.optimize.deadline import Deadline
-    from casadi_keyframe.optimize.ipopt import search
+    from casadi_keyframe.optimize.methods.ipopt import search
 
     def ev(x):
         return float(x @ x), 2 * x
@@ -127,7 +127,7 @@ class Counting(Adjoint):
                                   r"\(did you mean 'maxcor'\?\); scipy's L-BFGS-B takes .*maxls"),
     ({"method": "ipopt", "options": {"max_itr": 5}},
      r"unknown option 'max_itr' \(did you mean 'max_iter'.*listed by "
-     r"casadi_keyframe.optimize.ipopt.option_names\(\)"),
+     r"casadi_keyframe.optimize.methods.ipopt.option_names\(\)"),
     ({"method": "ipopt", "options": {"hessian_approximation": "exakt"}},
      r"(?s)IPOPT refuses option 'hessian_approximation' = 'exakt'.*limited-memory"),
     ({"method": "ipopt", "options": {"max_iter": "ten"}},
@@ -150,7 +150,7 @@ def test_valid_options_reach_the_method(race, method, options):
 
 
 def test_option_names_are_read_from_the_libraries():
-    from casadi_keyframe.optimize import ipopt, lbfgsb
+    from casadi_keyframe.optimize.methods import ipopt, lbfgsb
 
     assert {"maxcor", "ftol", "gtol", "maxfun", "maxiter", "maxls"} <= set(lbfgsb.option_names())
     assert {"tol", "max_iter", "hessian_approximation", "limited_memory_max_history",
@@ -274,7 +274,7 @@ def test_a_line_search_failure_is_converged_only_when_the_goal_is_met(monkeypatc
     round-off floor).  That is "converged" only with every keyframe within its tolerance;
     otherwise it failed (status 2) and says which keyframes it misses and by how much.  A
     failure at the very first step stays a failure too."""
-    import casadi_keyframe.optimize.lbfgsb as lbfgsb
+    import casadi_keyframe.optimize.methods.lbfgsb as lbfgsb
     from scipy.optimize import OptimizeResult
 
     starts = []
@@ -315,7 +315,7 @@ def test_a_line_search_failure_off_the_goal_exits_1_and_still_writes_its_best_po
         monkeypatch, tmp_path, capsys):
     """The command line's side of the same path: status 2 is exit 1, the message names the
     keyframes missed, and result.npz holds the best point."""
-    import casadi_keyframe.optimize.lbfgsb as lbfgsb
+    import casadi_keyframe.optimize.methods.lbfgsb as lbfgsb
     from casadi_keyframe.cli import main
     from scipy.optimize import OptimizeResult
 

@@ -12,7 +12,7 @@ from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.meshes import check_mesh
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import MeshKeyframe, RegionTarget
-from casadi_keyframe.optimize.residuals import Linearization
+from casadi_keyframe.optimize.residual.linearization import Linearization
 from casadi_keyframe.scenes.cloths import cloth_problem
 from casadi_keyframe.scenes.drops import drop_model, drop_start
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave

@@ -15,7 +15,7 @@
 * :mod:`.constrained`: :func:`lower_effort`, less control effort with the keyframes held.
 """
 from .augmented_lagrangian import solve_augmented
-from .constrained import lower_effort
+from .finish import lower_effort
 from .methods import METHODS, Method
 from .outcome import CONVERGED, FAILED, INTERRUPTED, LIMIT, STATUS
 from .result import Result

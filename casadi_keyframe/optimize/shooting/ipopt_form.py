@@ -13,7 +13,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..ipopt import search
+from ..methods.ipopt import search
 
 
 class Defects:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...simulate import tangent
-from ..residuals import ResidualMap, TermResiduals
+from ..residual.linearization import ResidualMap, TermResiduals
 from .segments import Shifted
 from .workers import Serial
 

@@ -23,9 +23,9 @@ import signal
 import casadi as ca
 import numpy as np
 
-from ..interrupts import Interrupted, catching
-from .goal import GoalReached
-from .outcome import ipopt_outcome
+from ...interrupts import Interrupted, catching
+from ..goal import GoalReached
+from ..outcome import ipopt_outcome
 
 
 def _made_with(ipopt_options: dict) -> tuple[str | None, str]:

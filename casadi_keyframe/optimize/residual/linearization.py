@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.sparse.linalg import LinearOperator
 
-from ..simulate import backward, tangent
+from ...simulate import backward, tangent
 
 
 class ResidualMap:

@@ -19,9 +19,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..interrupts import check
-from .outcome import CONVERGED, FAILED, LIMIT
-from .residuals import SearchSpace
+from ...interrupts import check
+from ..outcome import CONVERGED, FAILED, LIMIT
+from ..residual.linearization import SearchSpace
 
 DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
             "maxfun": None, "gtol": 1e-10, "plane": True}

@@ -14,15 +14,15 @@ from __future__ import annotations
 import signal
 from dataclasses import dataclass
 
-from ..controls import StepForces
-from ..interrupts import handled
-from .constrained import land, lower_effort
-from .deadline import Deadline
-from .goal import verdict
-from .kept import conclude, kept_outcome
-from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .result import assemble
-from .window_step import KeyframeConstraint, control_hessian, factor_window
+from ...controls import StepForces
+from ...interrupts import handled
+from ..deadline import Deadline
+from ..goal import verdict
+from ..kept import conclude, kept_outcome
+from ..outcome import CONVERGED, INTERRUPTED, LIMIT, judge
+from ..result import assemble
+from .constraint import KeyframeConstraint, control_hessian, factor_window
+from .searches import land, lower_effort
 
 KINDS = ("land", "effort")
 

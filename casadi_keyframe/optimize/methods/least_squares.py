@@ -18,9 +18,9 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse.linalg import LinearOperator
 
-from ..interrupts import check
-from .outcome import CONVERGED, FAILED, LIMIT
-from .residuals import SearchSpace
+from ...interrupts import check
+from ..outcome import CONVERGED, FAILED, LIMIT
+from ..residual.linearization import SearchSpace
 
 OPTIONS = ("max_nfev", "ftol", "xtol", "gtol", "x_scale", "lsmr_maxiter")
 

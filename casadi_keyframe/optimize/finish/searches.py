@@ -19,14 +19,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..adjoints import get_gradient
-from ..controls import StepForces
-from ..state import SimulationError
-from .deadline import Deadline, now
-from .kept import Standing
-from .outcome import CONVERGED, FAILED, LIMIT
-from .result import Result, assemble, history_record, stage_record
-from .window_step import KeyframeConstraint, WindowStep, control_hessian, factor_window
+from ...adjoints import get_gradient
+from ...controls import StepForces
+from ...state import SimulationError
+from ..deadline import Deadline, now
+from ..kept import Standing
+from ..outcome import CONVERGED, FAILED, LIMIT
+from ..result import Result, assemble, history_record, stage_record
+from .constraint import KeyframeConstraint, WindowStep, control_hessian, factor_window
 
 __all__ = ["KeyframeConstraint", "control_hessian", "land", "lower_effort"]
 

@@ -14,7 +14,7 @@ import re
 import numpy as np
 from scipy.optimize import minimize, show_options
 
-from .outcome import FAILED, LIMIT, lbfgsb_outcome
+from ..outcome import FAILED, LIMIT, lbfgsb_outcome
 
 
 @functools.cache

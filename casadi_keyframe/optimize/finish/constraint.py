@@ -27,8 +27,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..objectives import StateKeyframe
-from ..simulate import backward, tangent
+from ...objectives import StateKeyframe
+from ...simulate import backward, tangent
 
 FALLBACK = (1e-3, 0.05)  # m, m/s: a row's tolerance if neither caller nor keyframe gives one
 CG_RTOL = 1e-3  # the conjugate gradients' residual, relative to its right side or to the

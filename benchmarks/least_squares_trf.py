@@ -24,7 +24,7 @@ from scipy.optimize import least_squares  # noqa: E402
 from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
 from casadi_keyframe.optimize import solve  # noqa: E402
-from casadi_keyframe.optimize.residual.linearization import Linearization  # noqa: E402
+from casadi_keyframe.optimize.residual.linearization import linearize  # noqa: E402
 
 
 class Linearized:
@@ -33,13 +33,14 @@ class Linearized:
 
     def __init__(self, problem):
         self.problem, self.lin, self.simulations, self.products = problem, None, 0, 0
+        self.u = None
 
     def at(self, u):
-        if self.lin is None or not np.array_equal(self.lin.u, u):
+        if self.lin is None or not np.array_equal(self.u, u):
             if self.lin is not None:
                 self.products += self.lin.products
                 self.lin.release()
-            self.lin = Linearization(self.problem, u)
+            self.lin, self.u = linearize(self.problem, u), u.copy()
             self.simulations += 1
         return self.lin
 

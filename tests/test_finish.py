@@ -34,7 +34,8 @@ def test_the_window_products_are_exact_and_transposes(first):
     d = rng.standard_normal(prob.size)
     d[:first * block] = 0.0
     w = rng.standard_normal(constraint.size)
-    Jd, JTw = constraint.jvp(traj, d), constraint.vjp(traj, w)
+    lin = constraint.linearize(traj)
+    Jd, JTw = lin.jvp(d), lin.vjp(w)
     assert w @ Jd == pytest.approx(d @ JTw, rel=1e-10)
     h = 1e-6
     fd = (constraint.residual(prob.simulate(u + h * d, records=False))
@@ -185,16 +186,16 @@ def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
 def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_path):
     """Ctrl-C after the landing's first kept step: that step (it meets the goal, the search's
     result did not) is the result and the checkpoint's, the run says it was interrupted."""
-    import casadi_keyframe.optimize.finish.searches as constrained
     from casadi_keyframe.optimize import INTERRUPTED
+    from casadi_keyframe.optimize.finish.window import WindowSearch
 
-    real = constrained._Held.land
+    real = WindowSearch.land
 
-    def land_then_stop(self, tries):
-        real(self, tries)
+    def land_then_stop(self, rule):
+        real(self, rule)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(constrained._Held, "land", land_then_stop)
+    monkeypatch.setattr(WindowSearch, "land", land_then_stop)
     prob = tight(swing())
     result = solve(prob, maxiter=50, quiet=True, finish="land",
                    checkpoint=tmp_path / "checkpoint.npz")

@@ -12,7 +12,7 @@ from helpers import InterruptAfter
 from casadi_keyframe import Adjoint, Smoothness, StateKeyframe, StepForces, load_problem, solve
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from casadi_keyframe.optimize.methods.gauss_newton import SteihaugPath, trust_region_small
+from casadi_keyframe.optimize.residual.descents import SteihaugPath, trust_region_small
 from casadi_keyframe.scenes.cloths import cloth_problem
 
 

@@ -11,7 +11,7 @@ import signal
 
 import numpy as np
 
-from ..adjoints import get_gradient
+from ..adjoints import Evaluation, get_gradient
 from ..health import GrowthLog
 from ..interrupts import check
 from ..state import SimulationError
@@ -41,8 +41,12 @@ class RouteMerit:
 
     def describe(self, u, f, found):
         """What an iteration's record says of an evaluated point: ``(controls, objective,
-        keyframe error, extra record keys)``, of the goal's true targets."""
+        keyframe error, extra record keys)``, of the goal's true targets (a point judged
+        without a gradient: its state terms' part computed on its run)."""
         control = self.goal.control_cost(u)[0]
+        if found is not None and found.gradient is None:
+            state = self.goal.state_cost(self.run(u, found), gradient=False)[0]
+            return u, state + control, state, {}
         if self.goal is not self.problem:
             f = self.goal.state_cost(self.run(u, found), gradient=False)[0] + control
         return u, f, f - control, {}
@@ -68,12 +72,14 @@ class Evaluator:
     Search methods ask for f and its gradient at the same point in separate calls (IPOPT)
     or together (L-BFGS-B): the last point's pair is kept, so each point is simulated once.
     It evaluates ``merit`` (default: ``problem``'s objective by the ``gradient`` route,
-    :class:`RouteMerit`).  ``stage`` is the stage it serves; ``export`` maps its controls to
-    the final problem's grid for the checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint`
-    or None; ``final``: its points are the final problem's, comparable with any other
-    there).  The best point is ranked by its :class:`~.kept.Standing`: the goal (:mod:`.goal`,
-    the terms and limits of ``goal``, default ``problem``) first, then the merit; each iteration's record
-    describes the ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
+    :class:`RouteMerit`); a point a search needs no gradient at is judged by its value and
+    run alone (:meth:`judge`, ranked with the others by :meth:`offer`).  ``stage`` is the
+    stage it serves; ``export`` maps its controls to the final problem's grid for the
+    checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint` or None; ``final``: its points
+    are the final problem's, comparable with any other there).  The best point is ranked by
+    its :class:`~.kept.Standing`: the goal (:mod:`.goal`, the terms and limits of ``goal``,
+    default ``problem``) first, then the merit; each iteration's record describes the
+    ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
     ``failed_best`` a failed evaluation stands as the best while there is no other.  With
     ``stop="goal"`` each iteration raises :class:`~.goal.GoalReached` once the best point
     meets the goal.
@@ -92,6 +98,7 @@ class Evaluator:
             raise ValueError(f"Evaluator report must be 'last' or 'best', got {report!r}")
         self.report, self.failed_best = report, failed_best
         self.nfev = 0
+        self.judged = 0  # evaluations without a gradient (judge)
         self.failures = 0
         self.last_failure = ""
         self.last_error = None
@@ -111,8 +118,8 @@ class Evaluator:
 
     @property
     def njev(self) -> int:
-        """Gradients computed: the evaluations that did not fail."""
-        return self.nfev - self.failures
+        """Gradients computed: the evaluations that did not fail and asked for one."""
+        return self.nfev - self.failures - self.judged
 
     def counts(self) -> dict:
         """Its evaluations, gradients, seconds and failed simulations, as a
@@ -122,7 +129,8 @@ class Evaluator:
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
-        if self.last_u is not None and np.array_equal(u, self.last_u):
+        if (self.last_u is not None and self.last[1] is not None
+                and np.array_equal(u, self.last_u)):
             return self.last
         t = now()
         try:
@@ -145,12 +153,53 @@ class Evaluator:
         self.seconds += now() - t
         self.nfev += 1
         self.last_u, self.last, self.last_info = u, (f, g), info
+        self._rank(u, f, g, info)
+        return f, g
+
+    def _rank(self, u, f, g, info) -> None:
+        """Make the point ``u`` the best if its standing beats the best's."""
         met = info is not None and self.merit.meets(self.goal, info)
         if Standing(met, f).beats(Standing(self.best_met, self.best_f)) and (
                 info is not None or self.failed_best):
             self.best_u, self.best_f, self.best_g, self.best_info = u, f, g, info
             self.best_traj, self.best_met = None, met
-        return f, g
+
+    def judge(self, u, *, records: bool = False) -> Evaluation | None:
+        """The problem's objective and run at the controls ``u`` without a gradient (an
+        :class:`~casadi_keyframe.adjoints.Evaluation` whose gradient is None; ``records``:
+        the run keeps its records, for products made on it), or None where its simulation
+        fails; counted as an evaluation (its failure too), timed, a pending signal raised
+        first.  It becomes the last point, not the best: :meth:`offer` ranks it."""
+        u = np.array(u, dtype=float).ravel()
+        t = now()
+        found = None
+        try:
+            check()
+            run = self.problem.simulate(u, records=records)
+            value = self.problem.state_cost(run, gradient=False)[0]
+            found = Evaluation(value + self.problem.control_cost(u)[0], None, run)
+        except SimulationError as err:
+            self.failures += 1
+            self.last_failure = str(err)
+        except KeyboardInterrupt as err:
+            self.interrupted = getattr(err, "signum", signal.SIGINT)
+            raise
+        finally:
+            self.seconds += now() - t
+        self.nfev += 1
+        self.judged += found is not None
+        self.last_u, self.last_info = u, found
+        self.last = (np.nan if found is None else found.value, None)
+        return found
+
+    def offer(self, u, *, records: bool = False) -> Evaluation | None:
+        """:meth:`judge` the controls ``u`` and rank them with every point evaluated (the
+        best point, its objective and run kept, no gradient asked for): a search that needs
+        none where it steps (the transcription) offers its iterates here."""
+        found = self.judge(u, records=records)
+        if found is not None:
+            self._rank(self.last_u, found.value, None, found)
+        return found
 
     def take(self, x) -> bool:
         """Make ``x`` the best point (evaluated now if it is not the last), where the merit

@@ -161,9 +161,9 @@ def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
     """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``),
     or the ``kept`` point where that ended worse."""
     status, message = stages[-1]["status"], stages[-1]["message"]
-    if p is problem and ev.problem is problem:
+    if p is problem and ev.problem is problem and ev.best_g is not None:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
-    elif p is problem:  # a polish whose keyframes aimed past their targets
+    elif p is problem:  # a polish whose keyframes aimed elsewhere, or a point judged alone
         u = ev.best_u
         fun, jac = evaluate_final(problem, strategy, u)
     else:

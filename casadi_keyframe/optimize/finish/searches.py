@@ -8,12 +8,15 @@ curves so sharply, and the cloth's linearized steps switch so often (a spring cr
 rest length, a contact held or let go), that gradient methods on the penalty objective make
 no progress there; a search that stops a little off its keyframes stalls at the same kinks.
 Both functions work on the controls of the last ``window`` steps before the last keyframe,
-whose effect on the keyframes is short and nearly linear, with the matrix-free steps of
-:mod:`.window_step`.  A landing step is halved until the largest miss (over its tolerance)
-falls.  An effort step (the control cost's Newton step that leaves the linearized misses
-as they are) is damped until its trial, after at most ``restore`` landing steps from it, is
-within the tolerances at a lower control cost: a step that leaves the keyframes by a jump
-of the piecewise smooth dynamics is put back, not thrown away.
+whose effect on the keyframes is short and nearly linear (:class:`~.window.WindowSearch`),
+with the residual family's descents on the held keyframes' linearization
+(:mod:`.constraint`).  A landing step (:class:`~..residual.descents.Landing`) is halved
+(:class:`~..residual.steps.Halving`) until the largest miss (over its tolerance) falls.  An
+effort step (:class:`~..residual.descents.Projected`: the control cost's Newton step that
+leaves the linearized misses as they are) is damped (:class:`~..residual.steps.Damping`)
+until its trial, after at most ``restore`` landing steps from it, is within the tolerances
+at a lower control cost: a step that leaves the keyframes by a jump of the piecewise smooth
+dynamics is put back, not thrown away.
 """
 from __future__ import annotations
 
@@ -21,14 +24,11 @@ import numpy as np
 
 from ...adjoints import get_gradient
 from ...controls import StepForces
-from ...state import SimulationError
-from ..deadline import Deadline, now
-from ..kept import Standing
+from ..deadline import Deadline
 from ..outcome import CONVERGED, FAILED, LIMIT
-from ..result import Result, assemble, history_record, stage_record
-from .constraint import KeyframeConstraint, WindowStep, control_hessian, factor_window
-
-__all__ = ["KeyframeConstraint", "control_hessian", "land", "lower_effort"]
+from ..residual.steps import Damping, Halving
+from ..result import Result
+from .window import WindowSearch
 
 LANDED = 0.8  # land() goes on until every miss is within this share of its tolerance
 
@@ -55,11 +55,12 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
     tolerances, else 2 when no step brings the keyframes closer, 1 at ``maxiter`` or
     ``time_limit`` (s).
     """
-    started, deadline = now(), deadline or Deadline.start(time_limit)
+    deadline = deadline or Deadline.start(time_limit)
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance)
-    held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
-                 iterations, on_keep=on_keep, route=get_gradient(gradient))
+    held = WindowSearch(problem, window, (position_tolerance, velocity_tolerance), u0,
+                        iterations, get_gradient(gradient), on_keep=on_keep)
+    rule = Halving(tries)
     status, message = None, ""
     for _ in range(maxiter):
         if held.within(held.traj, LANDED):
@@ -67,7 +68,7 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
         if deadline.passed():
             status, message = LIMIT, f"time limit reached ({deadline.limit:g} s)"
             break
-        if not held.land(tries):
+        if not held.land(rule):
             status, message = FAILED, (f"no landing step of {tries} tried brings the keyframes "
                                        "closer")
             break
@@ -103,13 +104,14 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     ``time_limit`` (seconds), 2 when the first iteration keeps no step; ``history`` has one
     record per kept step, ``stages`` one stage, ``njev`` counts the sweeps over the window.
     """
-    started, deadline = now(), deadline or Deadline.start(time_limit)
+    deadline = deadline or Deadline.start(time_limit)
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance,
            damping=damping, restore=restore)
-    held = _Held(problem, window, (position_tolerance, velocity_tolerance), u0, started,
-                 iterations, damping=damping, keep_objective=keep_objective,
-                 on_keep=on_keep, route=get_gradient(gradient))
+    held = WindowSearch(problem, window, (position_tolerance, velocity_tolerance), u0,
+                        iterations, get_gradient(gradient), keep_objective=keep_objective,
+                        on_keep=on_keep)
+    rule = Damping(damping, tries)
     if not held.within(held.traj):
         raise ValueError(f"{problem.name}: the start misses its keyframes by "
                          f"{held.constraint.misses(held.traj)} (rms m, m/s), beyond the "
@@ -121,11 +123,11 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
         if deadline.passed():
             status, message = LIMIT, f"time limit reached ({deadline.limit:g} s)"
             break
-        if not held.lower(tries, restore):
+        if not held.lower(rule, restore):
             status = CONVERGED if held.history else FAILED
             kept = f"{len(held.history)} steps kept, then " if held.history else ""
             message = (f"{kept}no step of {tries} tried lowers the control cost with the "
-                       f"keyframes within their tolerances (damping up to {held.damping:.3g})")
+                       f"keyframes within their tolerances (damping up to {rule.damping:.3g})")
             break
     return held.result("lower_effort", status, message)
 
@@ -150,146 +152,3 @@ def _check(problem, **settings) -> None:
         value = settings.get(name)
         if value is not None and not (np.isfinite(value) and value >= 0):
             raise ValueError(f"{name} must be a number >= 0, got {value!r}")
-
-
-class _Held:
-    """What the iterations of :func:`land` and :func:`lower_effort` share: the window and
-    its factorised control Hessian, the keyframe constraint with its tolerances, the point
-    reached (``u``, its ``traj`` and control ``cost``), the damping, the history and the
-    counts (simulations, sweeps, failed simulations, seconds simulating)."""
-
-    def __init__(self, problem, window, tolerances, u, started, iterations, damping=0.0,
-                 keep_objective=False, on_keep=None, route=None):
-        self.problem, self.started, self.iterations = problem, started, iterations
-        self.route = route
-        self.damping, self.keep_objective, self.on_keep = damping, keep_objective, on_keep
-        self.last = max((t.frame for t in problem.objective_terms.state_terms), default=0)
-        self.first = max(self.last - window, 0)
-        self.constraint = KeyframeConstraint(problem, self.first, tolerances)
-        block = problem.size // problem.steps
-        self.cols = np.arange(self.first * block, self.last * block)  # the window's controls
-        self.Q = control_hessian(problem)
-        self.Q_window = factor_window(problem, self.Q, self.cols)
-        self.Q_diagonal = self.Q.diagonal()[self.cols]
-        self.history, self.nfev, self.sweeps, self.failures, self.seconds = [], 0, 0, 0, 0.0
-        u = problem.initial_controls() if u is None else problem.controls.check(u).copy()
-        self.u, self.traj = u, self._simulate(u)
-        if self.traj is None:
-            raise SimulationError(f"{problem.name}: the simulation fails at the starting "
-                                  "controls", None)
-        self.cost = problem.control_cost(u)[0]
-        objective = self.objective(u, self.traj)
-        self.start = (objective, objective - float(self.cost))  # objective, keyframe error
-
-    def within(self, traj, share: float = 1.0) -> bool:
-        """Every row within ``share`` of its tolerance, the motion within the physical
-        limits."""
-        return self.constraint.excess(traj) <= share and self.physical(traj)
-
-    def physical(self, traj) -> bool:
-        return not list(self.problem.physical_shortfall(traj))
-
-    def objective(self, u, traj) -> float:
-        return float(self.problem.state_cost(traj, gradient=False)[0]
-                     + self.problem.control_cost(u)[0])
-
-    def _step(self, traj) -> WindowStep:
-        return WindowStep(self.constraint, traj, self.Q_window, self.cols, self.Q_diagonal,
-                          self.iterations)
-
-    def land(self, tries: int) -> bool:
-        """One landing step at the current point, halved until the largest miss over its
-        tolerance falls, a whole motion staying whole (at most ``tries`` trials); True if
-        one was kept."""
-        step = self._step(self.traj)
-        d = step.land()
-        self.sweeps += step.products
-        excess, whole = self.constraint.excess(self.traj), self.physical(self.traj)
-        for k in range(tries):
-            trial_u = self.u.copy()
-            trial_u[self.cols] += 0.5 ** k * d
-            traj = self._simulate(trial_u)
-            if (traj is not None and self.constraint.excess(traj) < excess
-                    and (self.physical(traj) or not whole)):
-                self._keep(trial_u, traj)
-                return True
-        return False
-
-    def lower(self, tries: int, restore: int) -> bool:
-        """One effort iteration: the projected step at the current point (the keyframes'
-        misses left as they are, to first order), then up to ``tries`` damped trials, each
-        landed again by up to ``restore`` landing steps if it leaves the tolerances; True
-        if one was kept (within the tolerances, at a lower control cost)."""
-        step = self._step(self.traj)
-        projected = step.projected((self.Q @ self.u)[self.cols])
-        self.sweeps += step.products
-        for _ in range(tries):
-            trial_u = self.u.copy()
-            trial_u[self.cols] += projected / (1.0 + self.damping)
-            found = self._restored(trial_u, restore)
-            if found is not None and self._better(*found):
-                self._keep(*found)
-                self.damping /= 3.0
-                return True
-            self.damping = 4.0 * self.damping + 1.0
-        return False
-
-    def _better(self, u, traj) -> bool:
-        """A lower control cost (and, with ``keep_objective``, no higher objective), ranked
-        as every point is (:class:`~.kept.Standing`; a trial here is within the tolerances)."""
-        if not Standing(True, self.problem.control_cost(u)[0]).beats(Standing(True, self.cost)):
-            return False
-        return not self.keep_objective or Standing(True, self.objective(u, traj)).at_least(
-            Standing(True, self.objective(self.u, self.traj)))
-
-    def _restored(self, u, restore: int):
-        """``(u, traj)`` within the tolerances after at most ``restore`` landing steps from
-        the controls ``u``, or None."""
-        traj = self._simulate(u)
-        for _ in range(restore):
-            if traj is None or self.within(traj):
-                break
-            step = self._step(traj)
-            u = u.copy()
-            u[self.cols] += step.land()
-            self.sweeps += step.products
-            traj = self._simulate(u)
-        return (u, traj) if traj is not None and self.within(traj) else None
-
-    def _simulate(self, u):
-        """A trial's trajectory, or None if its simulation fails (counted and timed)."""
-        t = now()
-        self.nfev += 1
-        try:
-            return self.problem.simulate(u)
-        except SimulationError:
-            self.failures += 1
-            return None
-        finally:
-            self.seconds += now() - t
-
-    def _keep(self, u, traj) -> None:
-        self.u, self.traj, self.cost = u, traj, self.problem.control_cost(u)[0]
-        if self.on_keep is not None:
-            self.on_keep(u, traj)
-        state = self.problem.state_cost(traj, gradient=False)[0]
-        self.history.append(history_record(
-            self.problem, u, objective=state + self.cost, keyframe_error=state,
-            iteration=len(self.history) + 1, stage=0,
-            seconds=now() - self.started, nfev=self.nfev,
-            control_cost=self.cost, damping=self.damping,
-            misses=self.constraint.misses(traj)))
-
-    def result(self, method: str, status: int, message: str) -> Result:
-        """The :class:`~.result.Result` at the point reached, with its one stage."""
-        f, jac = self.route(self.problem, self.u)
-        message = (f"{message}; {self.sweeps} sweeps over the {self.last - self.first} steps "
-                   f"before frame {self.last}")
-        stage = stage_record(self.problem, 0, nit=len(self.history), nfev=self.nfev,
-                             njev=self.sweeps, fun=f, status=status, message=message,
-                             seconds=now() - self.started,
-                             evaluation_seconds=self.seconds,
-                             failed_simulations=self.failures, start=self.start)
-        return assemble(self.problem, self.u, fun=f, jac=jac, status=status, message=message,
-                        method=method, route=self.route, stages=[stage],
-                        history=self.history, started=self.started, trajectory=self.traj)

@@ -1,6 +1,9 @@
-"""A trust region on the Gauss-Newton model of the objective's residuals, matrix-free.
+"""A trust region on the Gauss-Newton model of the objective's residuals, matrix-free: the
+descent :class:`~..residual.descents.SteihaugPath` sized by the rule
+:class:`~..residual.steps.TrustRadius`, on the objective's
+:class:`~..residual.linearization.Linearization`.
 
-The objective is ``0.5 |r(u)|^2`` (:mod:`.residuals`).  At each point the model
+The objective is ``0.5 |r(u)|^2``.  At each point the model
 ``0.5 |r + J p|^2`` is minimised by conjugate gradients on ``J^T J p = -J^T r`` from p = 0
 (CGLS: per iteration one tangent pass and one backward pass), stopped where the path leaves
 the trust region (Steihaug).  A step the model does not predict is rejected and the region
@@ -11,8 +14,8 @@ relative tolerance on the model's gradient, ``radius`` the first radius (None: t
 step unbounded), ``accept`` the least ratio of actual to predicted decrease that takes a
 step, ``maxfun`` evaluations (default ``10 * maxiter``), ``gtol`` the gradient's largest
 component that counts as zero, ``plane`` (default True) a cut step chosen in the plane of
-the gradient and the Gauss-Newton step too (:class:`SteihaugPath`).  Bounds hold by fixing the controls at a bound the gradient
-pushes against and clipping the step.  The products are exact whatever gradient route the
+the gradient and the Gauss-Newton step too.  Bounds hold by fixing the controls at a bound
+the gradient pushes against and clipping the step.  The products are exact whatever gradient route the
 evaluator runs for its bookkeeping.
 """
 from __future__ import annotations
@@ -21,11 +24,12 @@ import numpy as np
 
 from ...interrupts import check
 from ..outcome import CONVERGED, FAILED, LIMIT
-from ..residual.linearization import SearchSpace
+from ..residual.descents import SteihaugPath
+from ..residual.space import SearchSpace
+from ..residual.steps import TrustRadius
 
 DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
             "maxfun": None, "gtol": 1e-10, "plane": True}
-SHRINK, GROW = 0.25, 2.0  # the radius after a poor step (times its length) and a good one
 
 
 def option_names() -> tuple[str, ...]:
@@ -69,103 +73,6 @@ class _Ended(Exception):
         self.status, self.message = status, message
 
 
-class SteihaugPath:
-    """CG's path on the Gauss-Newton model ``0.5 |r + J p|^2`` from p = 0, up to the trust
-    ``radius`` (None: unbounded), ``maxiter`` iterations or the model's gradient below
-    ``rtol`` times its start; :meth:`step` gives the step at any radius up to that one.
-
-    ``jvp(d) -> J d``, ``vjp(s) -> J^T s``, ``gradient`` ``J^T r``.  CG's iterates grow in
-    norm (Steihaug), so the path crosses each radius once.  With ``plane`` a step the radius
-    cuts is the better (by the model) of the path's point there and the best point within
-    the radius in the plane of the gradient and the path's end (scipy's ``trf`` subspace):
-    on a stiff model the path's first segment, steepest descent, is a poor step."""
-
-    def __init__(self, jvp, vjp, r, gradient, radius, maxiter, rtol, plane=True):
-        self.segments = []  # (start p, direction d, its longest step, |s|^2, s.q, |q|^2)
-        self.r, self.gradient, self.plane = np.asarray(r, dtype=float), gradient, plane
-        s, z = self.r.copy(), -np.asarray(gradient, dtype=float)
-        gamma = first = z @ z
-        p, d = np.zeros_like(z), z.copy()
-        for _ in range(maxiter if first > 0 else 0):
-            q = jvp(d)
-            if not self.segments:
-                self.j_gradient = -q  # d = -gradient at first
-            qq = q @ q
-            if not qq > 0:
-                break
-            alpha = gamma / qq
-            self.segments.append((p, d, alpha, s @ s, s @ q, qq))
-            p, s = p + alpha * d, s + alpha * q
-            if radius is not None and np.linalg.norm(p) >= radius:
-                break
-            z = -vjp(s)
-            gamma, last = z @ z, gamma
-            if gamma <= rtol ** 2 * first:
-                break
-            d = z + (gamma / last) * d
-        self.end = (p, s)  # the path's last point and its model residual r + J p
-
-    def step(self, radius):
-        """``(p, model value at p)``: the path's end, or its best step within ``radius``."""
-        if not self.segments:
-            return None, None
-        p_end, s_end = self.end
-        if radius is None or np.linalg.norm(p_end) <= radius:
-            return p_end, 0.5 * s_end @ s_end
-        for p, d, alpha, ss, sq, qq in self.segments:
-            if np.linalg.norm(p + alpha * d) > radius:
-                alpha = _to_sphere(p, d, radius)
-                break
-        cut, model = p + alpha * d, 0.5 * (ss + 2 * alpha * sq + alpha * alpha * qq)
-        if self.plane:
-            flat, flat_model = self._in_plane(radius)
-            if flat_model < model:
-                return flat, flat_model
-        return cut, model
-
-    def _in_plane(self, radius):
-        """The model's best point within ``radius`` in the span of the gradient and the
-        path's end, from products already made (``J g``, ``J p_end = s_end - r``)."""
-        p_end, s_end = self.end
-        basis, tri = np.linalg.qr(np.stack([self.gradient, p_end], axis=1))
-        keep = np.abs(np.diag(tri)) > 1e-12 * np.abs(tri[0, 0])
-        basis, tri = basis[:, keep], tri[np.ix_(keep, keep)]
-        images = np.stack([self.j_gradient, s_end - self.r], axis=1)[:, keep]
-        j_basis = np.linalg.solve(tri.T, images.T).T  # J basis = images tri^-1
-        x = trust_region_small(j_basis.T @ j_basis, j_basis.T @ self.r, radius)
-        residual = self.r + j_basis @ x
-        return basis @ x, 0.5 * residual @ residual
-
-
-def trust_region_small(B, c, radius) -> np.ndarray:
-    """argmin ``0.5 x^T B x + c^T x`` over ``|x| <= radius`` for a small symmetric positive
-    semi-definite B (its eigenvectors, and the secular equation solved by bisection)."""
-    w, V = np.linalg.eigh(B)
-    ct = V.T @ c
-
-    def length(lam):
-        return np.linalg.norm(ct / (w + lam))
-
-    if w.min() > 0 and length(0.0) <= radius:
-        return -V @ (ct / w)
-    lo = max(0.0, -w.min()) + 1e-300
-    hi = lo + np.linalg.norm(c) / radius + np.abs(w).max() + 1.0
-    if not length(lo) > radius:  # the hard case: along the flattest direction to the edge
-        x = -ct / np.where(w + lo > 0, w + lo, np.inf)
-        x[np.argmin(w)] += np.sqrt(max(radius ** 2 - x @ x, 0.0))
-        return V @ x
-    for _ in range(200):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if length(mid) > radius else (lo, mid)
-    return -V @ (ct / (w + hi))
-
-
-def _to_sphere(p, d, radius) -> float:
-    """The tau >= 0 with ``|p + tau d| = radius`` (``|p| <= radius``)."""
-    a, b, c = d @ d, 2 * p @ d, p @ p - radius * radius
-    return float((-b + np.sqrt(max(b * b - 4 * a * c, 0.0))) / (2 * a))
-
-
 def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point),
     calling ``on_iteration()`` after each step taken; stop once the call's
@@ -179,11 +86,10 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
         if deadline.passed():
             raise _Ended(LIMIT, "time limit reached before converging")
 
-    z, radius = np.array(u0, dtype=float), opts["radius"]
+    z, radius = np.array(u0, dtype=float), TrustRadius(opts["radius"], opts["accept"])
     try:
         for _ in range(maxiter):
-            z, radius, before, after, cut = _one_step(problem, ev, space, z, radius, opts,
-                                                      between, counts)
+            z, before, after, cut = _one_step(ev, space, z, radius, opts, between, counts)
             on_iteration()
             if before - after > tol * max(abs(before), abs(after), 1.0):
                 continue
@@ -207,10 +113,11 @@ class _Counts:
                 f"{self.products} Jacobian products]")
 
 
-def _one_step(problem, ev, space, z, radius, opts, between, counts):
-    """One step of the trust region from z: ``(z, radius, f before, f after, cut)``, ``cut``
-    the step's and the full step's lengths where the region cut it to a tenth or less;
-    raises :class:`_Ended` where the search ends."""
+def _one_step(ev, space, z, radius, opts, between, counts):
+    """One step of the trust region from z, the descent :class:`SteihaugPath` sized by the
+    rule ``radius`` (a :class:`~..residual.steps.TrustRadius`): ``(z, f before, f after,
+    cut)``, ``cut`` the step's and the full step's lengths where the region cut it to a
+    tenth or less; raises :class:`_Ended` where the search ends."""
     lin = space.linearize(z)
     counts.linearizations += 1
     try:
@@ -220,12 +127,12 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
             raise _Ended(CONVERGED, "converged: the gradient vanished (below gtol)")
         free = space.free(z, gradient)
         jvp, vjp = space.products(lin, free, between)
-        bound = None if opts["plane"] else radius  # the plane needs the path's end
+        bound = None if opts["plane"] else radius.size  # the plane needs the path's end
         path = SteihaugPath(jvp, vjp, lin.residual, free * gradient, bound,
                             opts["inner_maxiter"], opts["inner_tol"], opts["plane"])
         full = np.linalg.norm(path.step(None)[0]) if path.segments else 0.0
         while True:
-            p, model = path.step(radius)
+            p, model = path.step(radius.size)
             if p is None:
                 raise _Ended(CONVERGED, "converged: no free direction lowers the model")
             clipped = space.clipped(z, p)
@@ -240,24 +147,12 @@ def _one_step(problem, ev, space, z, radius, opts, between, counts):
                 raise _Ended(LIMIT, f"evaluation limit reached ({opts['maxfun']}) before "
                                     "converging")
             f_new = ev(z + p)[0]
-            ratio = (f - f_new) / predicted
-            radius = _new_radius(radius, ratio, length)
-            if ratio > opts["accept"]:
+            if radius.judge((f - f_new) / predicted, length):
                 cut = (length, full) if length < 0.1 * full else None
-                return z + p, radius, f, f_new, cut
+                return z + p, f, f_new, cut
     finally:
         counts.products += lin.products
         lin.release()
-
-
-def _new_radius(radius, ratio, length):
-    """The trust radius after a step of ``length`` whose actual decrease was ``ratio`` times
-    the predicted one (None: unbounded while full steps do well)."""
-    if ratio < 0.25:
-        return SHRINK * length
-    if ratio > 0.75 and (radius is None or length >= 0.99 * radius):
-        return None if radius is None else GROW * radius
-    return length if radius is None else radius
 
 
 def _too_sensitive(full, gradient) -> str:

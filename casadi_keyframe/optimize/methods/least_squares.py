@@ -1,7 +1,7 @@
 """scipy's trust-region reflective ``least_squares`` on the objective's residuals, matrix-free.
 
 Its ``fun`` is the residual vector r (one simulation that keeps its records,
-:class:`~.residuals.Linearization`) and its ``jac`` a ``LinearOperator`` of the exact
+:class:`~..residual.linearization.Linearization`) and its ``jac`` a ``LinearOperator`` of the exact
 products on that run; ``tr_solver="lsmr"``: each step solves the damped Gauss-Newton
 problem by LSMR, then the trust region is searched in the plane of that step and the
 gradient, so a rejected step costs one simulation.  Bounds are scipy's own (reflective).
@@ -20,7 +20,7 @@ from scipy.sparse.linalg import LinearOperator
 
 from ...interrupts import check
 from ..outcome import CONVERGED, FAILED, LIMIT
-from ..residual.linearization import SearchSpace
+from ..residual.space import SearchSpace
 
 OPTIONS = ("max_nfev", "ftol", "xtol", "gtol", "x_scale", "lsmr_maxiter")
 

@@ -1,11 +1,20 @@
-"""The objective as residuals, ``phi(u) = 0.5 |r(u)|^2``, linearized at a point: the matrix-free
-products ``J p`` (one tangent pass along the recorded run, the integrators' exact
-``step_jvp``) and ``J^T w`` (one backward pass with the residual cotangents as frame
-cotangents, the exact ``step_vjp``, then the controls' pullback) that a Gauss-Newton search
-needs.  ``r`` stacks every term's residual (keyframe misses, region distances, strain
-excess, control effort) in the problem's term order.
+"""A residual map ``r``, ``phi = 0.5 |r|^2``, linearized at a point: :class:`Linearization`,
+the one type every residual search works on (the residual, its Jacobian applied both ways,
+``J p`` and ``J^T w``, the run it was made on and the first frame a change can move), and its
+producer for a problem's objective, :func:`linearize`.
+
+The others make the same type: multiple shooting's merit
+(:func:`~..shooting.residuals.linearize_shooting`), the keyframes held over a window of late
+steps (:meth:`~..finish.constraint.KeyframeConstraint.linearize`); the search in positions
+will add its own.  For the objective, ``r`` stacks every term's residual (keyframe misses,
+region distances, strain excess, control effort) in the problem's term order; ``J p`` is
+one tangent pass along the recorded run (the integrators' exact ``step_jvp``), ``J^T w``
+one backward pass with the residual cotangents as frame cotangents (the exact
+``step_vjp``), then the controls' pullback.
 """
 from __future__ import annotations
+
+from collections.abc import Callable
 
 import numpy as np
 from scipy.sparse.linalg import LinearOperator
@@ -13,14 +22,55 @@ from scipy.sparse.linalg import LinearOperator
 from ...simulate import backward, tangent
 
 
-class ResidualMap:
-    """What every residual map gives beside its ``residual``: the objective's value there."""
+class Linearization:
+    """A residual map linearized at a point.
 
-    residual: np.ndarray
+    * ``residual``: r there; :attr:`value`: ``0.5 |r|^2``;
+    * :meth:`jvp` ``(p) -> J p`` and :meth:`vjp` ``(w) -> J^T w``, each counted in
+      ``products``; :meth:`operator`: both as a scipy ``LinearOperator``;
+    * ``size``: the variables' count; ``trajectory``: the run the products are made on
+      (with its records; None where there is none of one piece);
+    * ``start``: the first frame a change of the variables moves (0: the whole horizon; a
+      window's first frame);
+    * :meth:`release`: hand back what the run keeps for the products (its factorisations);
+      no product after it.
+    """
+
+    def __init__(self, residual, jvp: Callable, vjp: Callable, *, size: int,
+                 trajectory=None, start: int = 0, release: Callable | None = None):
+        self.residual = residual
+        self._jvp, self._vjp, self._release = jvp, vjp, release
+        self.size, self.trajectory, self.start = int(size), trajectory, int(start)
+        self.products = 0  # Jacobian products so far, forward and transposed
 
     @property
     def value(self) -> float:
         return float(0.5 * self.residual @ self.residual)
+
+    @property
+    def shape(self) -> tuple:
+        return (self.residual.size, self.size)
+
+    def jvp(self, p) -> np.ndarray:
+        """``J p``: the residual's change along the variables' change ``p`` (to first order)."""
+        self.products += 1
+        return self._jvp(p)
+
+    def vjp(self, w) -> np.ndarray:
+        """``J^T w``: the variables' cotangent of the residual cotangent ``w``."""
+        self.products += 1
+        return self._vjp(w)
+
+    def gradient(self) -> np.ndarray:
+        """``J^T r``, the gradient of ``0.5 |r|^2``."""
+        return self.vjp(self.residual)
+
+    def operator(self) -> LinearOperator:
+        return LinearOperator(self.shape, matvec=self.jvp, rmatvec=self.vjp, dtype=float)
+
+    def release(self) -> None:
+        if self._release is not None:
+            self._release()
 
 
 class TermResiduals:
@@ -59,111 +109,32 @@ class TermResiduals:
         return out
 
 
-class Linearization(ResidualMap):
-    """The residual map of ``problem`` at the controls ``u``: one simulation with records,
-    kept for the products until :meth:`release` (it holds the steps' factorisations).
+def linearize(problem, u) -> Linearization:
+    """The objective's residuals of ``problem`` at the controls ``u``: one simulation with
+    records, kept for the products until the linearization is released.  Exact for the
+    scheme simulated (the aligned mesh keyframe's Jacobian excepted: see ``MeshKeyframe``)."""
+    u = problem.controls.check(u)
+    trajectory = problem.simulate(u)
+    terms = TermResiduals(problem)
+    pieces = terms.pieces(trajectory, u)
+    ends = np.cumsum([p.size for p in pieces])
 
-    * ``residual``: r(u); ``value``: 0.5 |r|^2, the objective at u;
-    * :meth:`jvp` ``(du) -> J du`` and :meth:`vjp` ``(w) -> J^T w``, exact for the scheme
-      simulated (the aligned mesh keyframe's Jacobian excepted: see ``MeshKeyframe``);
-    * :meth:`operator`: both as a scipy ``LinearOperator`` (for LSMR, ``least_squares``).
-    """
-
-    def __init__(self, problem, u):
-        self.problem = problem
-        self.u = problem.controls.check(u)
-        self.trajectory = problem.simulate(self.u)
-        self.terms = TermResiduals(problem)
-        pieces = self.terms.pieces(self.trajectory, self.u)
-        self._ends = np.cumsum([p.size for p in pieces])
-        self.residual = np.concatenate(pieces) if pieces else np.zeros(0)
-        self.products = 0  # Jacobian products so far, forward and transposed
-
-    @property
-    def shape(self) -> tuple:
-        return (self.residual.size, self.u.size)
-
-    def jvp(self, du) -> np.ndarray:
-        """``J du``: the residuals' change along the controls' change ``du`` (to first order)."""
-        p = self.problem
+    def jvp(du):
         du = np.asarray(du, dtype=float).ravel()
-        offset, forces = p.controls.velocity_offset(du), p.controls.external(du)
-        traj = self.trajectory
-        dx, dv = tangent(p.integrator, p.model, traj, np.zeros_like(p.x0),
-                         np.zeros_like(p.v0) if offset is None else offset,
-                         np.zeros_like(p.external) if forces is None else forces)
-        self.products += 1
-        return np.concatenate(self.terms.jvp(traj, dx, dv, du))
+        offset, forces = problem.controls.velocity_offset(du), problem.controls.external(du)
+        dx, dv = tangent(problem.integrator, problem.model, trajectory,
+                         np.zeros_like(problem.x0),
+                         np.zeros_like(problem.v0) if offset is None else offset,
+                         np.zeros_like(problem.external) if forces is None else forces)
+        return np.concatenate(terms.jvp(trajectory, dx, dv, du))
 
-    def vjp(self, w) -> np.ndarray:
-        """``J^T w``: the controls' cotangent of the residual cotangent ``w``."""
-        p, traj = self.problem, self.trajectory
-        w = np.asarray(w, dtype=float).ravel()
-        parts = np.split(w, self._ends[:-1])
-        gx, gv = np.zeros_like(traj.x), np.zeros_like(traj.v)
-        self.terms.state_vjp(traj, parts, gx, gv)
-        g_external, g0 = backward(p.integrator, p.model, traj, gx, gv)
-        out = self.terms.control_vjp(parts, p.controls.pullback(g_external, g0.v))
-        self.products += 1
-        return out
+    def vjp(w):
+        parts = np.split(np.asarray(w, dtype=float).ravel(), ends[:-1])
+        gx, gv = np.zeros_like(trajectory.x), np.zeros_like(trajectory.v)
+        terms.state_vjp(trajectory, parts, gx, gv)
+        g_external, g0 = backward(problem.integrator, problem.model, trajectory, gx, gv)
+        return terms.control_vjp(parts, problem.controls.pullback(g_external, g0.v))
 
-    def gradient(self) -> np.ndarray:
-        """``J^T r``, the objective's gradient at u."""
-        return self.vjp(self.residual)
-
-    def operator(self) -> LinearOperator:
-        return LinearOperator(self.shape, matvec=self.jvp, rmatvec=self.vjp, dtype=float)
-
-    def release(self) -> None:
-        """Hand the run's kept factorisations back (no product after this)."""
-        self.problem.integrator.release(self.trajectory)
-
-
-class SearchSpace:
-    """Where a residual search moves: the evaluator's variables z (a smooth metric's, u =
-    S z, the controls themselves, or multiple shooting's controls and nodes), the bounds on
-    them, and the Jacobian products in z.  ``method`` names the search in a refusal."""
-
-    def __init__(self, problem, ev, method: str):
-        merit = getattr(getattr(ev, "ev", ev), "merit", None)
-        self.merit = merit if hasattr(merit, "linearize") else None
-        if self.merit is None and not hasattr(problem, "objective_terms"):
-            raise ValueError(f"method {method!r} searches residuals; {problem!r} has none")
-        self.problem, self.metric = problem, getattr(ev, "metric", None)
-        self.lb, self.ub = problem.bounds()
-        self.bounded = bool(np.isfinite(self.lb).any() or np.isfinite(self.ub).any())
-
-    def controls(self, z):
-        return z if self.metric is None else self.metric.smooth(z)
-
-    def linearize(self, z):
-        """The residual map at z: a :class:`Linearization` of the problem's controls, or
-        the merit's own (multiple shooting's)."""
-        if self.merit is not None:
-            return self.merit.linearize(z)
-        return Linearization(self.problem, self.controls(z))
-
-    def products(self, lin, free=1.0, between=lambda: None):
-        """``(z -> J_z p, w -> J_z^T w)`` at ``lin``, with only the ``free`` variables moving
-        and ``between()`` run before each product."""
-        smooth = (lambda v: v) if self.metric is None else self.metric.smooth
-
-        def jvp(d):
-            between()
-            return lin.jvp(smooth(free * d))
-
-        def vjp(s):
-            between()
-            return free * smooth(lin.vjp(s))
-
-        return jvp, vjp
-
-    def free(self, z, gradient):
-        """1 where a variable may move, 0 at a bound the gradient pushes against."""
-        if not self.bounded:
-            return 1.0
-        return np.where(((z <= self.lb) & (gradient > 0)) | ((z >= self.ub) & (gradient < 0)),
-                        0.0, 1.0)
-
-    def clipped(self, z, p):
-        return p if not self.bounded else np.clip(z + p, self.lb, self.ub) - z
+    return Linearization(np.concatenate(pieces) if pieces else np.zeros(0), jvp, vjp,
+                         size=u.size, trajectory=trajectory,
+                         release=lambda: problem.integrator.release(trajectory))

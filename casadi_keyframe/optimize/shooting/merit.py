@@ -10,7 +10,7 @@ import numpy as np
 
 from ...adjoints import Evaluation
 from ..goal import verdict
-from .residuals import ShootingLinearization
+from .residuals import linearize_shooting
 
 
 @dataclass(frozen=True)
@@ -45,9 +45,9 @@ class ShootingMerit:
                                   defects=tuple(info["defects"]))
 
     def linearize(self, z):
-        """Its residual form at z (:class:`~.residuals.ShootingLinearization`), for a
-        residual search."""
-        return ShootingLinearization(self, z)
+        """Its residual form at z (:func:`~.residuals.linearize_shooting`), for a residual
+        search."""
+        return linearize_shooting(self, z)
 
     def describe(self, z, f, info):
         """``(controls, objective, keyframe error, {"defect": ...})`` of an evaluated point:

@@ -8,7 +8,7 @@ import pytest
 from test_augmented_lagrangian import swing
 
 from casadi_keyframe import InitialVelocity, Smoothness, StateKeyframe, load_problem
-from casadi_keyframe.optimize import CONVERGED, solve
+from casadi_keyframe.optimize import CONVERGED, SolveSettings, solve
 from casadi_keyframe.optimize.finish import (Finish, KeyframeConstraint, check_finish,
                                              finish_options, land, lower_effort)
 from casadi_keyframe.simulate import tangent
@@ -115,7 +115,10 @@ def test_the_finish_refuses_what_it_cannot_hold_before_searching():
 ])
 def test_bad_finish_options_are_refused_by_name(finish, message):
     with pytest.raises(ValueError, match=message):
-        finish_options(finish)
+        SolveSettings(finish=finish)  # the request reads the text form, the finish checks it
+    if not isinstance(finish, str):
+        with pytest.raises(ValueError, match=message):
+            finish_options(finish)
 
 
 SWING_FILE = '''"""The swing of tests/test_augmented_lagrangian.py, its keyframe held to 1 mm."""
@@ -166,7 +169,9 @@ def test_finish_and_rounds_are_refused_together(capsys):
     from casadi_keyframe.cli import main
 
     assert main(["solve", "flock_path", "--rounds", "2", "--finish", "land"]) != 0
-    assert "--finish holds the keyframes after one search" in capsys.readouterr().err
+    assert "the finish holds the keyframes after one search" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="choose one"):  # the request itself, from Python too
+        SolveSettings(rounds=2, finish="land")
 
 
 def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):

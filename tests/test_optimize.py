@@ -4,7 +4,8 @@ import os
 import signal
 import threading
 import time
-from dataclasses import replace
+from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -12,6 +13,7 @@ import pytest
 from casadi_keyframe import Adjoint, SimulationError, load_problem, solve
 from casadi_keyframe.saved import Checkpoint, read_run
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
+from casadi_keyframe.optimize.methods import TypedOptions
 
 from helpers import InterruptAfter
 
@@ -158,28 +160,53 @@ def test_option_names_are_read_from_the_libraries():
     assert "sb" not in ipopt.option_names()  # undocumented: IPOPT itself is asked (above)
 
 
-def test_solve_dispatches_through_the_method_table(race, monkeypatch):
-    """A new method is one entry of METHODS: solve runs it with the evaluator, its
-    iterations land in the history, and its options are checked against its names."""
+@dataclass(frozen=True)
+class DescentOptions(TypedOptions):
+    """A method's own typed options, as the transcription's ``start=rest|blend|zero`` are."""
+
+    label: ClassVar[str] = "descent"
+    CHECKS: ClassVar[dict] = {"step": ("a number > 0", lambda v: v > 0)}
+    step: float = 1e-3
+
+
+def descend(problem, ev, u0, call):
+    """Gradient steps whose trial halfway is judged without a gradient (``ev.offer``: kept
+    if it is the best point), until ``call.deadline`` passes."""
+    u = u0
+    for _ in range(call.maxiter):
+        if call.deadline.passed():
+            return LIMIT, "time limit reached"
+        f, g = ev(u)
+        ev.offer(u - 0.5 * call.options.step * g)
+        u = u - call.options.step * g
+        call.on_iteration()
+    return LIMIT, f"{call.maxiter} steps taken"
+
+
+def test_solve_dispatches_through_the_method_table(race, monkeypatch, tmp_path, capsys):
+    """A new method is one entry of METHODS (the way the transcription comes in): solve runs
+    it with the evaluator, the one deadline and its own typed options, from the settings or
+    the command line's --option, checked against its names before anything is built; the
+    points it offers without a gradient are judged and kept like any other; its iterations
+    land in the history."""
+    from casadi_keyframe.cli import main
     from casadi_keyframe.optimize import METHODS, Method
 
-    def descend(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
-        u = u0
-        for _ in range(maxiter):
-            f, g = ev(u)
-            u = u - options.get("step", 1e-3) * g
-            ev(u)
-            on_iteration()
-        return LIMIT, f"{maxiter} steps taken"
-
-    names = lambda: ("step",)  # noqa: E731
-    monkeypatch.setitem(METHODS, "descent", Method(
-        "descent", descend, names, lambda o: [k for k in o if k not in names()]))
+    monkeypatch.setitem(METHODS, "descent", Method("descent", descend, DescentOptions))
     r = solve(race, "descent", maxiter=4, quiet=True, options={"step": 1e-4})
     assert r.method == "descent" and r.nit == 4 and r.status == LIMIT
     assert r.fun < race.objective(race.initial_controls())
+    assert (r.njev, r.nfev) == (4, 8)  # the start (memoised) and four offers, no gradient
+    assert r.fun == pytest.approx(race.objective(r.x), rel=1e-12)
     with pytest.raises(ValueError, match="did you mean 'step'"):
         solve(race, "descent", quiet=True, options={"stepp": 1e-4})
+    with pytest.raises(ValueError, match="descent option 'step' must be a number > 0"):
+        solve(race, "descent", quiet=True, options={"step": -1.0})
+    small = ["solve", "flock_race", "--set", "agents=8", "--set", "steps=40", "--quiet",
+             "--no-animation", "--no-viewer", "--method", "descent", "--out", str(tmp_path)]
+    assert main([*small, "--maxiter", "2", "--option", "step=1e-4"]) == 3
+    assert main([*small, "--option", "stepp=1e-4"]) == 2
+    assert "unknown option 'stepp' (did you mean 'step'?)" in capsys.readouterr().err
 
 
 def test_the_command_line_offers_the_method_table():
@@ -345,8 +372,10 @@ def test_advice_never_suggests_an_option_in_use(capsys):
     from casadi_keyframe.runs.report import hint
 
     failed = SimpleNamespace(status=FAILED, message="search failed: ...; still missed: x")
-    spec = SimpleNamespace(rounds={"rounds": 3}, shooting={"segments": 4}, method="ipopt",
-                           gradient="swapped", overrides={}, problem_arg="p", out="o")
+    from casadi_keyframe.optimize import SolveSettings
+
+    asked = SolveSettings(rounds=3, shooting=4, method="ipopt", gradient="swapped")
+    spec = SimpleNamespace(settings=asked, overrides={}, problem_arg="p", out="o")
     hint(failed, spec)
     assert capsys.readouterr().out == ""  # every remedy is in use, the gradient not in question
     failed.message += "; the gradient may be inaccurate"

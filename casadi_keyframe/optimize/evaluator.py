@@ -287,6 +287,10 @@ class MetricView:
         f, g = self.ev(self.metric.smooth(z))
         return f, self.metric.smooth(g)
 
+    def offer(self, z, *, records: bool = False):
+        """The evaluator's :meth:`~Evaluator.offer` at ``u = S z``."""
+        return self.ev.offer(self.metric.smooth(z), records=records)
+
     @property
     def best_u(self):
         return self.metric.unsmooth(self.ev.best_u)

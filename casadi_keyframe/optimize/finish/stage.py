@@ -38,14 +38,11 @@ class Finish:
 
 
 def finish_options(finish) -> Finish | None:
-    """``finish`` read (None; a kind, maybe with options: ``"effort,window=20,maxiter=3"``;
-    a dict of :class:`Finish`'s fields; a Finish) and checked, naming what is wrong
-    (ValueError)."""
+    """``finish`` (None; a dict of :class:`Finish`'s fields; a Finish) checked, naming what
+    is wrong (ValueError); its text form (``"effort,window=20,maxiter=3"``) is read by the
+    request (:func:`~..settings.read_kind`)."""
     if finish is None or isinstance(finish, Finish):
         opts = finish
-    elif isinstance(finish, str):
-        kind, *items = [item.strip() for item in finish.split(",")]
-        opts = finish_options({"kind": kind, **dict(_item(item) for item in items)})
     elif isinstance(finish, dict):
         unknown = sorted(set(finish) - {"kind", "window", "maxiter"})
         if unknown:
@@ -66,17 +63,6 @@ def finish_options(finish) -> Finish | None:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"finish: {name} must be a whole number >= 1, got {value!r}")
     return opts
-
-
-def _item(text: str) -> tuple:
-    name, sep, value = text.partition("=")
-    try:
-        if not sep:
-            raise ValueError
-        return name.strip(), int(value)
-    except ValueError:
-        raise ValueError(f"finish: expected KIND,window=N,maxiter=N, got the item "
-                         f"{text!r}") from None
 
 
 def check_finish(problem, opts: Finish) -> None:

@@ -9,7 +9,7 @@ The objective is ``0.5 |r(u)|^2``.  At each point the model
 the trust region (Steihaug).  A step the model does not predict is rejected and the region
 shrinks; the next trial is the same path cut shorter, one evaluation and no new products.
 
-``options`` (:data:`DEFAULTS`): ``inner_maxiter`` CG iterations per step, ``inner_tol`` its
+``options`` (:class:`GaussNewtonOptions`): ``inner_maxiter`` CG iterations per step, ``inner_tol`` its
 relative tolerance on the model's gradient, ``radius`` the first radius (None: the first
 step unbounded), ``accept`` the least ratio of actual to predicted decrease that takes a
 step, ``maxfun`` evaluations (default ``10 * maxiter``), ``gtol`` the gradient's largest
@@ -20,6 +20,9 @@ evaluator runs for its bookkeeping.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+from typing import ClassVar
+
 import numpy as np
 
 from ...interrupts import check
@@ -27,42 +30,34 @@ from ..outcome import CONVERGED, FAILED, LIMIT
 from ..residual.descents import SteihaugPath
 from ..residual.space import SearchSpace
 from ..residual.steps import TrustRadius
+from .base import TypedOptions, real, whole
 
-DEFAULTS = {"inner_maxiter": 50, "inner_tol": 0.1, "radius": None, "accept": 1e-4,
-            "maxfun": None, "gtol": 1e-10, "plane": True}
+@dataclass(frozen=True)
+class GaussNewtonOptions(TypedOptions):
+    """The Gauss-Newton trust region's options (the module docstring says each)."""
+
+    label: ClassVar[str] = "Gauss-Newton"
+    CHECKS: ClassVar[dict] = {
+        "inner_maxiter": ("a whole number >= 1", lambda v: whole(v) and v >= 1),
+        "inner_tol": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1),
+        "radius": ("a number > 0 or None", lambda v: v is None or (real(v) and v > 0)),
+        "accept": ("a number in [0, 0.25)", lambda v: real(v) and 0 <= v < 0.25),
+        "maxfun": ("a whole number >= 1 or None", lambda v: v is None or (whole(v)
+                                                                            and v >= 1)),
+        "gtol": ("a number >= 0", lambda v: real(v) and v >= 0),
+        "plane": ("True or False", lambda v: isinstance(v, bool))}
+
+    inner_maxiter: int = 50
+    inner_tol: float = 0.1
+    radius: float | None = None
+    accept: float = 1e-4
+    maxfun: int | None = None
+    gtol: float = 1e-10
+    plane: bool = True
 
 
 def option_names() -> tuple[str, ...]:
-    return tuple(DEFAULTS)
-
-
-_KINDS = {"inner_maxiter": ("a whole number >= 1", lambda v: _whole(v) and v >= 1),
-          "inner_tol": ("a number in (0, 1)", lambda v: _real(v) and 0 < v < 1),
-          "radius": ("a number > 0 or None", lambda v: v is None or (_real(v) and v > 0)),
-          "accept": ("a number in [0, 0.25)", lambda v: _real(v) and 0 <= v < 0.25),
-          "maxfun": ("a whole number >= 1 or None", lambda v: v is None or (_whole(v)
-                                                                             and v >= 1)),
-          "gtol": ("a number >= 0", lambda v: _real(v) and v >= 0),
-          "plane": ("True or False", lambda v: isinstance(v, bool))}
-
-
-def check_options(options: dict) -> list[str]:
-    """The names among ``options`` this method does not take; a ValueError for a value out
-    of its range, naming the option and what it takes."""
-    for key, value in options.items():
-        if key in _KINDS and not _KINDS[key][1](value):
-            raise ValueError(f"Gauss-Newton option {key!r} must be {_KINDS[key][0]}, got "
-                             f"{value!r}")
-    return [key for key in options if key not in DEFAULTS]
-
-
-def _real(v) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, bool) \
-        and bool(np.isfinite(v))
-
-
-def _whole(v) -> bool:
-    return isinstance(v, (int, np.integer)) and not isinstance(v, bool)
+    return GaussNewtonOptions.names()
 
 
 class _Ended(Exception):
@@ -73,12 +68,13 @@ class _Ended(Exception):
         self.status, self.message = status, message
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
-    """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point),
-    calling ``on_iteration()`` after each step taken; stop once the call's
-    :class:`~.deadline.Deadline` has passed.  Returns ``(status, message)`` (:mod:`.outcome`)."""
+def run(problem, ev, u0, call):
+    """Search from ``u0`` with the evaluator ``ev`` (its objective at each trial point), as
+    ``call`` (a :class:`~.base.SearchCall`) asks, ``on_iteration`` after each step taken.
+    Returns ``(status, message)`` (:mod:`..outcome`)."""
+    maxiter, tol, deadline = call.maxiter, call.tol, call.deadline
     space, counts = SearchSpace(problem, ev, "gauss-newton"), _Counts()
-    opts = {**DEFAULTS, **options}
+    opts = call.options.as_dict()
     opts["maxfun"] = opts["maxfun"] or 10 * maxiter
 
     def between():
@@ -90,7 +86,7 @@ def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
     try:
         for _ in range(maxiter):
             z, before, after, cut = _one_step(ev, space, z, radius, opts, between, counts)
-            on_iteration()
+            call.on_iteration()
             if before - after > tol * max(abs(before), abs(after), 1.0):
                 continue
             if cut is not None:  # small only because the region is: the model fails there

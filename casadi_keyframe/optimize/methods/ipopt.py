@@ -26,6 +26,7 @@ import numpy as np
 from ...interrupts import Interrupted, catching
 from ..goal import GoalReached
 from ..outcome import ipopt_outcome
+from .base import LibraryOptions
 
 
 def _made_with(ipopt_options: dict) -> tuple[str | None, str]:
@@ -78,6 +79,22 @@ def check_options(options: dict) -> list[str]:
         said = printed.strip() or error.strip().splitlines()[-1]
         raise ValueError(f"IPOPT refuses option {key!r} = {value!r}:\n{said}")
     return unknown
+
+
+class IpoptOptions(LibraryOptions):
+    """IPOPT's options, by its own names: IPOPT itself says which it knows
+    (:func:`check_options`); its documentation gives the names to suggest
+    (:func:`option_names`)."""
+
+    label = "IPOPT"
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return option_names()
+
+    @classmethod
+    def unknown(cls, options) -> list[str]:
+        return check_options(options)
 
 
 class _Function(ca.Callback):
@@ -194,13 +211,14 @@ def ipopt_options(maxiter, tol, options, deadline) -> dict:
     return ipopt
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+def run(problem, ev, u0, call):
     """Search from ``u0`` with the evaluator ``ev`` (f and gradient asked for separately,
-    memoised), calling ``on_iteration()`` after each iteration; ``deadline`` becomes IPOPT's
-    ``max_wall_time``.  Returns ``(status, message)`` (:mod:`.outcome`); an interrupt raises
+    memoised), as ``call`` (a :class:`~.base.SearchCall`) asks; the deadline becomes IPOPT's
+    ``max_wall_time``.  Returns ``(status, message)`` (:mod:`..outcome`); an interrupt raises
     :class:`~casadi_keyframe.interrupts.Interrupted`."""
-    status, message, _ = search(ev, u0, problem.bounds(), maxiter, tol, options,
-                                lambda x: on_iteration(), deadline)
+    status, message, _ = search(ev, u0, problem.bounds(), call.maxiter, call.tol,
+                                call.options.as_dict(), lambda x: call.on_iteration(),
+                                call.deadline)
     return status, message
 
 

@@ -15,6 +15,7 @@ import numpy as np
 from scipy.optimize import minimize, show_options
 
 from ..outcome import FAILED, LIMIT, lbfgsb_outcome
+from .base import LibraryOptions
 
 
 @functools.cache
@@ -32,17 +33,27 @@ def option_names() -> tuple[str, ...]:
     return names
 
 
+class LbfgsbOptions(LibraryOptions):
+    """L-BFGS-B's options, by scipy's names (:func:`option_names`)."""
+
+    label = "scipy's L-BFGS-B"
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return option_names()
+
+
 class _TimeUp(Exception):
     """Raised from L-BFGS-B's callback past the deadline (scipy lets it through)."""
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
-    """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), calling
-    ``on_iteration()`` after each iteration; stop once the call's
-    :class:`~.deadline.Deadline` has passed.  Returns ``(status, message)`` (:mod:`.outcome`)."""
-    opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": tol, "gtol": 1e-10,
+def run(problem, ev, u0, call):
+    """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), as ``call``
+    (a :class:`~.base.SearchCall`) asks.  Returns ``(status, message)`` (:mod:`..outcome`)."""
+    maxiter, on_iteration, deadline = call.maxiter, call.on_iteration, call.deadline
+    opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": call.tol, "gtol": 1e-10,
             "maxcor": 20}
-    opts.update(options)
+    opts.update(call.options.as_dict())
     lb, ub = problem.bounds()
     bounds = list(zip(lb, ub)) if np.isfinite(lb).any() or np.isfinite(ub).any() else None
 

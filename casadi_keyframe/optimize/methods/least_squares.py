@@ -21,12 +21,23 @@ from scipy.sparse.linalg import LinearOperator
 from ...interrupts import check
 from ..outcome import CONVERGED, FAILED, LIMIT
 from ..residual.space import SearchSpace
+from .base import LibraryOptions
 
 OPTIONS = ("max_nfev", "ftol", "xtol", "gtol", "x_scale", "lsmr_maxiter")
 
 
 def option_names() -> tuple[str, ...]:
     return OPTIONS
+
+
+class LeastSquaresOptions(LibraryOptions):
+    """``least_squares``' options (:data:`OPTIONS`: scipy's, and ``lsmr_maxiter``)."""
+
+    label = "scipy's least_squares"
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return option_names()
 
 
 class _Stop(Exception):
@@ -81,13 +92,14 @@ class _Residuals:
                 f"{self.products} Jacobian products]")
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+def run(problem, ev, u0, call):
     """Search from ``u0`` with scipy's ``least_squares`` (method "trf", LSMR), evaluating
-    each accepted point with ``ev`` and calling ``on_iteration()`` after it; stop once the
-    call's :class:`~.deadline.Deadline` has passed.  Returns ``(status, message)``."""
+    each accepted point with ``ev``, as ``call`` (a :class:`~.base.SearchCall`) asks.
+    Returns ``(status, message)``."""
+    maxiter, on_iteration, deadline = call.maxiter, call.on_iteration, call.deadline
     space = SearchSpace(problem, ev, "least-squares")
-    opts = {"max_nfev": 10 * maxiter, "ftol": tol, "xtol": 1e-10, "gtol": 1e-10,
-            "x_scale": 1.0, "lsmr_maxiter": 50, **options}
+    opts = {"max_nfev": 10 * maxiter, "ftol": call.tol, "xtol": 1e-10, "gtol": 1e-10,
+            "x_scale": 1.0, "lsmr_maxiter": 50, **call.options.as_dict()}
 
     def between():
         check()

@@ -117,9 +117,8 @@ def _rounds(problem, opts, search, ev, z):
         ev.reset()
         maxiter, before = max(budget // (opts.rounds - r), 1), len(search.history)
         try:
-            inner, said = run(shooting, ev, z, maxiter, search.tol, search.options,
-                              lambda r=r: ev.record(search.history, search.deadline, round=r),
-                              search.deadline)
+            inner, said = run(shooting, ev, z, search.call(
+                maxiter, lambda r=r: ev.record(search.history, search.clock, round=r)))
         except GoalReached:
             return CONVERGED, f"the goal is met in round {r}", r + 1
         budget -= len(search.history) - before
@@ -144,10 +143,10 @@ def _nlp(problem, opts, search, ev, z):
 
     def on_iteration(x):
         if ev.take(x):
-            ev.record(search.history, search.deadline, round=0)
+            ev.record(search.history, search.clock, round=0)
 
     try:
-        options = search.options if search.method == "ipopt" else {}
+        options = search.options.as_dict() if search.method == "ipopt" else {}
         status, message, z = run_nlp(ev.merit.shooting, ev.merit.runner, ev, z, search.maxiter,
                                      search.tol, options, on_iteration, search.deadline)
     except GoalReached as reached:

@@ -1,4 +1,6 @@
-"""Hard keyframes by an augmented Lagrangian around :func:`~.search.solve`.
+"""Hard keyframes by an augmented Lagrangian: the rounds, a stage of :func:`~.search.solve`
+(``rounds=``, :class:`Rounds`), each running the solve's other stages on the problem its
+keyframes aim in.
 
 A keyframe weight w turns ``q_N = q*`` into a penalty, and the optimum of ``control cost +
 0.5 w |q_N - q*|^2`` misses by about (control cost's pull) / w.  Raising w shrinks the miss
@@ -16,51 +18,79 @@ targets) get multipliers; other terms stay as they are.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from ..saved import as_checkpoint
-from .deadline import Deadline
 from .kept import Kept, conclude, evaluate_final, kept_outcome
-from .goal import check_stop, verdict
+from .goal import verdict
 from .multipliers import KeyframeMultipliers
 from .outcome import INTERRUPTED, LIMIT
 from .result import Result, assemble, stage_record
-from .search import solve
 
 
-def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
-                    multipliers: bool = True, u0=None, time_limit: float | None = None,
-                    resume: dict | None = None, **options) -> Result:
-    """Solve ``problem`` in ``rounds`` rounds of :func:`~.search.solve` (``options`` go to
-    each: method, gradient, maxiter per round, checkpoint, quiet, stop, ...), each from the
-    last round's controls, with the keyframes aiming past their targets by the multipliers'
-    shifts and their weights times ``weight_growth ** round``.
+@dataclass(frozen=True)
+class Rounds:
+    """Augmented-Lagrangian rounds: at most ``rounds`` of them, the keyframe weights times
+    ``weight_growth`` per round (1: the multipliers alone), ``multipliers`` (False: the
+    penalty schedule alone)."""
+
+    rounds: int = 4
+    weight_growth: float = 1.0
+    multipliers: bool = True
+
+
+def rounds_options(value) -> Rounds | None:
+    """``value`` (None, a number of rounds, a dict of :class:`Rounds`' fields, or one) as
+    checked rounds, or None for none; ValueError naming what is wrong."""
+    if value is None or isinstance(value, Rounds):
+        opts = value
+    elif isinstance(value, dict):
+        unknown = sorted(set(value) - set(Rounds.__dataclass_fields__))
+        if unknown:
+            raise ValueError(f"rounds: unknown option(s) {unknown}; they take "
+                             f"{', '.join(Rounds.__dataclass_fields__)}")
+        opts = Rounds(**value)
+    else:
+        opts = Rounds(value)
+    if opts is None:
+        return None
+    if isinstance(opts.rounds, bool) or not (isinstance(opts.rounds, (int, np.integer))
+                                             and opts.rounds >= 1):
+        raise ValueError(f"rounds must be a whole number >= 1, got {opts.rounds!r}")
+    growth = opts.weight_growth
+    if isinstance(growth, bool) or not (isinstance(growth, (int, float, np.number))
+                                        and np.isfinite(growth) and growth >= 1):
+        raise ValueError(f"weight_growth must be >= 1 (1: multipliers alone), got {growth}")
+    return opts
+
+
+def run_rounds(problem, rounds: Rounds, run, *, u0, resume, checkpoint, deadline,
+               stop: str) -> Result:
+    """The rounds of ``problem`` from ``u0`` (default: its start): ``run(aimed, u,
+    checkpoint)`` runs the solve's other stages on ``aimed`` (the problem with its keyframes
+    aiming past their targets by the multipliers' shifts, their weights times
+    ``weight_growth ** round``) from the last round's controls, judged by ``problem``.
 
     The result is ``problem``'s (objective, breakdown and trajectory with the true targets
-    and weights) at the last round's controls; ``stages`` has one entry per round with its
-    weight scale, iterations, evaluations, seconds, objective and the keyframes' misses;
-    ``nit``, ``nfev`` and ``history`` run over all rounds.  The ``status`` is the last
-    round's, judged by the true targets; the rounds end early when the goal is met, on
-    Ctrl-C (status 3) or at ``time_limit`` (seconds over all rounds, status 1).  The
-    checkpoint carries the round and the multipliers, and ``resume`` (a checkpoint's
-    metadata) starts from them, so a resumed run goes on where it stopped.
+    and weights) at the last round's controls, or at an earlier round's (or the start) that
+    was better by the goal; ``stages`` has one entry per round with its weight scale,
+    iterations, evaluations, seconds, objective and the keyframes' misses; ``nit``, ``nfev``
+    and ``history`` run over all rounds.  The ``status`` is the last round's, judged by the
+    true targets; the rounds end early when the goal is met (``stop="goal"``), on a signal
+    (status 3) or at the ``deadline`` (status 1).  The ``checkpoint`` carries the round and
+    the multipliers, and ``resume`` (a checkpoint's metadata) starts from them, so a resumed
+    run goes on where it stopped.
     """
-    if not (isinstance(rounds, (int, np.integer)) and rounds >= 1):
-        raise ValueError(f"rounds must be a whole number >= 1, got {rounds!r}")
-    if not (np.isfinite(weight_growth) and weight_growth >= 1):
-        raise ValueError(f"weight_growth must be >= 1 (1: multipliers alone), got {weight_growth}")
-    hard = KeyframeMultipliers(problem, weight_growth)
+    hard = KeyframeMultipliers(problem, rounds.weight_growth)
     first = hard.resume(resume)
     u = problem.initial_controls() if u0 is None else problem.controls.check(u0)
-    checkpoint = as_checkpoint(options.pop("checkpoint", None))
-    stop = check_stop(options.pop("stop", None), problem)
-    history, stages, deadline = [], [], Deadline.start(time_limit)
+    history, stages, last = [], [], max(rounds.rounds, first + 1)
     kept = Kept(problem, problem, hard.checkpoint(checkpoint, first), by_objective=False)
     kept.offer(u, "its start")
     res = None
-    for k in range(first, max(rounds, first + 1)):
-        res = solve(hard.problem(), u0=u, time_limit=deadline.left(), goal=problem, stop=stop,
-                    checkpoint=hard.checkpoint(checkpoint, k), **options)
+    for k in range(first, last):
+        res = run(hard.problem(), u, hard.checkpoint(checkpoint, k))
         u, traj = res.x, res.trajectory  # the dynamics do not depend on the keyframes' aim
         history += [{**h, "round": k, "iteration": len(history) + i + 1}
                     for i, h in enumerate(res.history)]
@@ -69,11 +99,11 @@ def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
         if (res.status == INTERRUPTED or deadline.passed()
                 or (stop == "goal" and verdict(problem, traj).met)):
             break
-        hard.update(traj, multipliers)
+        hard.update(traj, rounds.multipliers)
     status, message = res.status, f"{len(stages)} augmented-Lagrangian rounds; last: {res.message}"
-    if stages[-1]["stage"] < rounds - 1 and res.status != INTERRUPTED and deadline.passed():
-        status, message = LIMIT, (f"time limit reached ({time_limit:g} s) after round "
-                                  f"{stages[-1]['stage']} of 0..{rounds - 1}; last: "
+    if stages[-1]["stage"] < last - 1 and res.status != INTERRUPTED and deadline.passed():
+        status, message = LIMIT, (f"time limit reached ({deadline.limit:g} s) after round "
+                                  f"{stages[-1]['stage']} of 0..{last - 1}; last: "
                                   f"{res.message}")
     if kept.u is not u:  # an earlier round, or the start, was better than the last
         status, message = kept_outcome(kept, status, message)

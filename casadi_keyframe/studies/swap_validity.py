@@ -195,12 +195,12 @@ def optimizer_outcome(prob, maxiter: int) -> dict:
     from ..optimize import solve
 
     out = {"start_objective": prob.objective(prob.initial_controls())}
-    for route in ("adjoint", "swapped"):
+    for route in (Adjoint.name, Swapped.name):
         out[f"failed_{route}"] = ""
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", GradientRouteWarning)
-                result = solve(prob, "lbfgsb", gradient=route, maxiter=maxiter, quiet=True)
+                result = solve(prob, gradient=route, maxiter=maxiter, quiet=True)
             out[f"objective_{route}"] = result.fun
             out[f"refused_{route}"] = result.stages[0].get("gradient_refused", 0)
         except SimulationError as err:  # its gradient refused at the start (GradientError)

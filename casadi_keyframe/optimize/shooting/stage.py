@@ -139,6 +139,7 @@ def _rounds(problem, opts, search, ev, z):
 def _nlp(problem, opts, search, ev, z):
     """IPOPT on the constrained form: ``(status, message, 1)``; each iterate, and its last
     point, becomes the evaluator's best."""
+    from ..methods.ipopt import IpoptOptions
     from .ipopt_form import run_nlp
 
     def on_iteration(x):
@@ -146,7 +147,7 @@ def _nlp(problem, opts, search, ev, z):
             ev.record(search.history, search.clock, round=0)
 
     try:
-        options = search.options.as_dict() if search.method == "ipopt" else {}
+        options = search.options.as_dict() if isinstance(search.options, IpoptOptions) else {}
         status, message, z = run_nlp(ev.merit.shooting, ev.merit.runner, ev, z, search.maxiter,
                                      search.tol, options, on_iteration, search.deadline)
     except GoalReached as reached:

@@ -3,7 +3,8 @@
 The request and the solve:
 
 * :mod:`.settings`: :class:`SolveSettings`, one typed solve request (every default and
-  every string form of a setting written once);
+  every string form of a setting written once), and :mod:`.options`: the typed options its
+  parts take (a method's own, multiple shooting's, the finish's, the rounds'), read once;
 * :mod:`.search`: :func:`solve`, one optimisation through its stages, its rounds and its
   finish;
 * :mod:`.stages`: the problems a solve goes through, coarse to fine, and :mod:`.transfer`:

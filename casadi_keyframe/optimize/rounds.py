@@ -25,12 +25,13 @@ import numpy as np
 from .kept import Kept, conclude, evaluate_final, kept_outcome
 from .goal import verdict
 from .multipliers import KeyframeMultipliers
+from .options import TypedOptions
 from .outcome import INTERRUPTED, LIMIT
 from .result import Result, assemble, stage_record
 
 
 @dataclass(frozen=True)
-class Rounds:
+class Rounds(TypedOptions):
     """Augmented-Lagrangian rounds: at most ``rounds`` of them, the keyframe weights times
     ``weight_growth`` per round (1: the multipliers alone), ``multipliers`` (False: the
     penalty schedule alone)."""
@@ -43,16 +44,9 @@ class Rounds:
 def rounds_options(value) -> Rounds | None:
     """``value`` (None, a number of rounds, a dict of :class:`Rounds`' fields, or one) as
     checked rounds, or None for none; ValueError naming what is wrong."""
-    if value is None or isinstance(value, Rounds):
-        opts = value
-    elif isinstance(value, dict):
-        unknown = sorted(set(value) - set(Rounds.__dataclass_fields__))
-        if unknown:
-            raise ValueError(f"rounds: unknown option(s) {unknown}; they take "
-                             f"{', '.join(Rounds.__dataclass_fields__)}")
-        opts = Rounds(**value)
-    else:
-        opts = Rounds(value)
+    opts = Rounds.read(value, "rounds", single=(int, np.integer),
+                       takes="a number of rounds, a dict of rounds, weight_growth and "
+                             "multipliers, or None")
     if opts is None:
         return None
     if isinstance(opts.rounds, bool) or not (isinstance(opts.rounds, (int, np.integer))

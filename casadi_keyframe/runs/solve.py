@@ -122,7 +122,7 @@ def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
     """The search ``spec`` asks for from ``u0``, its settings passed whole; a resumed one
     goes on from its checkpoint's metadata (the problem's own mesh, the rounds' round and
     multipliers)."""
-    from ..optimize import solve
+    from ..optimize.search import solve
 
     return solve(spec.problem, spec.settings, u0=u0, quiet=spec.quiet, checkpoint=checkpoint,
                  resume=resumed.get("meta") if resumed else None)

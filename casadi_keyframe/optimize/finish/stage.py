@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from ...controls import StepForces
 from ...interrupts import handled
 from ..deadline import Deadline
+from ..options import TypedOptions
 from ..goal import verdict
 from ..kept import conclude, kept_outcome
 from ..outcome import CONVERGED, INTERRUPTED, LIMIT, judge
@@ -28,7 +29,7 @@ KINDS = ("land", "effort")
 
 
 @dataclass(frozen=True)
-class Finish:
+class Finish(TypedOptions):
     """``kind`` ("land" or "effort"), on the controls of the last ``window`` steps before
     the last keyframe, at most ``maxiter`` kept steps each for the landing and the effort."""
 
@@ -41,17 +42,8 @@ def finish_options(finish) -> Finish | None:
     """``finish`` (None; a dict of :class:`Finish`'s fields; a Finish) checked, naming what
     is wrong (ValueError); its text form (``"effort,window=20,maxiter=3"``) is read by the
     request (:func:`~..settings.read_kind`)."""
-    if finish is None or isinstance(finish, Finish):
-        opts = finish
-    elif isinstance(finish, dict):
-        unknown = sorted(set(finish) - {"kind", "window", "maxiter"})
-        if unknown:
-            raise ValueError(f"finish: unknown option(s) {unknown}; it takes kind, window "
-                             "and maxiter")
-        opts = Finish(**finish)
-    else:
-        raise ValueError(f"finish must be one of {KINDS}, a dict of kind, window and "
-                         f"maxiter, or None; got {finish!r}")
+    opts = Finish.read(finish, "finish",
+                       takes=f"one of {KINDS}, a dict of kind, window and maxiter, or None")
     if opts is None:
         return None
     if opts.kind not in KINDS:

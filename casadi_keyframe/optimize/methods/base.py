@@ -1,15 +1,17 @@
 """What a search method is, written once: :class:`Method` (the contract every
 :data:`~.METHODS` entry keeps), :class:`SearchCall` (what one run of it is given), and the
 two kinds of typed options a method takes: :class:`LibraryOptions` (a library's own names,
-passed through) and :class:`TypedOptions` (a method's own fields, with their defaults and
-checks)."""
+passed through) and :class:`~..options.TypedOptions` (a method's own fields, with
+their defaults and checks)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 from typing import ClassVar
 
-import numpy as np
+from ..options import TypedOptions
+
+__all__ = ["LibraryOptions", "Method", "SearchCall", "TypedOptions"]
 
 
 @dataclass(frozen=True)
@@ -96,45 +98,3 @@ class LibraryOptions:
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}({self.as_dict()!r})"
-
-
-@dataclass(frozen=True)
-class TypedOptions:
-    """A method's own options as a frozen dataclass: its fields are the names, with their
-    defaults; ``CHECKS`` maps a name to ``(what it takes, test)``; ``label`` names the
-    method in messages."""
-
-    label: ClassVar[str] = "the method"
-    CHECKS: ClassVar[dict] = {}
-
-    @classmethod
-    def names(cls) -> tuple[str, ...]:
-        return tuple(f.name for f in fields(cls))
-
-    @classmethod
-    def unknown(cls, options: Mapping) -> list[str]:
-        """The names among ``options`` it does not take; a ValueError for a value out of
-        its range, naming the option and what it takes."""
-        for key, value in options.items():
-            if key in cls.CHECKS and not cls.CHECKS[key][1](value):
-                raise ValueError(f"{cls.label} option {key!r} must be {cls.CHECKS[key][0]}, "
-                                 f"got {value!r}")
-        return [key for key in options if key not in cls.names()]
-
-    @classmethod
-    def make(cls, options: Mapping) -> "TypedOptions":
-        return cls(**options)
-
-    def as_dict(self) -> dict:
-        return {name: getattr(self, name) for name in self.names()}
-
-
-def real(value) -> bool:
-    """A finite real number (not a bool)."""
-    return (isinstance(value, (int, float, np.integer, np.floating))
-            and not isinstance(value, bool) and bool(np.isfinite(value)))
-
-
-def whole(value) -> bool:
-    """A whole number (not a bool)."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)

@@ -30,7 +30,7 @@ from ..outcome import CONVERGED, FAILED, LIMIT
 from ..residual.descents import SteihaugPath
 from ..residual.space import SearchSpace
 from ..residual.steps import TrustRadius
-from .base import TypedOptions, real, whole
+from ..options import TypedOptions, real, whole
 
 @dataclass(frozen=True)
 class GaussNewtonOptions(TypedOptions):

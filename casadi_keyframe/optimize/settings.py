@@ -93,10 +93,13 @@ class SolveSettings:
         plain = SolveSettings()
         said = [f"method {self.method}", f"maxiter {self.maxiter}",
                 f"gradient {self.gradient.name}"]
+        given = given_options(self.options)
+        if given:
+            said.append("options " + ",".join(f"{k}={v}" for k, v in given.items()))
         for field in fields(self):
             value = getattr(self, field.name)
-            if field.name not in ("method", "maxiter", "gradient") and value != getattr(
-                    plain, field.name) and not (field.name == "options" and not _given(value)):
+            if field.name not in ("method", "options", "maxiter", "gradient") and (
+                    value != getattr(plain, field.name)):
                 said.append(f"{field.name} {_said(value)}")
         return ", ".join(said)
 
@@ -233,17 +236,21 @@ def _positive(value) -> bool:
             and math.isfinite(value) and value > 0)
 
 
-def _given(options) -> bool:
-    """Whether a method's typed options differ from its defaults."""
-    return options != type(options).make({})
+def given_options(options) -> dict:
+    """The items of a method's typed options that are not its defaults."""
+    plain = type(options).make({}).as_dict()
+    return {k: v for k, v in options.as_dict().items() if k not in plain or plain[k] != v}
 
 
 def _said(value) -> str:
-    """A setting as ``describe`` says it: a typed one by the fields it sets."""
+    """A setting as ``describe`` says it: a typed one by its first field and the others it
+    sets."""
     if hasattr(value, "__dataclass_fields__"):
-        fields_set = {f.name: getattr(value, f.name) for f in fields(value)
-                      if getattr(value, f.name) != f.default}
-        return ",".join(f"{k}={v}" for k, v in fields_set.items()) or "defaults"
+        first, *rest = fields(value)
+        said = [str(getattr(value, first.name))] + [
+            f"{f.name}={getattr(value, f.name)}" for f in rest
+            if getattr(value, f.name) != f.default]
+        return ",".join(said)
     if hasattr(value, "as_dict"):
         return ",".join(f"{k}={v}" for k, v in value.as_dict().items())
     return str(list(value) if isinstance(value, tuple) else value)

@@ -9,6 +9,7 @@ from pathlib import Path
 from ..adjoints import DEFAULT
 from ..optimize.outcome import FAILED, LIMIT
 from ..optimize.report import format_effort, format_misses, format_physical, format_stage
+from ..optimize.settings import given_options
 from ..saved import CHECKPOINT, RESULT
 
 def format_value(value) -> str:
@@ -71,7 +72,9 @@ def command_line(spec, command: str) -> str:
     for ``solve``, its method and gradient route, so a resumed run goes on the same way)."""
     sets = "".join(f" --set {k}={set_value(v)}" for k, v in spec.overrides.items())
     if command == "solve":
-        sets += f" --method {spec.settings.method} --gradient {spec.settings.gradient.name}"
+        asked = spec.settings
+        sets += f" --method {asked.method} --gradient {asked.gradient.name}" + "".join(
+            f" --option {k}={set_value(v)}" for k, v in given_options(asked.options).items())
     return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
 
 

@@ -56,10 +56,6 @@ class GaussNewtonOptions(TypedOptions):
     plane: bool = True
 
 
-def option_names() -> tuple[str, ...]:
-    return GaussNewtonOptions.names()
-
-
 class _Ended(Exception):
     """The search ends here: ``status`` and ``message`` (:mod:`.outcome`)."""
 

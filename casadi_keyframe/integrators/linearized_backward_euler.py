@@ -26,7 +26,8 @@ from ..models.base import BlockJacobians, ForceJacobians, StepHold
 from ..models.blocks import GrowingPattern, SparseJacobian
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
-from .held_solve import adjoint_multiplier, held_q, held_rhs, projected_matrix
+from .held_solve import (adjoint_multiplier, held_q, held_rhs, projected_matrix,
+                         sliding_step)
 
 MAX_REVISIONS = 20  # a step solved again at most this often when its end shows it chose wrong
 # (a sheet landing at an angle lets go of a row of arriving particles per revision)
@@ -160,6 +161,7 @@ class LinearizedBackwardEuler(Integrator):
         product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
         solved = product
         if held is not None:
+            product = sliding_step(product, held)
             data, solved = projected_matrix(pattern.pattern, data, product, held, model.masses)
         block = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
                               shape=(pattern.pattern.size,) * 2)
@@ -314,7 +316,7 @@ class LinearizedBackwardEuler(Integrator):
             product = None
             if record.held is not None:  # the held solve needs A y
                 A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
-                product = lambda y: A.matvec(y).ravel()  # noqa: E731
+                product = sliding_step(lambda y: A.matvec(y).ravel(), record.held)
             return record.factor, StepSystem(None, product, K)
         system = self.step_system(model, start.x, start.v, t, dt, work,
                                   interactions=record.decisions, held=record.held)
@@ -353,6 +355,8 @@ class LinearizedBackwardEuler(Integrator):
             work.planned = found
         A, K = step_matrices(model, x, v, dt, t, interactions=found)
         pushed = None if held is None else held.pushed(model.n)  # friction: no control's
+        if pushed is not None:
+            pushed = pushed - held.sliding_product(dv)
         return ((A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape)
                 - model.forces(x, v, t, found) - (0 if pushed is None else pushed / dt))
 
@@ -423,7 +427,8 @@ def _held_system(n, V, held, A, b, prescribed, mass, free):
     blocks = [ca.mtimes(normals[:, k], normals[:, k].T) for k in range(n)]
     along = normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1)
     if friction:  # P = s I + (a - s) n n^T, z = a n (c - n . v) + s T (v_body - v)
-        velocity, normal, stick, pushed = friction
+        velocity, normal, stick, pushed, matrices = friction
+        A = A + ca.diagcat(*[ca.reshape(matrices[:, k], 3, 3).T for k in range(n)])
         blocks = [stick[k] * ca.SX.eye(3) + (normal[k] - stick[k]) * blocks[k]
                   for k in range(n)]
         slip = velocity - V

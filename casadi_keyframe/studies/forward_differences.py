@@ -25,7 +25,7 @@ TOLERANCE = 1e-5  # relative agreement of the quotients within the stable window
 
 @dataclass(frozen=True)
 class StableDifference:
-    """A central difference of the forward pass along a unit direction: ``quotients`` per
+    """A central difference of the forward pass along a direction: ``quotients`` per
     ``steps`` (NaN where a simulation failed), ``window`` the (largest, smallest) step of
     the widest run of agreeing quotients (None: no two agree), ``value`` the run's median
     quotient (NaN: none), ``spread`` its quotients' largest relative difference and
@@ -60,9 +60,9 @@ def _quotient(objective, h: float) -> float:
 
 def stable_difference(problem, u, d, *, steps=LADDER, decades: int = DECADES,
                       tolerance: float = TOLERANCE) -> StableDifference:
-    """The :class:`StableDifference` of ``problem``'s objective at controls ``u`` along the
-    unit direction ``d`` (module docstring)."""
-    d = np.asarray(d, float) / np.linalg.norm(d)
+    """The :class:`StableDifference` of ``problem``'s objective at controls ``u`` along
+    ``d`` (module docstring; the steps are in units of ``d``, so a unit ``d`` is best)."""
+    d = np.asarray(d, float)
     q = np.array([_quotient(lambda s: problem.objective(u + s * d), h) for h in steps])
     best = None
     for first in range(len(q)):

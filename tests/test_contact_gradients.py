@@ -62,3 +62,20 @@ def test_the_whole_grid_of_laws_routes_and_coefficients():
                         assert fd.error(g @ d) <= 1e-6, (law, motion, mu, route)
                     assert fd.error(prob.directional_derivative(u, d)) <= 1e-6
     assert stable >= 40  # of 42 scenes (two have a decision within the larger steps)
+
+
+def test_gradient_health_says_which_route_is_not_the_forward_pass_s_derivative():
+    """With friction the exact routes are healthy and claim no limit; the paper's swapped
+    adjoint, which leaves the sliding impulses' derivatives out, says so in its facts and
+    in ``gradcheck``'s report."""
+    from casadi_keyframe.adjoints import get_gradient
+    from casadi_keyframe.studies.health_report import format_health, gradient_health
+    prob, u = contact_gradient_problem("guarded", 0.6, "sliding")
+    exact = gradient_health(prob, u, "adjoint", radius=False)
+    assert exact.verdict == "healthy" and not exact.limits
+    assert not get_gradient("casadi").limits(prob.model)
+    swapped = gradient_health(prob, u, "swapped", radius=False)
+    assert any("not the forward pass's derivative" in line for line in swapped.limits)
+    assert "friction it is not the forward pass's derivative" in format_health(swapped)
+    frictionless, _ = contact_gradient_problem("guarded", 0.0, "sliding")
+    assert not get_gradient("swapped").limits(frictionless.model)

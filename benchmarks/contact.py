@@ -50,10 +50,11 @@ from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForce
 from casadi_keyframe.integrators import LinearizedBackwardEuler  # noqa: E402
 from casadi_keyframe.linear import SparseCholesky, System  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
-from casadi_keyframe.models import COLLISIONS, ClothModel, Sphere  # noqa: E402
+from casadi_keyframe.models import COLLISIONS, ClothModel, MeshBody, Sphere  # noqa: E402
 from casadi_keyframe.scenes.body_meshes import write_body  # noqa: E402
 from casadi_keyframe.scenes.drops import (MESH_RADIUS, RISE, drop, drop_model,  # noqa: E402
-                                          drop_start, ground_throw, mesh_drop, slope_slide)
+                                          drop_start, ground_throw, icosphere_file, mesh_drop,
+                                          slope_slide)
 from casadi_keyframe.state import SimulationError  # noqa: E402
 
 NOISE = 10.0  # m/s^2 rms: the perturbed point of the arch (any search iterate)
@@ -229,6 +230,20 @@ def sphere_drop(body: bool):
     free = None if body else ClothModel.grid(50, 50, width=1.0, height=1.0, plane="xy",
                                              mass=0.3)
     prob = drop_problem(50, "sphere", 8.0, 0, "guarded", 1 / 60, 0.5, model=free)
+    return prob, prob.initial_controls()
+
+
+def mesh_cost_problem(mesh: bool):
+    """``(problem, controls)``: the 25 x 25 sheet at 8 m/s onto the icosphere OBJ (radius
+    0.3 m, 2,562 vertices, still), or onto the analytic sphere it approximates (guarded)."""
+    centre = np.array([0.5, 0.5, -MESH_RADIUS])
+    body = Sphere(centre, MESH_RADIUS)
+    if mesh:
+        with tempfile.TemporaryDirectory() as folder:
+            read = MeshBody.from_file(icosphere_file(folder))
+        body = MeshBody(read.vertices + centre, read.faces, source=read.source)
+    prob = drop_problem(25, None, 8.0, 0, "guarded", 1 / 60, 0.5,
+                        model=drop_model(25, body, "guarded"))
     return prob, prob.initial_controls()
 
 

@@ -100,9 +100,11 @@ class HeldBody:
         """The body's geometry at t and at t + dt, as the symbolic step takes it."""
         return np.concatenate([self.body.parameters(t), self.body.parameters(t + dt)])
 
-    def rows(self, x, t, dt) -> np.ndarray:
-        """Each point's geometry at t and t + dt as one row ``(n, g)``."""
-        return np.hstack([*self.body.local_geometry(x, t), *self.body.local_geometry(x, t + dt)])
+    def rows(self, x, t, dt, reach=None) -> np.ndarray:
+        """Each point's geometry at t and t + dt as one row ``(n, g)`` (exact within
+        ``reach``, :meth:`~.colliders.Body.local_geometry`)."""
+        return np.hstack([*self.body.local_geometry(x, t, reach),
+                          *self.body.local_geometry(x, t + dt, reach)])
 
     def columns(self, rows, dt, flags=None):
         """The kernels' columns after x and v for the particles of geometry ``rows``: the
@@ -118,7 +120,7 @@ class HeldBody:
     def candidates(self, x, v, t, dt):
         """``(phi_0 (n,), normals (n, 3), targets (n,), velocities (n, 3) or None, rows)`` of
         every particle, step from t."""
-        rows = self.rows(x, t, dt)
+        rows = self.rows(x, t, dt, self.body.reach(v, t, dt))
         out = self.mapped["hold"](x, v, *self.columns(rows, dt))
         velocity = out[3] if self.law is not None else None
         return out[0].ravel(), out[1], out[2].ravel(), velocity, rows

@@ -48,13 +48,18 @@ def projected_matrix(pattern, values, product, held, masses):
         extra = np.zeros((n, 3, 3))
         extra[held.particles] = held.blocks
     data = pattern.projected(values, projector, touched, masses, extra)
+    return data, projected_product(product, held, masses)
+
+
+def projected_product(product, held, masses):
+    """``y -> A_hat y`` (flat) of ``A_hat = S A S + M P``, from A's ``product``."""
     mass = np.repeat(masses, 3)
 
     def hat(y):
         s = held.unheld_part(y).ravel()
         return held.unheld_part(product(s)).ravel() + mass * held.held_part(y).ravel()
 
-    return data, hat
+    return hat
 
 
 def held_rhs(held, b, product, z_prescribed, v, free):

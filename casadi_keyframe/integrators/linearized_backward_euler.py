@@ -27,7 +27,8 @@ from ..models.blocks import GrowingPattern, SparseJacobian
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
 from .held_solve import (adjoint_multiplier, held_q, held_rhs, projected_matrix,
-                         sliding_step)
+                         projected_product, sliding_step)
+from .released import RANK, ReleasedFactor, released_directions
 
 MAX_REVISIONS = 20  # a step solved again at most this often when its end shows it chose wrong
 # (a sheet landing at an angle lets go of a row of arriving particles per revision)
@@ -61,12 +62,14 @@ class LinearizedStep:
 class StepSystem:
     """A step's matrix as the linear solver sees it (``matrix``: A, or with a held set the
     projected ``S A S + M P``), the product ``product(y) = A y`` of the step matrix itself
-    (flat), and its stiffness ``K`` and, when asked, ``df_dx``, each with a ``matvec``."""
+    (flat), and its stiffness ``K`` and, when asked, ``df_dx``, each with a ``matvec``;
+    ``plain``: with a held set, A's free block unprojected (CSC)."""
 
     matrix: System
     product: object
     K: object
     df_dx: object = None
+    plain: object = None
 
 
 class StepWorkspace(Workspace):
@@ -159,13 +162,17 @@ class LinearizedBackwardEuler(Integrator):
         pattern = work.pattern
         data = pattern.values(A)
         product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
-        solved = product
+        solved, plain = product, None
+        shape = (pattern.pattern.size,) * 2
         if held is not None:
             product = sliding_step(product, held)
+            plain = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
+                                  shape=shape)
             data, solved = projected_matrix(pattern.pattern, data, product, held, model.masses)
         block = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
-                              shape=(pattern.pattern.size,) * 2)
-        return StepSystem(System(block, solved, solved, pattern.pattern), product, K, *df_dx)
+                              shape=shape)
+        return StepSystem(System(block, solved, solved, pattern.pattern), product, K,
+                          *(df_dx or [None]), plain=plain)
 
     @staticmethod
     def _held(model, decisions):
@@ -189,11 +196,15 @@ class LinearizedBackwardEuler(Integrator):
             found = model.step_decisions(x, v, t, dt, work.carried)
         f = (model.forces(x, v, t, found) + external).ravel()
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
+        base = None  # (factor, decisions): what a revision that only releases borders
         for revision in range(MAX_REVISIONS + 1):
             held = self._held(model, found)
-            system = self.step_system(model, x, v, t, dt, work, interactions=found, held=held)
-            b = dt * (f + dt * system.K.matvec(v).ravel())
-            factor, keep = self._step_factor_kept(work, system, n)
+            if base is None:
+                system = self.step_system(model, x, v, t, dt, work, interactions=found,
+                                          held=held)
+                b = dt * (f + dt * system.K.matvec(v).ravel())
+                factor, keep = self._step_factor_kept(work, system, n)
+                base = (factor, found)
             try:
                 if held is None:
                     dv, info = factor.solve(b, z, x0=work.warm)
@@ -213,14 +224,34 @@ class LinearizedBackwardEuler(Integrator):
             if revision == MAX_REVISIONS:
                 break
             found = revised  # the step chose wrong: solve it again with the revision
-            if keep:
-                factor.release()
+            bordered = self._bordered(model, work, system, base, found)
+            if bordered is None:  # a new matrix: factorise it
+                if keep:
+                    base[0].release()
+                base = None
+            factor = bordered
         work.kept_bytes += factor.nbytes if keep else 0
         work.carried = model.carried_decisions(found)
         v1 = v + dv.reshape(v.shape)
         model.check_state(x1, v1, n + 1)
         return State(x1, v1), LinearizedStep(found, info, factor if keep else None,
                                              self._held(model, found), revision + 1)
+
+    def _bordered(self, model, work, system, base, found):
+        """The prepared matrix of a revision that only lets particles go (nothing else in
+        ``found`` differs from the ``base`` factor's decisions), bordered on the released
+        directions (:mod:`.released`); None if more changed, or too much to pay."""
+        factor, decided = base
+        old, new = self._held(model, decided), self._held(model, found)
+        if (not work.plan.worth_keeping or system.plain is None or old is None
+                or any(a is not b for a, b in zip(decided, found)
+                       if a is not old and b is not new)):
+            return None
+        Q = released_directions(old, new, model.n)
+        if Q is None or not 0 < Q.shape[1] <= RANK:
+            return None
+        return ReleasedFactor(factor, old, Q, system.plain, work.plan.free,
+                              projected_product(system.product, new, model.masses))
 
     def _step_factor_kept(self, work, system, n):
         """The step matrix's factorisation and whether the pass keeps it for the derivative

@@ -50,3 +50,21 @@ def test_the_released_directions_are_the_dropped_members_held_ones():
                                atol=1e-15)
     moved = HeldSet(np.array([0, 3]), np.zeros(2, int), normals[[1, 2]], np.zeros(2))
     assert released_directions(old, moved, n) is None  # a kept member's normal changed
+
+
+def test_a_release_on_a_kept_cholmod_factor_gives_the_exact_gradient():
+    """The default solver keeps each step's CHOLMOD factor for the backward pass; a release
+    bordered on it is kept the same way, and the derivative passes solve with it."""
+    from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces
+    from casadi_keyframe.integrators import LinearizedBackwardEuler
+    from casadi_keyframe.linear import cholmod_available
+    if not cholmod_available():
+        pytest.skip("CHOLMOD (cvxopt) is not installed")
+    peel, lift = peel_problem()
+    prob = ControlProblem(model=peel.model, integrator=LinearizedBackwardEuler("cholmod"),
+                          x0=peel.x0, v0=peel.v0, steps=peel.steps, dt=peel.dt,
+                          controls=StepForces(), objective=StateKeyframe(
+                              peel.steps, x=peel.x0 + [0, 0, 0.02]) + Smoothness(1e-4))
+    u = lift + 0.01 * np.random.default_rng(0).standard_normal(prob.size)
+    assert released(prob.simulate(u))
+    assert_exact_routes(prob, u)

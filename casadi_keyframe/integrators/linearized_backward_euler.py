@@ -84,6 +84,7 @@ class StepWorkspace(Workspace):
         self.kept_bytes = 0
         self.carried = None  # what the last step carried
         self.planned = None  # what the next step decides, when an inverse step chose it
+        self.family_blocks = {}  # each family's last blocks, for a revision of another's
 
 
 class LinearizedBackwardEuler(Integrator):
@@ -157,7 +158,8 @@ class LinearizedBackwardEuler(Integrator):
         if work.pattern is None:
             A, *jacobians = step_matrices(model, x, v, dt, t, with_df_dx, interactions)
             return StepSystem(work.plan.system(A), A.dot, *map(SparseJacobian, jacobians))
-        K, D, *df_dx = model.jacobian_blocks(x, v, t, with_df_dx, interactions)
+        K, D, *df_dx = model.jacobian_blocks(x, v, t, with_df_dx, interactions,
+                                             reuse=work.family_blocks)
         A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
         pattern = work.pattern
         data = pattern.values(A)

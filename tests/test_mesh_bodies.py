@@ -171,7 +171,7 @@ def test_mesh_keyframes_takes_bodies_and_refuses_bad_ones_by_name(tmp_path):
     assert any(isinstance(b, MeshBody) for b in prob.model.colliders)
     assert prob.simulate(prob.initial_controls()).x.shape[0] == prob.steps + 1
     (tmp_path / "empty.obj").write_bytes(b"")
-    for bad, why in ((tmp_path / "none.obj", "no such file"), (tmp_path / "empty.obj", "no mesh"),
+    for bad, why in ((tmp_path / "none.obj", "no such file"), (tmp_path / "empty.obj", "is empty"),
                      (tmp_path / "walk.pc2", "rest mesh")):
         with pytest.raises(OverrideError, match=f"mesh_keyframes: bodies: .*{why}"):
             load_problem("mesh_keyframes", bodies=str(bad))

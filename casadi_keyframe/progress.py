@@ -208,10 +208,11 @@ def reporting(quiet: bool = False, *, stream=None, every: float = EVERY):
 
 
 def _columns(stream) -> int:
+    """The terminal's width (100 where it says none)."""
     try:
         import os
 
-        return os.get_terminal_size(stream.fileno()).columns
+        return os.get_terminal_size(stream.fileno()).columns or 100
     except (AttributeError, OSError, ValueError):
         return 100
 

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import Clock
 from test_augmented_lagrangian import swing
 
 from casadi_keyframe import InitialVelocity, Smoothness, StateKeyframe, load_problem
@@ -180,7 +181,7 @@ def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
     import casadi_keyframe.optimize.finish.stage as finish
     from casadi_keyframe.optimize.finish.window import WindowSearch
 
-    clock = _Clock()
+    clock = Clock()
     real, lower = finish.lower_effort, WindowSearch.lower
     monkeypatch.setattr(finish, "lower_effort",
                         lambda *a, **k: real(*a, **{**k, "deadline": clock}))
@@ -200,7 +201,7 @@ def test_the_time_limit_stops_the_finish_inside_a_step(monkeypatch):
     from casadi_keyframe.optimize.outcome import LIMIT
     import casadi_keyframe.optimize.finish.stage as finish
 
-    clock = _Clock()
+    clock = Clock()
     real, landing = finish.land, WindowSearch._landing
     monkeypatch.setattr(finish, "land", lambda *a, **k: real(*a, **{**k, "deadline": clock}))
     monkeypatch.setattr(WindowSearch, "_landing",
@@ -210,25 +211,6 @@ def test_the_time_limit_stops_the_finish_inside_a_step(monkeypatch):
     assert result.status == LIMIT, result.message
     assert result.stages[-1]["message"].startswith("finish (land): time limit reached (7 s)")
     assert np.isnan(result.jac).all()  # no more work once the time is up
-
-
-class _Clock:
-    """A deadline of 7 s that passes when told to (:meth:`end`), not by the machine's
-    clock."""
-
-    limit, started = 7.0, 0.0
-
-    def __init__(self):
-        self.over = False
-
-    def end(self):
-        self.over = True
-
-    def passed(self):
-        return self.over
-
-    def left(self):
-        return 0.0 if self.over else 7.0
 
 
 def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_path):

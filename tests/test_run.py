@@ -240,3 +240,26 @@ def test_misses_say_what_their_rms_is_over():
                                                          "fraction_inside": 1.0}])
     assert line == ("StateKeyframe@60 over 416 particles: rms_position_error 0.01; "
                     "RegionTarget@50 fraction_inside 1")
+
+
+def test_a_folder_in_use_is_refused_with_its_holders_pid(tmp_path, capsys):
+    """A live run's lock refuses a second run into its folder before anything is built or
+    written; a dead run's lock is taken over, and a run leaves no lock behind."""
+    from casadi_keyframe.saved.lock import LOCK
+
+    out = tmp_path / "run"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (out / LOCK).write_text(json.dumps({"pid": holder.pid, "started": "now"}))
+        assert main(["solve", *SMALL, "--out", str(out), "--maxiter", "2", "--quiet"]) == 2
+        said = capsys.readouterr().err
+        assert f"is in use by another run (pid {holder.pid}" in said and "another --out" in said
+        assert sorted(p.name for p in out.iterdir()) == [LOCK]
+    finally:
+        holder.kill()
+        holder.wait()
+    # its holder is gone: the lock is taken over, and gone after the run
+    assert main(["solve", *SMALL, "--out", str(out), "--maxiter", "2", "--quiet",
+                 "--no-animation", "--no-viewer"]) == 3
+    assert not (out / LOCK).exists() and (out / "result.npz").is_file()

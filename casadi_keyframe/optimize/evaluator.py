@@ -276,8 +276,8 @@ class Evaluator:
             iteration=len(history) + 1, stage=self.stage,
             seconds=clock.elapsed(), nfev=self.nfev, **growth, **extra, **more))
         self.keep(nit=len(history))
-        progress.advance(facts=f"objective {objective:.4g}")
         check()
+        progress.advance(facts=f"objective {objective:.4g}")
         self.check_goal(len(history))
 
 

@@ -58,10 +58,12 @@ def _take(path: Path, option: str) -> None:
         except FileExistsError:
             holder = _holder(path)
             if _alive(holder):
+                host = f" on {holder['host']}" if holder.get("host") else ""
+                began = f", started {holder['started']}" if holder.get("started") else ""
                 raise FolderInUse(
-                    f"{option} {path.parent} is in use by another run (pid {holder['pid']} on "
-                    f"{holder.get('host', '?')}, started {holder.get('started', '?')}): "
-                    f"wait for it to end, stop it, or give another {option}") from None
+                    f"{option} {path.parent} is in use by another run (pid {holder['pid']}"
+                    f"{host}{began}): wait for it to end, stop it, or give another "
+                    f"{option}") from None
             with contextlib.suppress(OSError):
                 path.unlink()  # its holder is gone (a run killed): take it over
     raise FolderInUse(f"{option} {path.parent}: could not take its lock ({path.name}); "

@@ -8,7 +8,7 @@ from __future__ import annotations
 import sys
 import time
 
-from ..progress import EVERY
+from ..progress import EVERY, format_seconds
 from .tasks import ERROR, failed
 
 
@@ -93,12 +93,3 @@ def describe(row: dict) -> str:
         return (f"{status}, objective {row['objective']:.6g}, {row.get('iterations', '?')} "
                 f"iterations{seconds}")
     return status + seconds
-
-
-def format_seconds(seconds: float) -> str:
-    """``"45 s"``, ``"3.2 min"``, ``"1.5 h"``."""
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"

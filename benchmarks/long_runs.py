@@ -170,7 +170,7 @@ def run(case: dict, code: Path, tmp: Path, timeout: float = 1200) -> dict:
                             stdin=subprocess.DEVNULL, stdout=slave, stderr=slave, env=env,
                             cwd=tmp, start_new_session=True, preexec_fn=_as_a_user)
     os.close(slave)
-    text, last, silence, sent, seen = b"", started, 0.0, None, None
+    text, last, silence, sent, seen, written = b"", started, 0.0, None, None, None
     when, after = case.get("when", "never"), case.get("after")
     while True:
         ready, _, _ = select.select([master], [], [], 0.2)
@@ -184,8 +184,11 @@ def run(case: dict, code: Path, tmp: Path, timeout: float = 1200) -> dict:
                 break
             text += chunk
             silence, last = max(silence, now - last), now
-            if seen is None and when and re.search(_pattern(when), text.decode("utf8", "replace")):
+            said = text.decode("utf8", "replace")
+            if seen is None and when and re.search(_pattern(when), said):
                 seen = now
+            if written is None and ("result written" in said or "nothing written" in said):
+                written = now
         if case.get("signal") and sent is None:
             base = started if when is None else seen
             if base is not None and now - base >= after:
@@ -202,9 +205,11 @@ def run(case: dict, code: Path, tmp: Path, timeout: float = 1200) -> dict:
     ended = time.monotonic()
     silence = max(silence, ended - last)
     os.close(master)
-    lines = [s.strip() for s in re.split(r"[\r\n]+", text.decode("utf8", "replace")) if s.strip()]
+    said = re.sub(r"\x1b\[K", "", text.decode("utf8", "replace"))
+    lines = [s.strip() for s in re.split(r"[\r\n]+", said) if s.strip()]
     killed = proc.returncode == -signal.SIGKILL
-    return {"wall": ended - started, "code": None if killed else proc.returncode,
+    return {"wall": ended - started, "written": None if written is None else written - started,
+            "code": None if killed else proc.returncode,
             "silence": silence,
             "stop": None if sent is None else ended - sent, "last": lines[-3:] if lines else [],
             "lines": lines}
@@ -238,9 +243,9 @@ def main(argv=None) -> int:
     if args.only:
         wanted = [w.strip() for w in args.only.split(",")]
         chosen = [c for c in chosen if any(c["name"].startswith(w) for w in wanted)]
-    print("| run | exit | wall s | limit s | first signal -> exit s | longest silence s | "
-          "last line |")
-    print("|---|---|---|---|---|---|---|")
+    print("| run | exit | wall s | result written at s | limit s | first signal -> exit s | "
+          "longest silence s | last line |")
+    print("|---|---|---|---|---|---|---|---|")
     for case in chosen:
         got = run(case, Path(args.code), tmp, args.timeout)
         if args.log:
@@ -250,7 +255,8 @@ def main(argv=None) -> int:
         stop = "" if got["stop"] is None else f"{got['stop']:.1f}"
         last = (got["last"][-1] if got["last"] else "").replace("|", "\\|")[:160]
         code = "killed" if got["code"] is None else got["code"]
-        print(f"| {case['name']} | {code} | {got['wall']:.1f} | "
+        written = "" if got["written"] is None else f"{got['written']:.1f}"
+        print(f"| {case['name']} | {code} | {got['wall']:.1f} | {written} | "
               f"{case.get('limit', '')} | {stop} | {got['silence']:.1f} | {last} |", flush=True)
     return 0
 

@@ -21,6 +21,7 @@ picture frame) call :func:`check`.
 from __future__ import annotations
 
 import contextlib
+import os
 import signal
 import threading
 
@@ -28,6 +29,9 @@ NAMES = {signal.SIGINT: "SIGINT", signal.SIGTERM: "SIGTERM"}
 _log: list[int] = []  # every signal the handler caught, in order
 _state = {"depth": 0, "seen": 0, "pending": None, "held": 0}
 _limits: list = []  # the time limits of the :func:`limited` blocks entered, innermost last
+
+# a forked child (a shooting worker) is stopped by its parent, never by a limit of its own
+os.register_at_fork(after_in_child=_limits.clear)
 
 
 class Interrupted(KeyboardInterrupt):

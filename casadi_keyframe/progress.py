@@ -14,6 +14,7 @@ call here does nothing but count.
 from __future__ import annotations
 
 import contextlib
+import os
 import sys
 import threading
 import time
@@ -23,6 +24,16 @@ REDRAW = 0.25  # s: the least time between two redraws of a terminal's status li
 
 _tasks: list = []  # the tasks entered, outermost first
 _reporters: list = []  # the reporters entered, innermost last
+
+
+def _forked() -> None:
+    """In a forked child (a shooting worker): no reporter, no tasks (the parent shows the
+    work, and a lock its thread held would never be let go here)."""
+    _reporters.clear()
+    _tasks.clear()
+
+
+os.register_at_fork(after_in_child=_forked)
 
 
 class Task:
@@ -69,7 +80,7 @@ def task(label: str, total=None, unit: str = "", *, limit=None, exact: bool = Tr
     finally:
         _tasks.remove(entered)
         if _reporters:
-            _reporters[-1].tick()
+            _reporters[-1].tick() if _tasks else _reporters[-1].clear()
 
 
 def advance(count: int = 1, facts: str | None = None) -> None:
@@ -155,6 +166,12 @@ class Reporter:
             self._clear()
             self._write(text + "\n")
 
+    def clear(self) -> None:
+        """Take the terminal's status line away (the work it showed has ended: what is
+        printed next starts on a clean line)."""
+        with self.lock:
+            self._clear()
+
     def tick(self) -> None:
         """The stack changed: redraw the terminal's status line (at most every
         :data:`REDRAW` seconds)."""
@@ -210,8 +227,6 @@ def reporting(quiet: bool = False, *, stream=None, every: float = EVERY):
 def _columns(stream) -> int:
     """The terminal's width (100 where it says none)."""
     try:
-        import os
-
         return os.get_terminal_size(stream.fileno()).columns or 100
     except (AttributeError, OSError, ValueError):
         return 100

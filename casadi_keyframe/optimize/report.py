@@ -6,7 +6,7 @@ def format_stage(stage: dict) -> str:
     """One line for a continuation stage (its dt, the build overrides that made it: a
     coarser mesh, a homotopy level) or an augmented-Lagrangian round (its weight scale and
     keyframe misses), ending with how it stopped; a stage that did not run says why."""
-    made = ", ".join(f"{k}={_typed(v)}" for k, v in stage.get("overrides", {}).items())
+    made = ", ".join(f"{k}={typed(v)}" for k, v in stage.get("overrides", {}).items())
     head = (f"round {stage['stage']}: weight x{stage['weight_scale']:.3g}"
             if "weight_scale" in stage else
             f"stage {stage['stage']}{f' ({made})' if made else ''}: dt {stage['dt']:.6g} s, "
@@ -21,11 +21,12 @@ def format_stage(stage: dict) -> str:
     return line + (f"; {stage['message']}" if stage.get("message") else "")
 
 
-def _typed(value) -> str:
-    """An override's value as typed: a sequence comma-separated."""
+def typed(value) -> str:
+    """An override's value as typed: a number as written (3, not 3.0), a sequence
+    comma-separated."""
     if isinstance(value, (list, tuple)):
-        return ",".join(str(v) for v in value)
-    return str(value)
+        return ",".join(typed(v) for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def format_physical(report: dict) -> str:

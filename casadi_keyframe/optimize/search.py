@@ -32,7 +32,7 @@ from .kept import Kept, conclude, evaluate_final, kept_outcome
 from .methods import SearchCall, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .report import format_stage
+from .report import format_stage, typed
 from .result import Result, assemble, skipped_stage, stage_record
 from .rounds import Rounds, run_rounds
 from .settings import SolveSettings, as_settings
@@ -378,6 +378,6 @@ def _out_of_time(limit, deadline, when: str) -> str:
 def _label(problem, method, stage, overrides) -> str:
     """A stage's progress label: ``"cape_blend [lbfgsb] stage 0/1 (contact=3)"``."""
     k, count = stage
-    said = ", ".join(f"{key}={value}" for key, value in (overrides or {}).items())
+    said = ", ".join(f"{key}={typed(value)}" for key, value in (overrides or {}).items())
     return (f"{problem.name} [{method}]" + ("" if count == 1 else f" stage {k}/{count - 1}")
             + (f" ({said})" if said else ""))

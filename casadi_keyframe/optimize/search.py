@@ -114,14 +114,11 @@ def run_stages(problem, settings: SolveSettings, search, u0=None, *, goal=None,
     if len(problems) > 1 or multiple is not None:  # stages that may end worse than the start
         kept.offer(start, "its start", trajectory=search.start_run)
         if stop == "goal" and kept.standing is not None and kept.standing.met:
-            why = "nothing to do: the start already meets the goal (stop='goal')"
-            skipped += [(p, why, CONVERGED) for p in problems[:-1]]
-            if multiple is not None:
-                skipped.append((problem, f"multiple shooting: {why}", CONVERGED))
+            skipped += _nothing_to_do(problems, multiple)
             problems, multiple = problems[-1:], None
     u, handed = (None if u0 is None else carry(problem, start, problems[0])), None
-    stages = [skipped_stage(p, n, why, status, **_made(p, problem))
-              for n, (p, why, status) in enumerate(skipped)]
+    stages = [skipped_stage(p, n, why, CONVERGED, **_made(p, problem))
+              for n, (p, why, _) in enumerate(skipped)]
     for k, p in enumerate(problems):
         final = p is problem
         export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
@@ -142,20 +139,35 @@ def run_stages(problem, settings: SolveSettings, search, u0=None, *, goal=None,
         if final or stages[-1]["status"] == INTERRUPTED or search.deadline.passed():
             stages += _not_run(problems[k + 1:], stages, search, problem)
             break
-        handed = None
-        if ev.best_u is None:  # its first evaluation did not end in its share of the time
-            u = None if kept.u is None else carry(problem, kept.u, problems[k + 1])
-            handed = None if kept.u is None else f"{kept.where}, carried here"
-            continue
-        better = kept.offer(carry(p, ev.best_u, problem), f"stage {stages[-1]['stage']}'s best",
-                            stage=stages[-1]["stage"], nit=len(search.history))
-        u = carry(p, ev.best_u, problems[k + 1])
-        if not better and kept.u is not None and problems[k + 1].model.n == problem.model.n:
-            u = carry(problem, kept.u, problems[k + 1])  # the stage left it worse off
-            handed = (f"{kept.where} (stage {stages[-1]['stage']}'s best is worse on the "
-                      "problem)")
+        u, handed = _hand_on(p, ev.best_u, kept, problems[k + 1], problem,
+                             stages[-1]["stage"], len(search.history))
     ran = [st for st in stages if "skipped" not in st]
     return _result(problem, p, ev, strategy, search, stages, kept, ran[-1], start)
+
+
+def _hand_on(p, best, kept, following, problem, stage: int, nit: int):
+    """``(controls, what they are)`` the stage after stage ``stage`` (on ``p``, its best
+    ``best``) starts from, on ``following``: its best carried there (offered to ``kept``
+    first), or, where that is worse on ``problem`` than the point ``kept`` holds (and
+    ``following`` has the problem's particles) or there is none, the kept point."""
+    if best is None:  # its first evaluation did not end in its share of the time
+        if kept.u is None:
+            return None, None
+        return carry(problem, kept.u, following), f"{kept.where}, carried here"
+    better = kept.offer(carry(p, best, problem), f"stage {stage}'s best", stage=stage,
+                        nit=nit)
+    if not better and kept.u is not None and following.model.n == problem.model.n:
+        return (carry(problem, kept.u, following),
+                f"{kept.where} (stage {stage}'s best is worse on the problem)")
+    return carry(p, best, following), None
+
+
+def _nothing_to_do(problems, multiple) -> list:
+    """``(stage, why, status)`` of the stages before the last (and multiple shooting) that a
+    start meeting the goal leaves with nothing to do."""
+    why = "nothing to do: the start already meets the goal (stop='goal')"
+    return ([(p, why, CONVERGED) for p in problems[:-1]]
+            + ([(problems[-1], f"multiple shooting: {why}", CONVERGED)] if multiple else []))
 
 
 def _not_run(problems, stages, search, problem) -> list:

@@ -71,7 +71,7 @@ def solve(problem, settings: SolveSettings | str | None = None, *, u0=None,
             inner = replace(settings, rounds=None)
             return run_rounds(problem, settings.rounds,
                               lambda aimed, u, at: run_stages(
-                                  aimed, inner, _Search(inner, at, deadline, stop, start_run),
+                                  aimed, inner, _Search(inner, at, deadline, stop),
                                   u, goal=problem),
                               u0=u0, resume=resume, checkpoint=checkpoint, deadline=deadline,
                               stop=stop)

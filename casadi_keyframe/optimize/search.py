@@ -110,15 +110,15 @@ def run_stages(problem, settings: SolveSettings, search, u0=None, *, goal=None,
     multiple, strategy, stop = settings.shooting, settings.gradient, search.stop
     start = problem.initial_controls() if u0 is None else problem.controls.check(u0)
     kept = search.kept = Kept(problem, goal or problem, search.checkpoint)
-    skipped = [(p, why, CONVERGED) for p, why in coarse]
+    skipped = list(coarse)  # (stage, why): nothing to do there
     if len(problems) > 1 or multiple is not None:  # stages that may end worse than the start
         kept.offer(start, "its start", trajectory=search.start_run)
         if stop == "goal" and kept.standing is not None and kept.standing.met:
             skipped += _nothing_to_do(problems, multiple)
             problems, multiple = problems[-1:], None
     u, handed = (None if u0 is None else carry(problem, start, problems[0])), None
-    stages = [skipped_stage(p, n, why, CONVERGED, **_made(p, problem))
-              for n, (p, why, _) in enumerate(skipped)]
+    stages = _said([skipped_stage(p, n, why, CONVERGED, **_made(p, problem))
+                    for n, (p, why) in enumerate(skipped)])
     for k, p in enumerate(problems):
         final = p is problem
         export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
@@ -137,7 +137,7 @@ def run_stages(problem, settings: SolveSettings, search, u0=None, *, goal=None,
             stages.append(search.run(ev.problem, ev, begin, (k, len(problems)), origin,
                                      limit=limit, **_made(p, problem)))
         if final or stages[-1]["status"] == INTERRUPTED or search.deadline.passed():
-            stages += _not_run(problems[k + 1:], stages, search, problem)
+            stages += _said(_not_run(problems[k + 1:], stages, search, problem))
             break
         u, handed = _hand_on(p, ev.best_u, kept, problems[k + 1], problem,
                              stages[-1]["stage"], len(search.history))
@@ -163,11 +163,11 @@ def _hand_on(p, best, kept, following, problem, stage: int, nit: int):
 
 
 def _nothing_to_do(problems, multiple) -> list:
-    """``(stage, why, status)`` of the stages before the last (and multiple shooting) that a
-    start meeting the goal leaves with nothing to do."""
+    """``(stage, why)`` of the stages before the last (and multiple shooting) that a start
+    meeting the goal leaves with nothing to do."""
     why = "nothing to do: the start already meets the goal (stop='goal')"
-    return ([(p, why, CONVERGED) for p in problems[:-1]]
-            + ([(problems[-1], f"multiple shooting: {why}", CONVERGED)] if multiple else []))
+    return ([(p, why) for p in problems[:-1]]
+            + ([(problems[-1], f"multiple shooting: {why}")] if multiple else []))
 
 
 def _not_run(problems, stages, search, problem) -> list:
@@ -181,6 +181,13 @@ def _not_run(problems, stages, search, problem) -> list:
     return [skipped_stage(p, first + i, why, INTERRUPTED if interrupted else LIMIT,
                           **_made(p, problem))
             for i, p in enumerate(problems)]
+
+
+def _said(records: list) -> list:
+    """``records`` (stages not run), each said as a stage line as it is decided."""
+    for record in records:
+        progress.say("  " + format_stage(record), stage=True)
+    return records
 
 
 def _made(stage, problem) -> dict:

@@ -26,7 +26,7 @@ $(DOCS_STAMP): pyproject.toml | $(BIN)/python
 	touch $(DOCS_STAMP)
 
 demo: $(STAMP)
-	$(BIN)/casadi-keyframe solve cloth_shapes --out results/cloth_shapes --quiet --stop method
+	$(BIN)/casadi-keyframe solve cloth_shapes --out results/cloth_shapes --stop method
 
 test: $(STAMP) $(DOCS_STAMP)
 	$(BIN)/python -m pytest -q

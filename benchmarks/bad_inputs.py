@@ -1,6 +1,8 @@
 """Every bad input a user may meet at the library's edges, and what each gets: damaged run
-files given to each command, unwritable and odd output paths, problem files that fail, and
-loose Python API arguments.  Prints a Markdown table: the input, the command or call, the
+files given to each command, unwritable and odd output paths, problem files that fail,
+loose Python API arguments, and the options and inputs of long runs (issue 42: the finish's
+options, bodies that are no body or an open or mixed-wound one, keys given twice, a folder
+in use, a stage no coarser than the problem, a time limit the start does not fit in).  Prints a Markdown table: the input, the command or call, the
 exit code or exception, the message's first line, and whether the output held a traceback
 or advice to load pickled data (both should say no).
 
@@ -37,6 +39,18 @@ def cli(what, *args):
     text = done.stderr.strip() or (done.stdout.strip().splitlines() or [""])[-1]
     shown = "casadi-keyframe " + " ".join(str(a) for a in args)
     row(what, f"`{shown[:110]}`", f"exit {done.returncode}", text)
+
+
+def cli_said(what, word, *args):
+    """Like :func:`cli`, the line holding ``word`` (a note, a warning) as the message."""
+    done = subprocess.run(COMMAND + [str(a) for a in args], capture_output=True, text=True,
+                          timeout=600)
+    lines = (done.stderr + "\n" + done.stdout).splitlines()
+    said = next((line for line in lines if word in line), f"(no line with {word!r})")
+    shown = "casadi-keyframe " + " ".join(str(a) for a in args)
+    traceback = "Traceback" in done.stderr + done.stdout
+    row(what, f"`{shown[:110]}`", f"exit {done.returncode}", said + (" Traceback" if traceback
+                                                                      else ""))
 
 
 def api(what, call: str, fn):
@@ -196,6 +210,65 @@ def api_arguments(tmp: Path, run: Path):
         lambda: ck.load_problem("flock_path", agnets=3))
 
 
+def long_runs(tmp: Path):
+    """The inputs issue 42 lists, each refused (exit 2) before any work, or run with the
+    note or warning that says what was found."""
+    import json
+    import os
+
+    import trimesh
+
+    cape = ["cape_blend"]
+    small = ["cape_blend", "--set", "rows=4", "--set", "cols=3"]
+    out = ["--out", tmp / "long", "--quiet", "--no-animation", "--no-viewer"]
+    for what, option in (("--finish bogus", "bogus"), ("--finish window=0", "effort,window=0"),
+                         ("--finish maxiter=-1", "effort,maxiter=-1"),
+                         ("--finish none with options", "none,window=3"),
+                         ("--finish window given twice", "effort,window=3,window=4")):
+        cli(what, "solve", *cape, "--finish", option, *out)
+    (tmp / "garbage.obj").write_bytes(bytes(range(256)) * 8)
+    (tmp / "empty.obj").write_bytes(b"")
+    (tmp / "a_folder").mkdir(exist_ok=True)
+    for what, body in (("cape body=cube (no such word)", "cube"),
+                       ("cape body: a missing file", tmp / "missing.obj"),
+                       ("cape body: garbage bytes", tmp / "garbage.obj"),
+                       ("cape body: an empty file", tmp / "empty.obj"),
+                       ("cape body: a folder", tmp / "a_folder")):
+        cli(what, "solve", *cape, "--set", f"body={body}", *out)
+    cli("mesh_keyframes bodies: a folder", "solve", "mesh_keyframes", "--set",
+        f"bodies={tmp / 'a_folder'}", *out)
+    ring = "".join(f"v {0.3 * np.cos(a):.6f} {0.3 * np.sin(a):.6f} 1.2\n"
+                   for a in np.linspace(0, 2 * np.pi, 6)[:-1])
+    (tmp / "pentagon.obj").write_text(ring + "f 1 2 3 4 5\n")
+    cli_said("cape body: an open mesh (a flat pentagon)", "open:", "solve", *small, "--set",
+             f"body={tmp / 'pentagon.obj'}", "--maxiter", "1", *out)
+    box = trimesh.creation.box((0.4, 0.4, 0.6))
+    box.apply_translation([0, 0, 1.1])
+    faces = box.faces.copy()
+    faces[[1, 6, 9]] = faces[[1, 6, 9]][:, ::-1]
+    trimesh.Trimesh(box.vertices, faces, process=False).export(tmp / "mixed.obj")
+    cli_said("cape body: a box with mixed winding", "wound against", "solve", *small,
+             "--set", f"body={tmp / 'mixed.obj'}", "--maxiter", "1", *out)
+    cli("a key given twice", "solve", *cape, "--set", "rows=4", "--set", "rows=5", *out)
+    cli("an --option given twice", "solve", *cape, "--option", "maxcor=3", "--option",
+        "maxcor=4", *out)
+    cli("a --shooting key given twice", "solve", *cape, "--segments", "2", "--shooting",
+        "workers=2", "--shooting", "workers=3", *out)
+    shapes = ["cloth_shapes", "--set", "rows=4", "--set", "cols=4", "--set", "steps=12"]
+    cli_said("a finish window longer than the run", "longer than", "solve", *shapes,
+             "--finish", "effort,window=1000", "--maxiter", "1", *out)
+    cli_said("a resolution no coarser than the problem", "not a coarser stage", "solve",
+             *shapes, "--resolution", "rows=4,cols=4", "--maxiter", "1", *out)
+    cli_said("a time limit the start does not fit in", "nothing written", "solve", *shapes,
+             "--time-limit", "0.001", *out)
+    cli_said("--draw-limit 0", "error:", "solve", *shapes, "--draw-limit", "0", *out)
+    busy = tmp / "busy"
+    busy.mkdir(exist_ok=True)
+    (busy / ".casadi-keyframe.lock").write_text(json.dumps({"pid": os.getpid(),
+                                                            "started": "now"}))
+    cli("an --out folder in use by another run", "solve", *shapes, "--out", busy)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", help="folder for the runs and files (default: a temporary one)")
@@ -208,6 +281,7 @@ def main():
     outputs(tmp, run)
     problem_files(tmp)
     api_arguments(tmp, run)
+    long_runs(tmp)
     print("| # | input | command or call | outcome | message | traceback | allow_pickle |")
     print("|---|---|---|---|---|---|---|")
     for i, (what, how, outcome, text, tb, pickle) in enumerate(ROWS, 1):

@@ -10,11 +10,17 @@ Backward, eq. (5) of the paper: with ``s_n = (x_n, v_n)`` and ``a_n = dphi/ds_n`
 
 (:func:`backward`); the product with the transposed step Jacobians is the integrator's
 backward step, chosen by the gradient strategy (exact or the paper's swapped one).
+
+Every step of each loop is a safe point (:func:`~casadi_keyframe.interrupts.check`: a
+signal or the time limit stops a long run there) and counts as progress
+(:mod:`~casadi_keyframe.progress`).
 """
 from __future__ import annotations
 
 import numpy as np
 
+from . import progress
+from .interrupts import check
 from .state import State, Trajectory
 
 
@@ -38,16 +44,19 @@ def simulate(integrator, model, x0, v0, external, dt: float, *, records: bool = 
         dx, dv = np.empty_like(x), np.empty_like(x)
         (dx[0], dv[0]), d_external = tangent[:2], tangent[2]
         tangent_work = integrator.init(model)
-    for n in range(steps):
-        start = traj.state(n)
-        end, record = integrator.step(model, start, external[n], n, dt, work)
-        x[n + 1], v[n + 1] = end.x, end.v
-        if records:
-            traj.records.append(record)
-        if tangent is not None:
-            out = integrator.step_jvp(model, start, end, record, n, dt, State(dx[n], dv[n]),
-                                      d_external[n], tangent_work)
-            dx[n + 1], dv[n + 1] = out.x, out.v
+    with progress.task("simulating", steps, "steps"):
+        for n in range(steps):
+            check()
+            start = traj.state(n)
+            end, record = integrator.step(model, start, external[n], n, dt, work)
+            x[n + 1], v[n + 1] = end.x, end.v
+            if records:
+                traj.records.append(record)
+            if tangent is not None:
+                out = integrator.step_jvp(model, start, end, record, n, dt,
+                                          State(dx[n], dv[n]), d_external[n], tangent_work)
+                dx[n + 1], dv[n + 1] = out.x, out.v
+            progress.advance()
     return traj if tangent is None else (traj, dx, dv)
 
 
@@ -61,10 +70,13 @@ def tangent(integrator, model, traj: Trajectory, dx0, dv0, d_external, *, start:
     dx, dv = np.zeros_like(traj.x), np.zeros_like(traj.v)
     dx[start], dv[start] = dx0, dv0
     work = integrator.init(model)
-    for n in range(start, traj.steps):
-        out = integrator.step_jvp(model, traj.state(n), traj.state(n + 1), traj.record(n), n,
-                                  traj.dt, State(dx[n], dv[n]), d_external[n], work)
-        dx[n + 1], dv[n + 1] = out.x, out.v
+    with progress.task("tangent pass", traj.steps - start, "steps"):
+        for n in range(start, traj.steps):
+            check()
+            out = integrator.step_jvp(model, traj.state(n), traj.state(n + 1), traj.record(n),
+                                      n, traj.dt, State(dx[n], dv[n]), d_external[n], work)
+            dx[n + 1], dv[n + 1] = out.x, out.v
+            progress.advance()
     return dx, dv
 
 
@@ -90,10 +102,13 @@ def backward(integrator, model, traj: Trajectory, gx, gv, *, step_vjp=None, stop
     a = State(gx[steps], gv[steps])
     if watch is not None:
         watch.start(gx, gv)
-    for n in range(steps - 1, stop - 1, -1):
-        pulled, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1),
-                                         traj.record(n), n, dt, a, work)
-        a = State(pulled.x + gx[n], pulled.v + gv[n])
-        if watch is not None:
-            watch.step(n, pulled, a)
+    with progress.task("backward pass", steps - stop, "steps"):
+        for n in range(steps - 1, stop - 1, -1):
+            check()
+            pulled, g_external[n] = step_vjp(model, traj.state(n), traj.state(n + 1),
+                                             traj.record(n), n, dt, a, work)
+            a = State(pulled.x + gx[n], pulled.v + gv[n])
+            if watch is not None:
+                watch.step(n, pulled, a)
+            progress.advance()
     return g_external, a

@@ -29,7 +29,7 @@ from casadi_keyframe.checks import frame_at
 from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION
 from casadi_keyframe.objectives import Smoothness, StateKeyframe
 from casadi_keyframe.scenes.animations import fall, transition
-from casadi_keyframe.scenes.body_meshes import cape_body
+from casadi_keyframe.scenes.body_meshes import cape_body, cape_body_file
 from casadi_keyframe.scenes.cape_tracking import (blend_steps, check_attached, reference_path,
                                                   tracking_guess)
 from casadi_keyframe.scenes.capes import cached_clip, cape_contacts, cape_model
@@ -74,6 +74,8 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
           collision: str = DEFAULT_COLLISION, friction: float = 0.0,
           body: str = "capsules"):
     steps = blend_steps(steps, window, dt)
+    contacts = _contacts(rows, cols, dt, contact, friction)
+    given = cape_body_file("cape_blend", body, dt, contacts["body"])  # before any simulation
     fall_start = frame_at(t_a, dt, "cape_blend: t_a")
     walk_start = frame_at(t_b, dt, "cape_blend: t_b")
     character = Character()
@@ -86,11 +88,10 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     fall_model, fall_traj, fall_motion = cached_clip("fall", rows, cols, t_a + window, dt)
     walk_model, walk_traj, walk_motion = cached_clip("walk", rows, cols, t_b + window, dt)
     motion = transition(fall_motion, walk_motion, t_a, t_b, window)
-    contacts = _contacts(rows, cols, dt, contact, friction)
     model = cape_model(character, motion.shifted(-t_a), rows=rows, cols=cols, dt=dt,
                        contacts=contacts, collision=collision,
                        body=cape_body("cape_blend", body, character, motion.shifted(-t_a),
-                                      window, dt, contacts["body"]))
+                                      window, dt, contacts["body"], given))
     x0, v0 = fall_traj.x[fall_start], fall_traj.v[fall_start]
     target_x = walk_traj.x[walk_start + steps] + motion.offset
     target_v = walk_traj.v[walk_start + steps]

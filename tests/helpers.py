@@ -1,6 +1,7 @@
 """What several test files share: a small flock with every objective term, a gradient
-route that acts like Ctrl-C, the exact routes' agreement with CasADi, and a slope against
-the forward pass's stable central differences.  Imported as ``from helpers import ...`` (pytest puts this folder
+route that acts like Ctrl-C, a deadline that passes when told, the exact routes' agreement
+with CasADi, and a slope against the forward pass's stable central differences.  Imported
+as ``from helpers import ...`` (pytest puts this folder
 on the path)."""
 import numpy as np
 import pytest
@@ -30,6 +31,32 @@ def small_flock(cutoff="smooth", *, n=8, steps=30, dt=0.1, dim=2, controls=None,
                           dt=dt, controls=controls or StepForces(), objective=obj,
                           external=wander_forces(steps, n, dim, strength=0.3, seed=seed + 1),
                           name="small_flock")
+
+
+class Clock:
+    """A deadline of 7 s that passes when told (:meth:`end`), not by the machine's clock
+    (what a test of a time limit checks is the code's own check, not a loaded machine's
+    speed); a stage's share of it is itself."""
+
+    limit, started = 7.0, 0.0
+
+    def __init__(self):
+        self.over = False
+
+    def end(self):
+        self.over = True
+
+    def passed(self):
+        return self.over
+
+    def left(self):
+        return 0.0 if self.over else 7.0
+
+    def elapsed(self):
+        return 0.0
+
+    def share(self, fraction):
+        return self
 
 
 class InterruptAfter(Adjoint):

@@ -248,3 +248,48 @@ def test_a_method_option_reaches_the_method_checked_before_the_build(tmp_path, c
     assert "Gauss-Newton option 'radius' must be a number > 0" in capsys.readouterr().err
     assert main([*common, "--option", "radiu=1"]) == 2
     assert "did you mean 'radius'?" in capsys.readouterr().err and built == []
+
+
+@pytest.mark.parametrize("args, said", [
+    (["--finish", "none,window=3"], "--finish none drops the finish and takes no options"),
+    (["--set", "agents=5"], "--set: agents is given twice (first 4): give it once"),
+    (["--option", "maxcor=3", "--option", "maxcor=4"], "--option: maxcor is given twice"),
+    (["--finish", "effort,window=3,window=4"], "finish: window is given twice"),
+    (["--segments", "2", "--shooting", "workers=2", "--shooting", "workers=3"],
+     "--shooting: workers is given twice"),
+])
+def test_a_mistyped_option_is_refused_before_the_build(args, said, capsys, tmp_path,
+                                                       monkeypatch):
+    """A key typed twice is refused, never the last one silently; 'none' takes no
+    options; all before the problem is built."""
+    import casadi_keyframe.loading as loading
+
+    monkeypatch.setattr(loading, "build_problem", lambda *a, **k: pytest.fail("built"))
+    code = main(["solve", "flock_path", "--set", "agents=4", "--set", "steps=10", "--quiet",
+                 "--out", str(tmp_path), *args])
+    assert code == 2 and said in capsys.readouterr().err
+
+
+def test_the_continue_line_repeats_every_option_as_typed(tmp_path, capsys):
+    """pins=0,5 stays 0,5; --segments, --shooting, --resolution none, --continuation all
+    come back, and the method and route; --out and --resume are the line's own."""
+    from types import SimpleNamespace
+
+    from casadi_keyframe.cli.parser import build_parser
+    from casadi_keyframe.cli.commands import typed_options
+    from casadi_keyframe.optimize import SolveSettings
+    from casadi_keyframe.runs.report import command_line
+
+    typed = ["--set", "pins=0,5", "--set", "dt=1/60", "--segments", "3", "--shooting",
+             "workers=2", "--resolution", "none", "--continuation", "1/30,1/60",
+             "--time-limit", "40", "--quiet"]
+    args = build_parser().parse_args(["solve", "mesh_keyframes", *typed, "--out", "o"])
+    spec = SimpleNamespace(typed=typed_options(args), settings=SolveSettings(),
+                           problem_arg="mesh_keyframes", problem_file="", overrides={})
+    line = command_line(spec, "solve")
+    assert line == ("casadi-keyframe solve mesh_keyframes --set pins=0,5 --set dt=1/60 "
+                    "--method lbfgsb --gradient adjoint --continuation 1/30,1/60 "
+                    "--resolution none --segments 3 --shooting workers=2 --time-limit 40 "
+                    "--quiet")
+    assert command_line(spec, "gradcheck") == ("casadi-keyframe gradcheck mesh_keyframes "
+                                               "--set pins=0,5 --set dt=1/60")

@@ -176,7 +176,8 @@ def test_interrupt_in_an_early_stage_keeps_its_best_on_the_final_grid(tmp_path):
     r = solve(prob, gradient=InterruptAfter(8), maxiter=100, quiet=True, checkpoint=ckpt,
               continuation=[0.2])
     assert "stage 0" in r.message and "interrupted" in r.message and not r.success
-    assert len(r.stages) == 1 and r.x.size == prob.size
+    assert len(r.stages) == 2 and r.x.size == prob.size
+    assert r.stages[1]["skipped"] == "signal" and r.stages[1]["nit"] == 0  # said, not run
     assert r.fun == pytest.approx(prob.objective(r.x), rel=1e-12)
     assert r.fun < prob.objective(prob.initial_controls())
     saved = np.load(ckpt)  # the stage's best, carried to the final grid and judged there

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from helpers import Clock
 from test_augmented_lagrangian import swing
 
 from casadi_keyframe import InitialVelocity, Smoothness, StateKeyframe, load_problem
@@ -175,17 +176,41 @@ def test_finish_and_rounds_are_refused_together(capsys):
 
 
 def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
-    """The effort finish starts from a landing: stopped by the clock it has still converged."""
+    """The effort finish starts from a landing: stopped by the clock after its first step it
+    has still converged."""
     import casadi_keyframe.optimize.finish.stage as finish
-    from casadi_keyframe.optimize.deadline import Deadline
+    from casadi_keyframe.optimize.finish.window import WindowSearch
 
-    real = finish.lower_effort
+    clock = Clock()
+    real, lower = finish.lower_effort, WindowSearch.lower
     monkeypatch.setattr(finish, "lower_effort",
-                        lambda *a, **k: real(*a, **{**k, "deadline": Deadline.start(1e-9)}))
+                        lambda *a, **k: real(*a, **{**k, "deadline": clock}))
+    monkeypatch.setattr(WindowSearch, "lower",
+                        lambda self, *a: (lower(self, *a), clock.end())[0])
     prob = tight(swing(), tolerance=5e-3)
     result = solve(prob, maxiter=50, quiet=True, finish="effort")
     assert result.status == CONVERGED, result.message
-    assert "finish (lower_effort): time limit reached" in result.message
+    assert "finish (lower_effort): time limit reached (7 s)" in result.message
+
+
+def test_the_time_limit_stops_the_finish_inside_a_step(monkeypatch):
+    """The clock runs out inside the landing's first trial (a simulation under way): the
+    finish stops there, by its own check, and the search's result is kept, its gradient
+    not computed again."""
+    from casadi_keyframe.optimize.finish.window import WindowSearch
+    from casadi_keyframe.optimize.outcome import LIMIT
+    import casadi_keyframe.optimize.finish.stage as finish
+
+    clock = Clock()
+    real, landing = finish.land, WindowSearch._landing
+    monkeypatch.setattr(finish, "land", lambda *a, **k: real(*a, **{**k, "deadline": clock}))
+    monkeypatch.setattr(WindowSearch, "_landing",
+                        lambda self, traj: (landing(self, traj), clock.end())[0])
+    prob = tight(swing())
+    result = solve(prob, maxiter=50, quiet=True, finish="land", stop="method")
+    assert result.status == LIMIT, result.message
+    assert result.stages[-1]["message"].startswith("finish (land): time limit reached (7 s)")
+    assert np.isnan(result.jac).all()  # no more work once the time is up
 
 
 def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_path):

@@ -31,18 +31,34 @@ def judged(prob, u):
     return verdict(prob, traj).met, prob.objective(u)
 
 
-def test_a_homotopy_that_ends_worse_returns_its_start_and_says_so(flock, tmp_path):
+def test_a_homotopy_level_that_ends_worse_is_not_carried_on(flock, tmp_path):
+    """A level whose best is worse on the problem than the start hands the start on: the
+    problem's own stage starts where the search would have started without the level."""
     prob, u_opt = flock
     ckpt = tmp_path / "checkpoint.npz"
     r = solve(prob, u0=u_opt, maxiter=3, quiet=True, stop="method", checkpoint=ckpt,
               homotopy=[shifted(prob, np.array([15.0, 15.0]))])
     assert judged(prob, u_opt)[0]  # the start meets the goal
-    assert "its start" in r.message and "is kept" in r.message and r.success
-    np.testing.assert_array_equal(r.x, u_opt)
-    assert r.fun == pytest.approx(prob.objective(u_opt), rel=1e-12) == r.stages[-1]["fun"]
+    level, own = r.stages
+    assert level["nit"] > 0 and "skipped" not in level
+    assert own["start_objective"] == pytest.approx(prob.objective(u_opt), rel=1e-12)
+    met, fun = judged(prob, r.x)
+    assert met and r.success and fun <= prob.objective(u_opt)
     assert [s["stage"] for s in r.stages] == list(range(len(r.stages)))
-    assert r.stages[-2]["fun"] > r.fun  # the final stage's own best was worse
-    np.testing.assert_array_equal(np.load(ckpt)["u"], u_opt)  # never replaced by a worse one
+    assert np.load(ckpt)["meta"] is not None and judged(prob, np.load(ckpt)["u"])[1] <= fun
+
+
+def test_a_start_that_meets_the_goal_skips_the_homotopy_and_says_why(flock):
+    """With stop="goal" a level has nothing to do when the start already meets the goal:
+    it is not run, and its stage says so."""
+    prob, u_opt = flock
+    r = solve(prob, u0=u_opt, maxiter=3, quiet=True, stop="goal",
+              homotopy=[shifted(prob, np.array([15.0, 15.0]))])
+    level, own = r.stages
+    assert level["skipped"] == "nothing to do" and level["nit"] == level["nfev"] == 0
+    assert "the start already meets the goal" in level["message"]
+    assert own["nit"] == 0 and r.success
+    np.testing.assert_array_equal(r.x, u_opt)
 
 
 def test_the_result_is_never_worse_than_the_start_by_goal_then_objective(flock):
@@ -101,9 +117,9 @@ def test_a_checkpoint_takes_only_points_at_least_as_good(tmp_path):
     assert read_run(tmp_path / "c.npz")["meta"]["rounds_round"] == 1
 
 
-@pytest.mark.parametrize("extra", [["--set", "steps=16", "--continuation", "1/10"],
-                                   ["--segments", "2", "--shooting", "rounds=2"]])
-def test_one_story_per_run(extra, tmp_path, capsys):
+@pytest.mark.parametrize("steps, extra", [(16, ["--continuation", "1/10"]),
+                                          (20, ["--segments", "2", "--shooting", "rounds=2"])])
+def test_one_story_per_run(steps, extra, tmp_path, capsys):
     """The objective printed, in summary.json, the last stage's, the history's last and the
     one recomputed from result.npz are one number; stages have distinct numbers."""
     import json
@@ -112,7 +128,7 @@ def test_one_story_per_run(extra, tmp_path, capsys):
     from casadi_keyframe.saved import load_saved
 
     out = tmp_path / "run"
-    main(["solve", "flock_path", "--set", "agents=6", "--set", "steps=20", "--set",
+    main(["solve", "flock_path", "--set", "agents=6", "--set", f"steps={steps}", "--set",
           "tolerance=2.0", "--maxiter", "4", "--quiet", "--no-animation", "--no-viewer",
           "--out", str(out), *extra])
     printed = capsys.readouterr().out

@@ -168,7 +168,7 @@ def test_mesh_keyframes_takes_bodies_and_refuses_bad_ones_by_name(tmp_path):
     assert any(isinstance(b, MeshBody) for b in prob.model.colliders)
     assert prob.simulate(prob.initial_controls()).x.shape[0] == prob.steps + 1
     (tmp_path / "empty.obj").write_bytes(b"")
-    for bad, why in ((tmp_path / "none.obj", "no such file"), (tmp_path / "empty.obj", "no mesh"),
+    for bad, why in ((tmp_path / "none.obj", "no such file"), (tmp_path / "empty.obj", "is empty"),
                      (tmp_path / "walk.pc2", "rest mesh")):
         with pytest.raises(OverrideError, match=f"mesh_keyframes: bodies: .*{why}"):
             load_problem("mesh_keyframes", bodies=str(bad))
@@ -238,3 +238,41 @@ def test_a_still_mesh_builds_its_tree_once_and_spares_far_points_with_the_same_r
     exact = run()
     np.testing.assert_array_equal(spared.x, exact.x)
     assert spared_points < 0.8 * sum(asked)  # the tree was asked for fewer points
+
+
+def test_a_body_file_is_wound_alike_and_out_and_an_open_one_is_noted(tmp_path):
+    """Faces wound against their neighbours are turned (two of a ball's), a ball wound
+    inward is turned out, each with a note; an open mesh is read, noted; a mesh without
+    two sides (a Moebius strip) is refused; a folder or an empty file is named as such."""
+    from casadi_keyframe.meshes import read_animated
+    from casadi_keyframe.meshes.checks import _volume
+
+    V, F = ball(1)
+    mixed = F.copy()
+    mixed[[3, 17]] = mixed[[3, 17]][:, ::-1]
+    read = read_animated(write_obj(tmp_path / "mixed.obj", V, mixed)).mesh
+    np.testing.assert_array_equal(read.faces, F)
+    assert any("2 of 80 faces were wound against their neighbours" in n for n in read.notices)
+    inward = read_animated(write_obj(tmp_path / "inward.obj", V, F[:, ::-1])).mesh
+    assert _volume(inward.vertices, inward.faces) > 0
+    assert any("pointing inward; turned to point out" in n for n in inward.notices)
+    plain = read_animated(write_obj(tmp_path / "ball.obj", V, F)).mesh
+    np.testing.assert_array_equal(plain.faces, F)
+    assert plain.notices == ()
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    floor = read_animated(write_obj(tmp_path / "floor.obj", square, [[0, 1, 2], [0, 2, 3]]))
+    assert any("open: 4 edge(s) belong to one face only" in n for n in floor.mesh.notices)
+    u = np.linspace(0, 2 * np.pi, 13)[:-1]
+    strip = np.concatenate([np.c_[np.cos(u) * (1 + s * np.cos(u / 2)),
+                                  np.sin(u) * (1 + s * np.cos(u / 2)), s * np.sin(u / 2)]
+                            for s in (-0.3, 0.3)])
+    twisted = [f for k in range(12) for f in (
+        [k, (k + 1) % 12 if k < 11 else 12, 12 + k],
+        [(k + 1) % 12 if k < 11 else 12, 12 + (k + 1) % 12 if k < 11 else 0, 12 + k])]
+    with pytest.raises(MeshError, match="cannot all be wound alike"):
+        read_animated(write_obj(tmp_path / "moebius.obj", strip, twisted))
+    with pytest.raises(MeshError, match="is a folder, not a mesh file"):
+        read_animated(tmp_path)
+    (tmp_path / "empty.obj").write_bytes(b"")
+    with pytest.raises(MeshError, match="is empty .* export the body"):
+        read_animated(tmp_path / "empty.obj")

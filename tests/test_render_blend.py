@@ -88,8 +88,8 @@ def test_animate_dispatches_and_writes_three_panels(blend, tmp_path, monkeypatch
     p, traj = blend
     seen = {}
 
-    def spy(fig, draw, frames, path, fps):
-        write_gif(fig, draw, frames, path, fps)
+    def spy(fig, draw, frames, path, fps, **bounds):
+        write_gif(fig, draw, frames, path, fps, **bounds)
         seen.update(frames=list(frames), axes=[(ax.name, ax.get_title()) for ax in fig.axes],
                     legend=[t.get_text() for t in fig.legends[0].get_texts()])
 

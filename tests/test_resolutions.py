@@ -129,8 +129,19 @@ def test_an_interrupt_on_a_coarse_mesh_keeps_its_best_on_the_fine_one():
     assert r.x.size == prob.size and r.trajectory.x.shape[1] == 36
 
 
+def test_a_mesh_no_coarser_than_the_problem_is_left_out_and_said():
+    """A "coarse" stage as fine as the problem would solve it twice: it is not run, and its
+    stage says why."""
+    r = solve(toss(6), maxiter=2, quiet=True, resolutions=[{"rows": 6, "cols": 6},
+                                                           {"rows": 3, "cols": 3}])
+    assert [s["particles"] for s in r.stages] == [36, 9, 36]
+    left_out = r.stages[0]
+    assert left_out["skipped"] == "nothing to do" and left_out["nit"] == left_out["nfev"] == 0
+    assert "no fewer than the problem's 36" in left_out["message"]
+    assert "overrides" not in left_out and r.stages[1]["overrides"] == {"rows": 3, "cols": 3}
+
+
 @pytest.mark.parametrize("resolutions, match", [
-    ([{"rows": 8, "cols": 8}], "coarse to fine"),
     ([{"rows": 4, "cols": 4}, {"rows": 3, "cols": 3}], "coarse to fine"),
     ([{"steps": 24}], "not the same problem"),
     ({"rows": 3}, "must be a list"),
@@ -157,7 +168,7 @@ def test_cli_solves_coarse_to_fine(tmp_path, capsys):
                  "--no-animation", "--no-viewer", "--out", str(tmp_path)])
     assert code in (0, 3)
     out = capsys.readouterr().out
-    assert "stage 0: dt 0.0166667 s, 12 steps, 9 particles" in out
+    assert "stage 0 (rows=3, cols=3): dt 0.0166667 s, 12 steps, 9 particles" in out
     assert "stage 1: dt 0.0166667 s, 12 steps, 25 particles" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
     assert [s["particles"] for s in summary["stages"]] == [9, 25]

@@ -21,8 +21,8 @@ def temporaries(folder):
     return sorted(p.name for p in folder.iterdir() if ".tmp" in p.name)
 
 
-def start_solve(out, *extra):
-    cmd = [sys.executable, "-m", "casadi_keyframe.cli", "solve", *SMALL, "--out", str(out),
+def start_solve(out, *extra, problem=SMALL):
+    cmd = [sys.executable, "-m", "casadi_keyframe.cli", "solve", *problem, "--out", str(out),
            "--quiet", *extra]
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
 
@@ -83,26 +83,39 @@ def test_a_signal_writes_the_best_result_and_render_and_resume_use_it(method, si
     assert temporaries(out) == temporaries(again) == []
 
 
+SLOW_SAVE = ("import sys, time\n"
+             "import casadi_keyframe.runs.solve as run\n"
+             "real = run.save_result\n"
+             "run.save_result = lambda *a, **k: (time.sleep(3), real(*a, **k))[1]\n"
+             "from casadi_keyframe.cli import main\n"
+             "sys.exit(main(sys.argv[1:]))\n")
+
+
 def test_a_second_ctrl_c_stops_at_once_and_leaves_whole_files(tmp_path):
+    """The first signal stops the search at the next simulated step; the result's writing
+    is slowed down here so that the second arrives before it and stops the run at once."""
     out = tmp_path / "run"
-    proc = start_solve(out, "--gradient", "fd", "--maxiter", "500")
+    proc = subprocess.Popen([sys.executable, "-c", SLOW_SAVE, "solve", *SMALL, "--out",
+                             str(out), "--quiet", "--gradient", "fd", "--maxiter", "500"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     wait_for(out / "checkpoint.npz", proc)  # the start's, written before the first iteration
     wait_for(out / "checkpoint.npz", proc, after_iteration=True)  # inside the search now
     proc.send_signal(signal.SIGINT)
-    time.sleep(0.15)  # the first waits for the evaluation under way (about 0.5 s)
+    time.sleep(1.0)  # the search has stopped; the result is being written (slowly)
+    sent = time.monotonic()
     proc.send_signal(signal.SIGINT)
     text = proc.communicate(timeout=60)[0]
     assert proc.returncode == 130, text
+    assert time.monotonic() - sent < 2.0  # at once: not after the slow save
     assert temporaries(out) == [] and read_run(out / "checkpoint.npz")["u"].size == 240
-    if (out / "result.npz").exists():  # the first signal's result, if written before
-        assert read_run(out / "result.npz")["meta"]["status"] == 3
-    else:
-        assert "before the result was written" in text and f"--resume {out}" in text
+    assert not (out / "result.npz").exists()
+    assert "before the result was written" in text and f"--resume {out}" in text
 
 
 def test_an_interrupt_while_drawing_leaves_no_truncated_gif(tmp_path):
     out = tmp_path / "run"
-    proc = start_solve(out, "--set", "steps=200", "--maxiter", "3")  # a 151-frame GIF
+    long = [item if item != "steps=20" else "steps=200" for item in SMALL]
+    proc = start_solve(out, "--maxiter", "3", problem=long)  # a 151-frame GIF
     wait_for(out / "keyframes.png", proc)
     time.sleep(0.3)  # well into the animation (several seconds)
     proc.send_signal(signal.SIGINT)
@@ -135,7 +148,9 @@ def test_the_iteration_limit_exits_3_and_resume_goes_on(tmp_path, capsys):
                  "--no-animation"]) == 3
     text = capsys.readouterr().out
     assert "iteration limit reached (3 iterations in this stage)" in text and f"--resume {tmp_path}" in text
-    assert "--method lbfgsb --gradient adjoint --out" in text  # resumed the same way
+    # resumed the same way: every option repeated as typed, the method and route always
+    assert ("--set agents=6 --set steps=20 --set tolerance=2 --method lbfgsb --gradient "
+            "adjoint --maxiter 3 --quiet --no-animation --out") in text
     first = json.loads((tmp_path / "summary.json").read_text())
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--resume",
                  str(tmp_path / "checkpoint.npz"), "--quiet", "--no-animation"]) == 0
@@ -144,13 +159,16 @@ def test_the_iteration_limit_exits_3_and_resume_goes_on(tmp_path, capsys):
 
 
 def test_the_time_limit_exits_3(tmp_path, capsys):
-    """One finite-difference gradient takes longer than the limit, so the search stops at
-    its first iteration (counted, not timed: a loaded machine is slower, not wrong)."""
+    """One finite-difference gradient (480 simulations) takes longer than the limit, which
+    the run counts from its start: the first evaluation is cut at the limit, by the checks
+    of its own simulations, and the start is the result (counted, not timed: a loaded
+    machine is slower, not wrong)."""
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--gradient", "fd", "--time-limit",
                  "0.5", "--quiet", "--no-animation"]) == 3
-    assert "time limit reached (0.5 s)" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "time limit reached (0.5 s) during the first evaluation" in out
     summary = json.loads((tmp_path / "summary.json").read_text())
-    assert summary["status"] == 1 and summary["nit"] == 1
+    assert summary["status"] == 1 and summary["nit"] == 0 and summary["nfev"] == 0
 
 
 @pytest.mark.parametrize("change, message", [
@@ -161,7 +179,9 @@ def test_resume_refuses_another_run(change, message, tmp_path, capsys):
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--maxiter", "2", "--quiet",
                  "--no-animation"]) == 3
     capsys.readouterr()
-    assert main(["solve", *SMALL, *change, "--out", str(tmp_path / "b"), "--resume",
+    other = [*SMALL, *change] if "seed" in change[1] else [
+        item if not item.startswith("agents=") else change[1] for item in SMALL]
+    assert main(["solve", *other, "--out", str(tmp_path / "b"), "--resume",
                  str(tmp_path), "--quiet", "--no-animation"]) == 2
     assert message in capsys.readouterr().err
     assert main(["solve", "flock_race", "--set", "agents=6", "--set", "steps=20", "--out",
@@ -220,3 +240,26 @@ def test_misses_say_what_their_rms_is_over():
                                                          "fraction_inside": 1.0}])
     assert line == ("StateKeyframe@60 over 416 particles: rms_position_error 0.01; "
                     "RegionTarget@50 fraction_inside 1")
+
+
+def test_a_folder_in_use_is_refused_with_its_holders_pid(tmp_path, capsys):
+    """A live run's lock refuses a second run into its folder before anything is built or
+    written; a dead run's lock is taken over, and a run leaves no lock behind."""
+    from casadi_keyframe.saved.lock import LOCK
+
+    out = tmp_path / "run"
+    out.mkdir()
+    holder = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"])
+    try:
+        (out / LOCK).write_text(json.dumps({"pid": holder.pid, "started": "now"}))
+        assert main(["solve", *SMALL, "--out", str(out), "--maxiter", "2", "--quiet"]) == 2
+        said = capsys.readouterr().err
+        assert f"is in use by another run (pid {holder.pid}" in said and "another --out" in said
+        assert sorted(p.name for p in out.iterdir()) == [LOCK]
+    finally:
+        holder.kill()
+        holder.wait()
+    # its holder is gone: the lock is taken over, and gone after the run
+    assert main(["solve", *SMALL, "--out", str(out), "--maxiter", "2", "--quiet",
+                 "--no-animation", "--no-viewer"]) == 3
+    assert not (out / LOCK).exists() and (out / "result.npz").is_file()

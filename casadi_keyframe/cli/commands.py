@@ -2,6 +2,7 @@
 ``study``, ``sweep``): each reads its parsed arguments, runs, and returns its exit code."""
 from __future__ import annotations
 
+import contextlib
 import inspect
 import shutil
 import textwrap
@@ -12,10 +13,12 @@ import numpy as np
 from ..adjoints import ROUTES as GRADIENT_ROUTES
 from ..loading import (check_overrides, list_problems, load_module, load_problem,
                        overrides_of, solve_defaults)
+from ..optimize.deadline import now
 from ..optimize.settings import settings_from
 from ..runs import run_export, run_render, run_solve, solve_run
 from ..runs.report import format_value
 from ..saved import writable_folder
+from ..saved.lock import locked
 from .values import (option_items, parse_grid, parse_levels, parse_overrides,
                      parse_resolutions, parse_shooting, parse_time_steps)
 
@@ -61,6 +64,7 @@ def describe_allowed(override) -> str:
 def cmd_solve(args) -> int:
     from ..export import check_library
 
+    started = now()  # --time-limit counts from here: the build and the start are the run's
     for fmt in args.export or ():
         check_library(fmt)  # before the solve, not after it
     module = load_module(args.problem)
@@ -74,11 +78,38 @@ def cmd_solve(args) -> int:
              "homotopy": parse_levels(module, option_items(args.homotopy, "--homotopy",
                                                            "contact=3")),
              "stop": args.stop, "finish": args.finish}
-    spec = solve_run(module, args.problem, overrides, out, given=given, resume=args.resume,
-                     quiet=args.quiet, animation=not args.no_animation,
-                     exports=tuple(args.export or ()), viewer=not args.no_viewer)
-    writable_folder(spec.out, "--out")
-    return run_solve(spec)
+    with locked(out) if out is not None else contextlib.nullcontext():  # refused before the build
+        spec = solve_run(module, args.problem, overrides, out, given=given, resume=args.resume,
+                         quiet=args.quiet, animation=not args.no_animation,
+                         exports=tuple(args.export or ()), viewer=not args.no_viewer,
+                         started=started, typed=typed_options(args),
+                         draw_limit=args.draw_limit)
+        writable_folder(spec.out, "--out")
+        return run_solve(spec)
+
+
+def typed_options(args) -> tuple:
+    """The options of ``solve`` as the user typed them (text as given, numbers as
+    written), as ``(flag, value or None)`` pairs, but --out and --resume (the lines to type
+    again add their own): what a run's "continue with" line repeats."""
+    typed = []
+    for flag, value in (("--set", args.set), ("--method", args.method),
+                        ("--gradient", args.gradient), ("--option", args.option),
+                        ("--maxiter", args.maxiter), ("--continuation", args.continuation),
+                        ("--resolution", args.resolution), ("--rounds", args.rounds),
+                        ("--weight-growth", args.weight_growth),
+                        ("--segments", args.segments), ("--shooting", args.shooting),
+                        ("--scheduler", args.scheduler), ("--homotopy", args.homotopy),
+                        ("--stop", args.stop), ("--finish", args.finish),
+                        ("--time-limit", args.time_limit), ("--export", args.export),
+                        ("--draw-limit", args.draw_limit)):
+        for item in value if isinstance(value, list) else [value]:
+            if item is not None:
+                typed.append((flag, f"{item:g}" if isinstance(item, float) else str(item)))
+    for flag, on in (("--quiet", args.quiet), ("--no-animation", args.no_animation),
+                     ("--no-viewer", args.no_viewer)):
+        typed += [(flag, None)] if on else []
+    return tuple(typed)
 
 
 def asked(args) -> dict:
@@ -91,7 +122,7 @@ def asked(args) -> dict:
 
 
 def cmd_render(args) -> int:
-    return run_render(args.results, animation=not args.no_animation)
+    return run_render(args.results, animation=not args.no_animation, limit=args.draw_limit)
 
 
 def cmd_export(args) -> int:

@@ -128,8 +128,12 @@ def solve_parser(sub) -> None:
                         "'none' drops the problem file's")
     output_options(s)
     s.add_argument("--time-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
-                   help="stop the search after this wall time (over all stages and rounds); "
-                        "the best result is written, exit code 3")
+                   help="stop the run after this wall time, counted from its start (the "
+                        "problem's build, every stage, round and the finish; pictures "
+                        "apart, see --draw-limit); the best result is written, exit code 3")
+    s.add_argument("--draw-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
+                   help="the time the animation may take to draw (default 60): beyond it, "
+                        "fewer frames are drawn (every keyframe kept) and the run says so")
     s.add_argument("--resume", metavar="DIR_OR_NPZ",
                    help="start from a run's controls: a results folder (the newer of its "
                         "checkpoint.npz and result.npz) or either file; same problem and --set")
@@ -205,6 +209,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("results", help="results folder (result.npz and summary.json, or only "
                                     "checkpoint.npz), or one of those .npz files")
     r.add_argument("--no-animation", action="store_true", help="skip the GIF")
+    r.add_argument("--draw-limit", type=at_least(float, 0, strict=True), metavar="SECONDS",
+                   help="the time the animation may take to draw (default 60): beyond it, "
+                        "fewer frames are drawn (every keyframe kept)")
     r.set_defaults(func=cmd_render)
 
     export_parser(sub)

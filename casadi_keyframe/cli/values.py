@@ -10,7 +10,7 @@ from fractions import Fraction
 import numpy as np
 
 from ..loading import OverrideError, check_overrides
-from ..optimize.settings import key_value, parse_value, split_top
+from ..optimize.settings import key_value, once, parse_value, split_top
 
 
 def parse_overrides(items, option: str = "--set", example: str = "agents=50") -> dict:
@@ -21,7 +21,7 @@ def parse_overrides(items, option: str = "--set", example: str = "agents=50") ->
     out = {}
     for item in items or []:
         key, value = key_value(item, option, example)
-        out[key] = parse_value(value)
+        out[once(out, key, option)] = parse_value(value)
     return out
 
 
@@ -101,7 +101,9 @@ def parse_shooting(segments, items: list[dict], scheduler) -> dict | None:
 
     out = {} if segments is None else {"segments": segments}
     for item in items:
-        out.update(item)
+        for key, value in item.items():
+            out[once(out, key, "--shooting" if key != "segments" or segments is None
+                     else "--segments and --shooting")] = value
     if scheduler is not None:
         out["scheduler"] = scheduler
     if not out:

@@ -11,6 +11,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from .. import progress
 from . import alembic, obj, pc2, usd, viewer
 from .scene import Scene, scene_of
 
@@ -58,10 +59,12 @@ def format_help() -> str:
 
 
 def export_scene(scene: Scene, fmt: str, out) -> list[Path]:
-    """Write ``scene`` in format ``fmt`` into the folder ``out``; the files written."""
+    """Write ``scene`` in format ``fmt`` into the folder ``out``; the files written (the
+    work said as it goes: :mod:`~casadi_keyframe.progress`)."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    return check_format(fmt).write(scene, out)
+    with progress.task(f"exporting {fmt} ({scene.frames} frames)"):
+        return check_format(fmt).write(scene, out)
 
 
 def export(source, fmt: str, *, out=None) -> list[Path]:

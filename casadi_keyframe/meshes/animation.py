@@ -4,7 +4,8 @@
 time-sampled points or a time-sampled transform of its mesh) or a PC2 point cache with its
 rest mesh (``NAME.pc2`` beside ``NAME_rest.obj``, as :mod:`~..export.pc2` and Blender's Mesh
 Cache write them).  Times count from the first frame: a USD file's first time sample, a
-PC2 file's first sample, is t = 0.
+PC2 file's first sample, is t = 0.  The mesh is checked as a body
+(:func:`~.checks.check_body`: faces wound alike and out, an open one noted).
 """
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .checks import MeshError
+from .checks import MeshError, check_body
 from .mesh import Mesh
 from .point_cache import read_pc2
 from .readers import read_mesh, usd_frames
@@ -35,7 +36,7 @@ def read_animated(path, *, rest=None, fps: float | None = None) -> Animated:
     PC2 file has none).  A :class:`MeshError` names the file and what to give."""
     path = Path(path)
     if path.suffix.lower() != ".pc2":
-        mesh = read_mesh(path)
+        mesh = check_body(read_mesh(path, "body"))
         if path.suffix.lower() not in (".usd", ".usda", ".usdc", ".usdz"):
             return Animated(mesh)
         sampled = usd_frames(path)
@@ -46,7 +47,7 @@ def read_animated(path, *, rest=None, fps: float | None = None) -> Animated:
                         f"mesh, {rest}, which is missing: put the rest OBJ beside it")
     if fps is None or not fps > 0:
         raise MeshError(f"{path}: a PC2 cache holds no frame rate; give its frames per second")
-    mesh = read_mesh(rest)
+    mesh = check_body(read_mesh(rest, "body"))
     try:
         frames, _, rate = read_pc2(path)
     except ValueError as err:

@@ -24,21 +24,28 @@ _PLY_STANDARD = {"x", "y", "z", "nx", "ny", "nz", "red", "green", "blue", "alpha
                  "u", "v", "texture_u", "texture_v", "quality", "intensity"}
 
 
-def read_mesh(path) -> Mesh:
+def read_mesh(path, role: str = "cloth") -> Mesh:
     """The checked triangle mesh in the file ``path`` (``.obj``, ``.ply``, ``.usd``,
     ``.usda``, ``.usdc``, ``.usdz``); a :class:`MeshError` (a ValueError) naming the file
-    when it is missing, unreadable or not a usable cloth mesh."""
+    when it is missing, unreadable or not a usable mesh for its ``role`` ("cloth", a target
+    shape of one, or "body")."""
     path = Path(path)
+    if path.is_dir():
+        raise MeshError(f"{path}: is a folder, not a mesh file; give the {role}'s file in it "
+                        f"(OBJ, PLY or USD)")
     kind = FORMATS.get(path.suffix.lower())
     if kind is None:
         raise MeshError(f"{path}: unknown mesh format {path.suffix or '(no suffix)'!r}; give "
                         f"an OBJ, PLY or USD file ({', '.join(FORMATS)})")
     if not path.is_file():
         raise MeshError(f"{path}: no such file" if not path.exists()
-                        else f"{path}: is a folder, not a mesh file")
+                        else f"{path}: is not a regular file")
+    if path.stat().st_size == 0:
+        raise MeshError(f"{path}: is empty (0 bytes); export the {role} into it again as a "
+                        f"mesh with its faces")
     reader = {"OBJ": _read_obj, "PLY": _read_ply, "USD": _read_usd}[kind]
-    vertices, polygons, groups, notices, *numbering = reader(path)
-    mesh = check_mesh(vertices, polygons, source=path, groups=groups,
+    vertices, polygons, groups, notices, *numbering = reader(path, role)
+    mesh = check_mesh(vertices, polygons, source=path, groups=groups, role=role,
                       **(numbering[0] if numbering else {}))
     if notices:
         mesh = Mesh(mesh.vertices, mesh.faces, mesh.groups, mesh.source,
@@ -46,7 +53,7 @@ def read_mesh(path) -> Mesh:
     return mesh
 
 
-def _trimesh(path: Path, kind: str):
+def _trimesh(path: Path, kind: str, role: str = "cloth"):
     """trimesh's reading of ``path`` with the file's vertex order kept (no merging)."""
     try:
         import trimesh
@@ -62,11 +69,11 @@ def _trimesh(path: Path, kind: str):
         raise MeshError(f"{path}: cannot be read as {kind}: {err}") from None
     if not hasattr(loaded, "vertices") or len(loaded.vertices) == 0:
         raise MeshError(f"{path}: holds no mesh vertices readable as {kind}; export the "
-                        f"cloth as a mesh with its faces")
+                        f"{role} as a mesh with its faces")
     return loaded
 
 
-def _read_obj(path: Path):
+def _read_obj(path: Path, role: str = "cloth"):
     head = path.read_bytes()[:1 << 16]
     try:
         if b"\0" in head:
@@ -76,7 +83,7 @@ def _read_obj(path: Path):
         raise MeshError(f"{path}: cannot be read as OBJ: it is not a text file (an OBJ is "
                         f"text: export it again as Wavefront OBJ)") from None
     sizes, count = _obj_faces(path)
-    loaded = _trimesh(path, "OBJ")
+    loaded = _trimesh(path, "OBJ", role)
     if len(loaded.vertices) != count:
         raise MeshError(f"{path}: {count} 'v' lines but {len(loaded.vertices)} vertices read; "
                         f"the vertex order could not be kept (one object per file, please)")
@@ -120,8 +127,8 @@ def _quads(path, sizes) -> list[str]:
              f"into triangles from their first corner"] if big else [])
 
 
-def _read_ply(path: Path):
-    loaded = _trimesh(path, "PLY")
+def _read_ply(path: Path, role: str = "cloth"):
+    loaded = _trimesh(path, "PLY", role)
     raw = loaded.metadata.get("_ply_raw", {})
     polygons = raw.get("face", {}).get("data", {}).get("vertex_indices")
     notices = []
@@ -138,7 +145,7 @@ def _read_ply(path: Path):
     return np.asarray(loaded.vertices, float), polygons, groups, notices
 
 
-def _read_usd(path: Path):
+def _read_usd(path: Path, role: str = "cloth"):
     try:
         from pxr import Usd, UsdGeom
     except ImportError:
@@ -148,7 +155,7 @@ def _read_usd(path: Path):
     time = Usd.TimeCode.EarliestTime()
     mesh = UsdGeom.Mesh(prim)
     points, turned = _usd_points(stage, prim, time)
-    notices = ([f"{path}: the stage is y up; turned to z up as the cloth is simulated"]
+    notices = ([f"{path}: the stage is y up; turned to z up as the {role} is simulated"]
                if turned else [])
     counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get(time) or [], int)
     flat = np.asarray(mesh.GetFaceVertexIndicesAttr().Get(time) or [], int)

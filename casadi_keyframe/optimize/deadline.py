@@ -46,3 +46,11 @@ class Deadline:
     def elapsed(self) -> float:
         """Seconds since it started."""
         return now() - self.started
+
+    def share(self, fraction: float) -> "Deadline":
+        """A deadline from now that passes once ``fraction`` of the time this one leaves is
+        used (itself without a limit): a stage's share, so that the stages after it keep
+        the rest."""
+        if self.limit is None:
+            return self
+        return Deadline.start(fraction * max(self.limit - self.elapsed(), 0.0))

@@ -11,9 +11,10 @@ import signal
 
 import numpy as np
 
+from .. import progress
 from ..adjoints import Evaluation, get_gradient
 from ..health import GrowthLog
-from ..interrupts import check
+from ..interrupts import OutOfTime, check
 from ..state import SimulationError
 from .deadline import now
 from .goal import GoalReached, verdict
@@ -104,6 +105,7 @@ class Evaluator:
         self.last_error = None
         self.seconds = 0.0
         self.interrupted = None
+        self.timed_out = False  # an evaluation was cut by the time limit (OutOfTime)
         self.start = None  # (objective, keyframe error) at the starting controls
         self.health = GrowthLog()  # each gradient's backward growth (health.GradientError too)
         self.reset()
@@ -150,6 +152,9 @@ class Evaluator:
         except KeyboardInterrupt as err:  # IPOPT would swallow it: remember, then re-raise
             self.interrupted = getattr(err, "signum", signal.SIGINT)
             raise
+        except OutOfTime:  # the evaluation was cut short: it never happened
+            self.timed_out = True
+            raise
         self.seconds += now() - t
         self.nfev += 1
         self.last_u, self.last, self.last_info = u, (f, g), info
@@ -183,6 +188,9 @@ class Evaluator:
             self.last_failure = str(err)
         except KeyboardInterrupt as err:
             self.interrupted = getattr(err, "signum", signal.SIGINT)
+            raise
+        except OutOfTime:
+            self.timed_out = True
             raise
         finally:
             self.seconds += now() - t
@@ -255,12 +263,12 @@ class Evaluator:
             return self.merit.describe(self.best_u, self.best_f, self.best_info)
         return self.merit.describe(self.last_u, self.last[0], self.last_info)
 
-    def record(self, history, clock, bar=None, **extra):
+    def record(self, history, clock, **extra):
         """Append one iteration (at the :attr:`report` point) to ``history``, ``extra`` its
         optional keys, its time read from ``clock`` (the call's :class:`~.deadline.Deadline`);
         the checkpoint gets the best controls on the final grid (``u``), their objective at
         this stage's time step (``fun``), the iterations so far (``nit``), the ``stage`` and
-        its ``stage_dt``."""
+        its ``stage_dt``; the stage's progress counts it."""
         u, objective, keyframe, more = self._described(self.report)
         growth = {} if self.health.last is None else {"gradient_growth": self.health.last}
         history.append(history_record(
@@ -268,10 +276,8 @@ class Evaluator:
             iteration=len(history) + 1, stage=self.stage,
             seconds=clock.elapsed(), nfev=self.nfev, **growth, **extra, **more))
         self.keep(nit=len(history))
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(f=f"{objective:.4g}")
         check()
+        progress.advance(facts=f"objective {objective:.4g}")
         self.check_goal(len(history))
 
 
@@ -298,3 +304,7 @@ class MetricView:
     @property
     def interrupted(self):
         return self.ev.interrupted
+
+    @property
+    def timed_out(self):
+        return self.ev.timed_out

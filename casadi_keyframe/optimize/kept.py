@@ -99,29 +99,35 @@ def kept_outcome(kept, status: int, message: str) -> tuple[int, str]:
     return (FAILED if status == CONVERGED else status), f"{said}; {found.describe()}"
 
 
-def kept_stage(problem, stages: list, fun: float, status: int, message: str) -> None:
-    """Append to ``stages`` the record of returning the kept point (no iteration), so that
-    the last stage's objective is the result's."""
+def kept_stage(problem, stages: list, fun: float, status: int, message: str,
+               seconds: float = 0.0) -> None:
+    """Append to ``stages`` the record of returning the kept point (no iteration; its
+    ``seconds``: work that ended without a record of its own, such as an interrupted
+    finish's), so that the last stage's objective is the result's."""
     number = stages[-1]["stage"] + 1 if stages else 0
     stages.append(stage_record(problem, number, nit=0, nfev=0, njev=0, fun=fun,
-                               status=status, message=message, seconds=0.0,
+                               status=status, message=message, seconds=seconds,
                                evaluation_seconds=0.0, failed_simulations=0))
 
 
 def conclude(problem, kept, route, *, status: int, message: str, stages: list, history: list,
-             method: str, started: float, known=None, gradient: bool = True) -> Result:
+             method: str, started: float, known=None, gradient: bool = True,
+             seconds: float = 0.0) -> Result:
     """The :class:`~.result.Result` at the point ``kept`` holds, ending with ``status`` and
-    ``message`` and a stage that says so: its objective and gradient by ``route``, or
-    ``known`` ``(controls, objective, gradient)`` where the point is those controls, or
-    (``gradient`` False, after a signal: no more work) its objective alone."""
+    ``message`` and a stage that says so (``seconds``: see :func:`kept_stage`): its
+    objective and gradient by ``route``, or ``known`` ``(controls, objective, gradient)``
+    where the point is those controls, or (``gradient`` False, after a signal or the time
+    limit: no more work) its objective alone, from its kept run."""
     u = kept.u
     if known is not None and (u is known[0] or np.array_equal(u, known[0])):
         fun, jac = known[1], known[2]
     elif gradient:
         fun, jac = evaluate_final(problem, route, u)
     else:
-        fun, jac = problem.objective(u), np.full(u.size, np.nan)
-    kept_stage(problem, stages, fun, status, message)
+        fun = float(problem.state_cost(kept.trajectory, gradient=False)[0]
+                    + problem.control_cost(u)[0])
+        jac = np.full(u.size, np.nan)
+    kept_stage(problem, stages, fun, status, message, seconds)
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
                     method=method, route=route, stages=stages, history=history,
                     started=started, trajectory=kept.trajectory)

@@ -3,17 +3,30 @@ round's outcome, the keyframes' misses, how physical a motion stays."""
 from __future__ import annotations
 
 def format_stage(stage: dict) -> str:
-    """One line for a continuation stage (its dt) or an augmented-Lagrangian round (its
-    weight scale and keyframe misses), ending with how it stopped."""
+    """One line for a continuation stage (its dt, the build overrides that made it: a
+    coarser mesh, a homotopy level) or an augmented-Lagrangian round (its weight scale and
+    keyframe misses), ending with how it stopped; a stage that did not run says why."""
+    made = ", ".join(f"{k}={typed(v)}" for k, v in stage.get("overrides", {}).items())
     head = (f"round {stage['stage']}: weight x{stage['weight_scale']:.3g}"
             if "weight_scale" in stage else
-            f"stage {stage['stage']}: dt {stage['dt']:.6g} s, {stage['steps']} steps"
+            f"stage {stage['stage']}{f' ({made})' if made else ''}: dt {stage['dt']:.6g} s, "
+            f"{stage['steps']} steps"
             + (f", {stage['particles']} particles" if "particles" in stage else ""))
+    if "skipped" in stage:
+        return f"{head}; {stage['message']}"
     line = (f"{head}, {stage['nit']} iterations, objective {stage['fun']:.6g}, "
             f"{stage['seconds']:.1f} s")
     if stage.get("misses"):
         line += "; " + format_misses(stage["misses"])
     return line + (f"; {stage['message']}" if stage.get("message") else "")
+
+
+def typed(value) -> str:
+    """An override's value as typed: a number as written (3, not 3.0), a sequence
+    comma-separated."""
+    if isinstance(value, (list, tuple)):
+        return ",".join(typed(v) for v in value)
+    return f"{value:g}" if isinstance(value, float) else str(value)
 
 
 def format_physical(report: dict) -> str:

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..state import Trajectory
 from .deadline import now
-from .outcome import CONVERGED, STATUS
+from .outcome import CONVERGED, INTERRUPTED, LIMIT, STATUS
 
 
 class _HistoryFields(TypedDict):
@@ -133,6 +133,12 @@ class Stage(_StageFields, total=False):
     """The largest backward growth of its evaluations (a route that watches it)."""
     gradient_refused: int
     """Its evaluations whose gradient was refused (in ``failed_simulations`` too)."""
+    overrides: dict
+    """The build overrides that make its problem, where they are not the solve's own (a
+    coarser mesh's ``rows`` and ``cols``, a homotopy level's ``contact``)."""
+    skipped: str
+    """Why it did not run: ``"time"`` (the time limit), ``"signal"`` or ``"nothing to do"``
+    (its message says more); its counts are then 0 and its objective NaN."""
 
 
 @dataclass
@@ -263,6 +269,29 @@ def stage_record(problem, stage: int, *, nit: int, nfev: int, njev: int, fun: fl
               "failed_simulations": failed_simulations, **extra}
     _check_keys("stage", record, Stage)
     return record
+
+
+SKIPPED = {"time": "the time limit", "signal": "a signal", "nothing to do": "nothing to do"}
+"""Why a stage may not run, as :attr:`Stage.skipped` says it."""
+
+
+def skipped_stage(problem, stage: int, why: str, status: int, **extra) -> Stage:
+    """The :class:`Stage` of stage number ``stage`` on ``problem`` that did not run, ending
+    with ``status`` (of the stage before it, or 0 with nothing to do): its message "not run:
+    ``why``", its counts 0; ``extra`` as for :func:`stage_record`."""
+    kind = ("signal" if status == INTERRUPTED else "time" if status == LIMIT
+            else "nothing to do")
+    return stage_record(problem, stage, nit=0, nfev=0, njev=0, fun=math.nan, status=status,
+                        message=f"not run: {why}", seconds=0.0, evaluation_seconds=0.0,
+                        failed_simulations=0, skipped=kind, **extra)
+
+
+def with_stage(result: "Result", stage: Stage) -> "Result":
+    """``result`` with ``stage`` appended to its stages (and its seconds to the timings)."""
+    result.stages = [*result.stages, stage]
+    result.timings = {**result.timings,
+                      "stage_seconds": [*result.timings["stage_seconds"], stage["seconds"]]}
+    return result
 
 
 def assemble(problem, u, *, fun: float, jac, status: int, message: str, method: str,

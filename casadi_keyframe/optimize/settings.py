@@ -166,6 +166,10 @@ def settings_from(file: Mapping | None = None, given: Mapping | None = None) -> 
         values["resolutions"], values["coarser_only"] = file["resolutions"], True
     values["shooting"] = _merged_shooting(file.get("shooting"), given.get("shooting"))
     finish = given.get("finish", file.get("finish"))
+    if isinstance(finish, str) and finish != "none" and split_top(finish)[:1] == ["none"]:
+        raise ValueError(f"--finish none drops the finish and takes no options; got "
+                         f"{finish!r}: give 'none' alone, or a kind with options such as "
+                         "effort,window=20")
     values["finish"] = None if finish == "none" else finish
     return SolveSettings(**values)
 
@@ -283,8 +287,16 @@ def _items(items, what: str, form: str) -> dict:
         key, sep, value = item.partition("=")
         if not sep or not key.strip().isidentifier():
             raise ValueError(f"{what}: expected {form}, got the item {item!r}")
-        out[key.strip()] = parse_value(value)
+        out[once(out, key.strip(), what)] = parse_value(value)
     return out
+
+
+def once(given: Mapping, key: str, what: str) -> str:
+    """``key``, refused (ValueError naming ``what``) if ``given`` has it already: a key
+    typed twice is a mistake whichever value was meant, never the last one silently."""
+    if key in given:
+        raise ValueError(f"{what}: {key} is given twice (first {given[key]!r}): give it once")
+    return key
 
 
 def key_value(item: str, option: str, example: str) -> tuple[str, str]:

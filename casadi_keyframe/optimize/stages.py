@@ -4,22 +4,24 @@ first, then the model's own) and the time steps of a continuation (time); and ho
 pass from one to the next."""
 from __future__ import annotations
 
+from .. import progress
 from .transfer import carry_to_mesh
 
 
 def stage_problems(problem, continuation, resolutions=None, homotopy=None,
-                   coarser_only: bool = False) -> list:
+                   coarser_only: bool = False, skipped: list | None = None) -> list:
     """The problems a continuation solves in turn, coarse to fine; the last is ``problem``.
 
-    For every mesh of ``resolutions`` (see :func:`coarser_meshes`; with ``coarser_only``
-    those coarser than ``problem`` only, the others left out) and then ``problem``: the
-    mesh at each level of ``homotopy`` (see :func:`homotopy_levels`) and then as it is, each
-    at the time stages of ``continuation``.  ``continuation`` None means one time stage.
-    Otherwise its time steps must decrease strictly and end at ``problem.dt`` (appended if
-    missing), each dividing the horizon into whole steps with every keyframe on its grid
-    (else ValueError, from ``resampled``).
+    For every mesh of ``resolutions`` (see :func:`coarser_meshes`: one no coarser than
+    ``problem`` is left out, and, unless ``coarser_only``, appended to ``skipped`` as
+    ``(mesh, why)``) and then ``problem``: the mesh at each level of ``homotopy`` (see
+    :func:`homotopy_levels`) and then as it is, each at the time stages of
+    ``continuation``.  ``continuation`` None means one time stage.  Otherwise its time steps
+    must decrease strictly and end at ``problem.dt`` (appended if missing), each dividing
+    the horizon into whole steps with every keyframe on its grid (else ValueError, from
+    ``resampled``).
     """
-    meshes = coarser_meshes(problem, resolutions, coarser_only) + [problem]
+    meshes = coarser_meshes(problem, resolutions, coarser_only, skipped) + [problem]
     return [stage for mesh in meshes for level in homotopy_levels(mesh, homotopy)
             for stage in _time_stages(level, continuation)]
 
@@ -44,36 +46,58 @@ def homotopy_levels(problem, homotopy) -> list:
     return levels + [problem]
 
 
-def coarser_meshes(problem, resolutions, coarser_only: bool = False) -> list:
+def coarser_meshes(problem, resolutions, coarser_only: bool = False,
+                   skipped: list | None = None) -> list:
     """The problems of ``resolutions`` (None or a list of problems or build-override dicts),
     checked to be the same kind of problem on ever finer meshes, all coarser than
-    ``problem`` (with ``coarser_only``: those that are not are left out, as a problem file's
-    default meshes are for a problem built that coarse itself)."""
+    ``problem``: one that is not would solve the problem again, and is left out (a problem
+    file's default meshes for a problem built that coarse itself: silently, with
+    ``coarser_only``; else appended to ``skipped`` as ``(mesh, why)`` and noted)."""
     if resolutions is None:
         return []
     if isinstance(resolutions, (dict, str)) or not hasattr(resolutions, "__iter__"):
         raise ValueError(f"resolutions must be a list of coarser problems or of build "
                          f"overrides such as {{'rows': 12, 'cols': 12}}, got {resolutions!r}")
     meshes = [problem.at_resolution(**r) if isinstance(r, dict) else r for r in resolutions]
-    if coarser_only:
-        kept = [(r, m) for r, m in zip(resolutions, meshes) if m.model.n < problem.model.n]
-        resolutions, meshes = [r for r, _ in kept], [m for _, m in kept]
-    sizes = []
+    kept = []
     for r, mesh in zip(resolutions, meshes):
-        if not isinstance(mesh, type(problem)):
-            raise ValueError(f"resolutions: {r!r} is neither a problem nor a dict of build "
-                             "overrides")
-        if mesh.horizon != problem.horizon or type(mesh.controls) is not type(problem.controls):
-            raise ValueError(f"resolutions: {mesh.name} on {mesh.model.n} particles is not the "
-                             f"same problem as {problem.name} ({mesh.steps} steps of "
-                             f"{mesh.dt:.6g} s, {mesh.controls.label}; the problem: "
-                             f"{problem.steps} of {problem.dt:.6g} s, {problem.controls.label})")
-        sizes.append(mesh.model.n)
+        finer = isinstance(mesh, type(problem)) and mesh.model.n >= problem.model.n
+        if finer and coarser_only:
+            continue
+        _same_problem(problem, r, mesh)
+        if not finer:
+            kept.append(mesh)
+            continue
+        said = (f"{_said(r)} has {mesh.model.n} particles, no fewer than the problem's "
+                f"{problem.model.n}: not a coarser stage")
+        progress.note(f"resolution {said}; left out")
+        if skipped is not None:
+            skipped.append((mesh, f"nothing to do: {said}"))
+    sizes = [mesh.model.n for mesh in kept]
     if any(b <= a for a, b in zip(sizes, sizes[1:] + [problem.model.n])):
         raise ValueError(f"resolutions must go coarse to fine, each mesh with fewer particles "
                          f"than the next and than the problem's {problem.model.n}; got "
                          f"{sizes} particles")
-    return meshes
+    return kept
+
+
+def _same_problem(problem, level, mesh) -> None:
+    """Refuse a mesh ``level`` (``mesh`` built) that is not ``problem`` on another mesh."""
+    if not isinstance(mesh, type(problem)):
+        raise ValueError(f"resolutions: {level!r} is neither a problem nor a dict of build "
+                         "overrides")
+    if mesh.horizon != problem.horizon or type(mesh.controls) is not type(problem.controls):
+        raise ValueError(f"resolutions: {mesh.name} on {mesh.model.n} particles is not the "
+                         f"same problem as {problem.name} ({mesh.steps} steps of "
+                         f"{mesh.dt:.6g} s, {mesh.controls.label}; the problem: "
+                         f"{problem.steps} of {problem.dt:.6g} s, {problem.controls.label})")
+
+
+def _said(level) -> str:
+    """A stage's build overrides as typed (``rows=5,cols=5``), or the problem it is."""
+    if isinstance(level, dict):
+        return ",".join(f"{k}={v}" for k, v in level.items())
+    return f"{level.name} ({level.model.n} particles)"
 
 
 def _time_stages(problem, continuation) -> list:
@@ -99,6 +123,16 @@ def _time_stages(problem, continuation) -> list:
             f"{[float(f'{d:.6g}') for d in continuation]}.  To solve at a finer step, build the "
             "problem with that dt")
     return [problem.resampled(dt) for dt in dts[:-1]] + [problem]
+
+
+def stage_overrides(stage, problem) -> dict:
+    """The build overrides that make ``stage`` (a coarser mesh, a homotopy level) where
+    they differ from ``problem``'s (the solve's own): ``{"contact": 3}``; empty for the
+    problem itself, a time stage of it, or problems not rebuilt from a file."""
+    if stage is problem or stage.source is None or problem.source is None:
+        return {}
+    own, built = problem.source.overrides, stage.source.overrides
+    return {k: v for k, v in built.items() if k not in own or own[k] != v}
 
 
 def stage_name(problem) -> str:

@@ -30,18 +30,21 @@ def renderer(problem):
 
 
 def animate(problem, trajectory, path, *, fps: int | None = None,
-            max_frames: int | None = None, title=None):
+            max_frames: int | None = None, title=None, limit: float | None = None):
     """Write an animated GIF of ``trajectory``; returns the path.
 
     About ``max_frames + 1`` frames, always with every keyframe and the last frame; ``fps``
     and ``max_frames`` default to the renderer's own (flock 20 and 150, cloth and blend 15
-    and 80); ``title`` overrides the problem name in the title.
+    and 80); ``title`` overrides the problem name in the title; ``limit``: the seconds its
+    drawing may take, past which the frames left are thinned (:func:`.frames.write_gif`).
     """
     given = {k: v for k, v in (("fps", fps), ("max_frames", max_frames)) if v is not None}
-    return renderer(problem).animate(problem, trajectory, path, title=title, **given)
+    return renderer(problem).animate(problem, trajectory, path, title=title, limit=limit,
+                                     **given)
 
 
-def snapshot(problem, trajectory, path, frames=None):
+def snapshot(problem, trajectory, path, frames=None, title=None):
     """Write a PNG of small multiples, by default at the first frame, each keyframe and the
-    last (a blend: the start, two between and the end of the blend); returns the path."""
-    return renderer(problem).snapshot(problem, trajectory, path, frames)
+    last (a blend: the start, two between and the end of the blend); ``title`` in place of
+    the problem's name; returns the path."""
+    return renderer(problem).snapshot(problem, trajectory, path, frames, title=title)

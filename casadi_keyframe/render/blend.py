@@ -130,9 +130,10 @@ def side_by_side(fig, problem, trajectory, ks) -> list[BlendPanel]:
 
 
 def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
-            title=None) -> Path:
+            title=None, limit: float | None = None) -> Path:
     """Write the three-panel GIF; about ``max_frames + 1`` frames, always with the blend's
-    first and last; ``title`` overrides the problem name.  Returns the path."""
+    first and last (fewer past ``limit`` seconds of drawing: :func:`~.frames.write_gif`);
+    ``title`` overrides the problem name.  Returns the path."""
     path, ks = Path(path), blend_frames(problem)
     name = problem.name if title is None else title
     fig = plt.figure(figsize=(16.0, 6.4))
@@ -150,16 +151,16 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
             fig.suptitle(f"{name} \u2014 {stage}", fontsize=11, y=0.985)
 
         frames = select_frames(len(ks) - 1, [-ks[0]], max_frames)  # keep the blend's start
-        write_gif(fig, draw, frames, path, fps)
+        write_gif(fig, draw, frames, path, fps, limit=limit, keep=[-ks[0]])
     finally:
         plt.close(fig)
     return path
 
 
-def snapshot(problem, trajectory, path, frames=None) -> Path:
+def snapshot(problem, trajectory, path, frames=None, title=None) -> Path:
     """Write a PNG: a row per panel (fall, blend, walk), a column per blend frame
     (default: the start, two between and the end of the blend, and every keyframe, where
-    the blend panel says whether it was hit)."""
+    the blend panel says whether it was hit); ``title`` in place of the problem's name."""
     path, steps = Path(path), problem.steps
     ks = sorted({int(k) for k in ([*np.round(np.linspace(0, steps, 4)), *keyframes(problem)]
                                  if frames is None else frames)})
@@ -175,8 +176,8 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
                 panel = BlendPanel(ax, problem, trajectory, p, range(steps + 1), box)
                 panel.draw(k, full_title=False)
                 middle = panel if p == "blend" else middle
-        save_grid(fig, path, titled(problem.name, middle.markers, trajectory, problem), middle,
-                  _handles())
+        save_grid(fig, path, titled(title or problem.name, middle.markers, trajectory, problem),
+                  middle, _handles())
     finally:
         plt.close(fig)
     return path

@@ -322,10 +322,11 @@ def legend(fig, panel: ClothPanel, extra=(), *, bottom: float = 0.0):
 
 
 def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
-            title=None) -> Path:
+            title=None, limit: float | None = None) -> Path:
     """Write an animated 3-D GIF of a cloth ``trajectory``; returns the path.
 
-    About ``max_frames + 1`` frames, always with every keyframe and the last frame;
+    About ``max_frames + 1`` frames, always with every keyframe and the last frame (fewer
+    past ``limit`` seconds of drawing: :func:`~.frames.write_gif`);
     ``title`` overrides the problem name in the title.  One camera for the whole animation,
     the one nearest the problem's that sees every target's extent; between keyframes the
     next target is drawn faded and labelled with its frame; at a keyframe the cloth is
@@ -342,17 +343,19 @@ def animate(problem, trajectory, path, *, fps: int = 15, max_frames: int = 80,
         if coloured(problem, range(trajectory.steps + 1)):
             colorbar(fig, panel.scale, rect=(0.3, 0.08, 0.4, 0.014))
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
-        write_gif(fig, lambda n: panel.draw(n, hold=True), frames, path, fps)
+        write_gif(fig, lambda n: panel.draw(n, hold=True), frames, path, fps, limit=limit,
+                  keep=keyframes(problem))
     finally:
         plt.close(fig)
     return path
 
 
-def snapshot(problem, trajectory, path, frames=None) -> Path:
+def snapshot(problem, trajectory, path, frames=None, title=None) -> Path:
     """Write a PNG of 3-D small multiples: by default the first frame, each keyframe and
     the last.  Each keyframe panel has the camera that sees its target's extent, the cloth
     coloured by its distance to the target and a line per keyframe saying whether it was
-    hit; targets appear only at their own frame; the title counts the hits."""
+    hit; targets appear only at their own frame; the title counts the hits (``title`` in
+    place of the problem's name)."""
     path = Path(path)
     frames = snapshot_frames(problem, trajectory, frames)
     rows, cols = grid_shape(len(frames))
@@ -364,19 +367,20 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
             panel = TrajectoryPanel(ax, problem, trajectory, box=box,
                                     camera=keyframe_camera(problem, [n], trajectory))
             panel.draw(n, full_title=False, ahead=False)
-        save_grid(fig, path, titled(problem.name, panel.markers, trajectory, problem), panel,
-                  scale=panel.scale if coloured(problem, frames) else None)
+        save_grid(fig, path, titled(title or problem.name, panel.markers, trajectory, problem),
+                  panel, scale=panel.scale if coloured(problem, frames) else None)
     finally:
         plt.close(fig)
     return path
 
 
-def side_by_side(problem, rows: dict, path, frames=None) -> Path:
+def side_by_side(problem, rows: dict, path, frames=None, title=None) -> Path:
     """Write a PNG with one row of 3-D panels per trajectory of ``rows`` (``{label:
     trajectory}``, e.g. the optimizer's start and its result) at the same frames (default:
     the first, each keyframe and the last), all in one box; each column seen from the
     camera that shows its keyframe's target, the cloth coloured by its distance to the
-    target on the problem's scale, each keyframe panel saying whether it was hit."""
+    target on the problem's scale, each keyframe panel saying whether it was hit (``title``
+    in place of the problem's name)."""
     path = Path(path)
     first = next(iter(rows.values()))
     frames = snapshot_frames(problem, first, frames)
@@ -392,8 +396,8 @@ def side_by_side(problem, rows: dict, path, frames=None) -> Path:
                 panel.draw(n, full_title=False, ahead=False)
                 ax.set_title(f"{label}: " + ax.get_title() if c == 0 else ax.get_title(),
                              fontsize=8)
-        title = "  |  ".join(titled(label, panel.markers, t, problem) for label, t in rows.items())
-        save_grid(fig, path, f"{problem.name} \u2014 {title}", panel,
+        said = "  |  ".join(titled(label, panel.markers, t, problem) for label, t in rows.items())
+        save_grid(fig, path, f"{title or problem.name} \u2014 {said}", panel,
                   scale=panel.scale if coloured(problem, frames) else None)
     finally:
         plt.close(fig)

@@ -153,11 +153,12 @@ def _figsize(panel: FlockPanel, width: float) -> tuple[float, float]:
 
 
 def animate(problem, trajectory, path, *, fps: int = 20, max_frames: int = 150,
-            title=None) -> Path:
+            title=None, limit: float | None = None) -> Path:
     """Write an animated GIF of ``trajectory`` seen from above; returns the path.
 
     Long trajectories are subsampled to about ``max_frames + 1`` frames, keeping every
-    keyframe and the last frame.  ``title`` overrides the problem name in the title.
+    keyframe and the last frame (and to fewer, past ``limit`` seconds of drawing:
+    :func:`~.frames.write_gif`).  ``title`` overrides the problem name in the title.
     """
     path = Path(path)
     fig, ax = plt.subplots()
@@ -172,15 +173,17 @@ def animate(problem, trajectory, path, *, fps: int = 20, max_frames: int = 150,
         _legend(fig, panel)
         fig.tight_layout(rect=(0, 0.05, 1, 1))
         frames = select_frames(trajectory.steps, keyframes(problem), max_frames)
-        write_gif(fig, lambda n: panel.draw(n, hold=True), frames, path, fps)
+        write_gif(fig, lambda n: panel.draw(n, hold=True), frames, path, fps, limit=limit,
+                  keep=keyframes(problem))
     finally:
         plt.close(fig)
     return path
 
 
-def snapshot(problem, trajectory, path, frames=None) -> Path:
+def snapshot(problem, trajectory, path, frames=None, title=None) -> Path:
     """Write a PNG of small multiples: by default the first frame, each keyframe and the
-    last, each keyframe's panel saying whether it was hit; the title counts the hits."""
+    last, each keyframe's panel saying whether it was hit; the title counts the hits
+    (``title`` in place of the problem's name)."""
     path = Path(path)
     frames = snapshot_frames(problem, trajectory, frames)
     rows, cols = grid_shape(len(frames))
@@ -195,7 +198,7 @@ def snapshot(problem, trajectory, path, frames=None) -> Path:
             panel.draw(n, full_title=False)
         said = sum(max(p.pad for p in panels[r * cols:(r + 1) * cols]) for r in range(rows))
         fig.set_size_inches(w * cols, (h - 0.2) * rows + 0.5 + said / 72)  # room for them
-        fig.suptitle(titled(problem.name, panels[0].markers, trajectory), fontsize=11)
+        fig.suptitle(titled(title or problem.name, panels[0].markers, trajectory), fontsize=11)
         _legend(fig, panels[0])
         fig.tight_layout(rect=(0, 0.04, 1, 1))
         save_figure(fig, path, dpi=110)

@@ -1,18 +1,24 @@
 """What every picture shares: which frames to draw, their titles, and writing PNGs and GIFs.
 
 Files are written to a temporary name moved into place when complete, so an interrupted
-drawing leaves no half-written picture.
+drawing leaves no half-written picture.  An animation says how far it is
+(:mod:`~casadi_keyframe.progress`) and may be given a time to draw in: past it, the frames
+left are thinned (every one asked to be kept, and the last, stay).
 """
 from __future__ import annotations
 
+import time
 from pathlib import Path
 
 import matplotlib
 import numpy as np
 from matplotlib.animation import PillowWriter
 
+from .. import progress
 from ..interrupts import check
 from ..saved import atomic_path
+
+ENCODING = 0.8  # the share of a GIF's time limit its frames may take (the rest: encoding)
 
 
 def keyframes(problem) -> list[int]:
@@ -66,19 +72,48 @@ def mass_centers(masses, positions) -> np.ndarray:
     return np.einsum("i,nij->nj", w / w.sum(), np.asarray(positions))
 
 
-def write_gif(fig, draw, frames, path: Path, fps: int, dpi: int = 80) -> None:
-    """Grab ``fig`` after ``draw(n)`` for each of ``frames`` into a GIF at ``path``.
+def write_gif(fig, draw, frames, path: Path, fps: int, dpi: int = 80, *,
+              limit: float | None = None, keep=()) -> int:
+    """Grab ``fig`` after ``draw(n)`` for each of ``frames`` into a GIF at ``path``; the
+    frames drawn, a count.
 
     Written whole or not at all: an interrupted animation leaves no truncated GIF (and the
-    frames grabbed so far are dropped, not encoded)."""
+    frames grabbed so far are dropped, not encoded).  With ``limit`` (seconds), once the
+    frames drawn so far say the rest would not fit in it, the rest are thinned to what
+    fits, keeping those of ``keep`` and the last; a line says so."""
     writer = PillowWriter(fps=fps)
-    with atomic_path(path) as tmp, matplotlib.rc_context({"savefig.bbox": None}):
+    frames, planned, began = list(frames), len(frames), time.monotonic()
+    with atomic_path(path) as tmp, matplotlib.rc_context({"savefig.bbox": None}), \
+            progress.task(f"drawing {Path(path).name}", len(frames), "frames") as task:
         writer.setup(fig, str(tmp), dpi=dpi)
-        for n in frames:
+        i = 0
+        while i < len(frames):
             check()
-            draw(n)
+            draw(frames[i])
             writer.grab_frame()
+            i += 1
+            progress.advance()
+            if limit is not None and i >= 3:
+                frames = _fitted(frames, i, time.monotonic() - began, ENCODING * limit, keep)
+                task.total = len(frames)
         writer.finish()
+    if len(frames) < planned:
+        progress.say(f"  {Path(path).name}: {len(frames)} of {planned} frames drawn, to fit "
+                     f"its {limit:g} s (--draw-limit)", stage=True)
+    return len(frames)
+
+
+def _fitted(frames: list, drawn: int, spent: float, limit: float, keep) -> list:
+    """``frames`` with those after the first ``drawn`` thinned to what fits in what is left
+    of ``limit`` seconds at the pace so far (``spent`` seconds for ``drawn``)."""
+    rest = frames[drawn:]
+    room = int(max(limit - spent, 0.0) / (spent / drawn))
+    if len(rest) <= room:
+        return frames
+    wanted = [j for j, f in enumerate(rest) if f in set(keep)]
+    chosen = select_frames(len(rest) - 1, wanted, max(room - 1, 0)) if room > 1 else [
+        len(rest) - 1]
+    return frames[:drawn] + [rest[j] for j in chosen]
 
 
 def save_figure(fig, path, **kwargs) -> Path:

@@ -5,23 +5,38 @@ from __future__ import annotations
 from pathlib import Path
 from types import SimpleNamespace
 
+from .. import progress
 from ..interrupts import check
 from .exits import guarded, stopped
 
-def draw(problem, trajectory, result, out, *, animation: bool = True, start=None) -> None:
+DRAW_LIMIT = 60.0  # s: the time an animation may take to draw unless --draw-limit says
+
+
+def draw(problem, trajectory, result, out, *, animation: bool = True, start=None,
+         limit: float | None = None, subtitle: str = "") -> None:
     """convergence.png (its start point alone for a search of no iteration), keyframes.png,
-    animation.gif and, given the ``start`` trajectory of a cloth's search,
-    start_and_result.png (the two side by side)."""
+    animation.gif (its drawing held to ``limit`` seconds, default :data:`DRAW_LIMIT`: past
+    it fewer frames) and, given the ``start`` trajectory of a cloth's search,
+    start_and_result.png (the two side by side); each picture's title names the problem
+    and ``subtitle`` (the overrides the run used), and each says as it is drawn."""
     from .. import render
 
     out = Path(out)
-    render.convergence(result, out / "convergence.png")
-    render.snapshot(problem, trajectory, out / "keyframes.png")
-    if start is not None and render.renderer(problem) is render.cloth:
-        render.cloth.side_by_side(problem, {"start": start, "result": trajectory},
-                                  out / "start_and_result.png")
-    if animation:
-        render.animate(problem, trajectory, out / "animation.gif")
+    title = f"{problem.name} ({subtitle})" if subtitle else None
+    pictures = 2 + (start is not None and render.renderer(problem) is render.cloth) + animation
+    with progress.task(f"{problem.name}: drawing the pictures", pictures, "pictures"):
+        render.convergence(result, out / "convergence.png")
+        progress.advance()
+        render.snapshot(problem, trajectory, out / "keyframes.png", title=title)
+        progress.advance()
+        if start is not None and render.renderer(problem) is render.cloth:
+            render.cloth.side_by_side(problem, {"start": start, "result": trajectory},
+                                      out / "start_and_result.png", title=title)
+            progress.advance()
+        if animation:
+            render.animate(problem, trajectory, out / "animation.gif", title=title,
+                           limit=DRAW_LIMIT if limit is None else limit)
+            progress.advance()
 
 
 def write_outputs(spec, trajectory) -> None:
@@ -40,17 +55,20 @@ def run_export(source, formats, *, out=None) -> int:
 
     for fmt in formats:  # every format's library before any file is written
         check_library(fmt)
-    for fmt in formats:
-        paths = export(source, fmt, out=out)
-        more = f" ... ({len(paths)} files)" if len(paths) > 2 else ""
-        print(f"{fmt}: {', '.join(str(p) for p in paths[:2])}{more}")
+    with progress.reporting():
+        for fmt in formats:
+            paths = export(source, fmt, out=out)
+            more = f" ... ({len(paths)} files)" if len(paths) > 2 else ""
+            print(f"{fmt}: {', '.join(str(p) for p in paths[:2])}{more}")
     return 0
 
 
-def run_render(source, *, animation: bool = True) -> int:
-    """Draw a saved run's pictures again (``casadi-keyframe render``); the exit code."""
+def run_render(source, *, animation: bool = True, limit: float | None = None) -> int:
+    """Draw a saved run's pictures again (``casadi-keyframe render``; the animation within
+    ``limit`` seconds, see :func:`draw`); the exit code."""
     def work(caught):
-        code = render_saved(source, animation)
+        with progress.reporting():
+            code = render_saved(source, animation, limit)
         check()
         return code
 
@@ -58,7 +76,7 @@ def run_render(source, *, animation: bool = True) -> int:
                                          "pictures drawn so far are whole")
 
 
-def render_saved(source, animation: bool) -> int:
+def render_saved(source, animation: bool, limit: float | None = None) -> int:
     from ..saved import load_saved, saved_file, writable_folder
 
     path = saved_file(source)
@@ -66,7 +84,8 @@ def render_saved(source, animation: bool) -> int:
                     "file: copy the folder somewhere you can write and render the copy")
     saved = load_saved(path)
     prob, out = saved.problem, saved.path.parent
-    draw(prob, saved.trajectory, _history(saved.meta, saved.arrays), out, animation=animation)
+    draw(prob, saved.trajectory, _history(saved.meta, saved.arrays), out, animation=animation,
+         limit=limit)
     print(f"{prob.name}: pictures drawn in {out}/ from {saved.path.name}")
     return 0
 

@@ -3,6 +3,7 @@ hint after it (:func:`hint`), what a second interrupt leaves on disk, and comman
 user can type again (values as ``--set`` reads them)."""
 from __future__ import annotations
 
+import shlex
 from fractions import Fraction
 from pathlib import Path
 
@@ -69,13 +70,29 @@ def hint(result, spec) -> None:
 
 def command_line(spec, command: str) -> str:
     """``casadi-keyframe COMMAND PROBLEM --set ...`` for this run's problem and overrides (and,
-    for ``solve``, its method and gradient route, so a resumed run goes on the same way)."""
-    sets = "".join(f" --set {k}={set_value(v)}" for k, v in spec.overrides.items())
+    for ``solve``, its method and gradient route, always, and every other option it was
+    given, so that a resumed run goes on the same way), each as the user typed it where the
+    run knows (``spec.typed``: ``pins=0,5`` stays so), else as ``--set`` reads it back."""
+    head = f"casadi-keyframe {command} {shlex.quote(spec.problem_arg or spec.problem_file)}"
+    sets = [("--set", item) for item in typed_sets(spec)]
+    typed_options = getattr(spec, "typed", ())  # a run made by hand may not know them
     if command == "solve":
-        asked = spec.settings
-        sets += f" --method {asked.method} --gradient {asked.gradient.name}" + "".join(
-            f" --option {k}={set_value(v)}" for k, v in given_options(asked.options).items())
-    return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
+        asked, typed = spec.settings, dict(typed_options)
+        sets += [("--method", typed.get("--method", asked.method)),
+                 ("--gradient", typed.get("--gradient", asked.gradient.name))]
+        sets += ([flag_value for flag_value in typed_options
+                  if flag_value[0] not in ("--set", "--method", "--gradient")] if typed_options
+                 else [("--option", f"{k}={set_value(v)}")
+                       for k, v in given_options(asked.options).items()])
+    words = [word for flag, value in sets for word in (flag, value) if word is not None]
+    return f"{head} {shlex.join(words)}" if words else head
+
+
+def typed_sets(spec) -> list[str]:
+    """The run's overrides as ``KEY=VALUE`` the way the user typed them (where known)."""
+    if getattr(spec, "typed", ()):
+        return [value for flag, value in spec.typed if flag == "--set"]
+    return [f"{k}={set_value(v)}" for k, v in spec.overrides.items()]
 
 
 def left_on_disk(done, spec) -> str:

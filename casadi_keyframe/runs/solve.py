@@ -10,19 +10,24 @@ A second signal stops at once; the files already written stay whole.
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
-from ..interrupts import check
+from .. import progress
+from ..interrupts import OutOfTime, check, limited
+from ..optimize.deadline import Deadline, now
 from ..optimize.outcome import INTERRUPTED
 from ..optimize.report import format_effort, format_misses, format_physical
 from ..saved import (CHECKPOINT, Checkpoint, check_inputs, check_trajectory, input_record,
                      read_run, save_result)
+from ..saved.lock import locked
 from ..state import SimulationError
+from ..optimize.outcome import LIMIT
 from .exits import exit_code, guarded, stopped
 from .outputs import draw, write_outputs
-from .report import command_line, hint, left_on_disk, report
+from .report import command_line, hint, left_on_disk, report, typed_sets
 
 
 @dataclass
@@ -45,6 +50,9 @@ class SolveRun:
     viewer: bool = True  # the HTML viewer (skipped with a note when plotly is missing)
     pictures: bool = True  # False: result files only ('render' draws them later)
     u0: object = None  # starting controls instead of the problem's (a sweep's perturbed start)
+    started: float = field(default_factory=now)  # when the run began: --time-limit counts
+    typed: tuple = ()  # the options as the user typed them, for the lines to type again
+    draw_limit: float | None = None  # seconds the animation may take (None: the default)
 
 
 def solve_run(module, problem_arg: str, overrides: dict, out=None, *, given=None,
@@ -66,34 +74,52 @@ def solve_run(module, problem_arg: str, overrides: dict, out=None, *, given=None
 
 
 def run_solve(spec: SolveRun) -> int:
-    """Solve, write, draw; return the exit code (see :data:`EXIT_CODES`)."""
+    """Solve, write, draw; return the exit code (see :data:`EXIT_CODES`).  The folder is
+    locked while the run writes there (:func:`~casadi_keyframe.saved.lock.locked`: a second
+    run into it is refused), and the run says what it does as it goes
+    (:mod:`~casadi_keyframe.progress`; ``quiet``: a line per stage)."""
     done = SimpleNamespace(started=False, written=False)
-    return guarded(lambda caught: _solve(spec, caught, done),
-                    lambda signum: f"\n{spec.problem.name}: {stopped(signum)} "
-                                   f"{left_on_disk(done, spec)}")
+    with locked(spec.out):
+        return guarded(lambda caught: _reported(spec, caught, done),
+                       lambda signum: f"\n{spec.problem.name}: {stopped(signum)} "
+                                      f"{left_on_disk(done, spec)}")
+
+
+def _reported(spec, caught, done) -> int:
+    with progress.reporting(spec.quiet):
+        return _solve(spec, caught, done)
 
 
 def _solve(spec: SolveRun, caught, done) -> int:
     prob, out = spec.problem, spec.out
+    deadline = Deadline(spec.started, spec.settings.time_limit)
     u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
     origin = ("resumed" if resumed else "given" if u0 is not None
               else "guess" if prob.has_guess else "passive")
     start_controls = prob.initial_controls() if u0 is None else u0
     try:
-        start_trajectory = prob.simulate(start_controls, records=False)
+        with limited(deadline), progress.task(f"{prob.name}: the start ({origin})"):
+            start_trajectory = prob.simulate(start_controls, records=False)
         start = prob.breakdown(start_controls, start_trajectory)
     except SimulationError as err:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
+    except OutOfTime:
+        print(f"{prob.name}: the time limit ({deadline.limit:g} s, counted from the run's "
+              f"start) was reached while simulating the start ({origin}): nothing written; "
+              "raise --time-limit")
+        return exit_code(LIMIT)
     physical = f"; {format_physical(start['physical'])}" if "physical" in start else ""
     effort = f"; {format_effort(start['effort'])}" if "effort" in start else ""
     print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
           f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}{effort}")
+    _warn_inside(prob, start.get("physical"))
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
             "overrides": spec.overrides, "method": spec.settings.method,
             "gradient": spec.settings.gradient.name, **input_record(prob)}
     done.started = True
-    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed)
+    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed,
+                     deadline=deadline, start_run=start_trajectory)
     signum = caught.signum if result.status == INTERRUPTED else None
     extra = {"problem_file": spec.problem_file, **input_record(prob),
              **({"resumed_from": {k: v for k, v in resumed.items() if k != "meta"}}
@@ -110,7 +136,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
         print(f"  pictures not drawn; draw them with 'casadi-keyframe render {out}'")
     else:
         draw(prob, result.trajectory, result, out, animation=spec.animation,
-             start=start_trajectory)
+             start=start_trajectory, limit=spec.draw_limit, subtitle=", ".join(typed_sets(spec)))
         print(f"  pictures drawn in {out}/")
         write_outputs(spec, result.trajectory)
     hint(result, spec)
@@ -118,14 +144,29 @@ def _solve(spec: SolveRun, caught, done) -> int:
     return exit_code(result.status, signum)
 
 
-def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
-    """The search ``spec`` asks for from ``u0``, its settings passed whole; a resumed one
-    goes on from its checkpoint's metadata (the problem's own mesh, the rounds' round and
-    multipliers)."""
+def _warn_inside(prob, physical) -> None:
+    """A warning when the cloth begins deeper inside a body than the physical limits allow
+    (a body's mesh open or wound inward, the cloth placed in it): no search fixes that."""
+    if not physical or physical.get("max_penetration_frame") != 0 or prob.limits is None:
+        return
+    depth = physical.get("max_penetration", 0.0)
+    if depth > prob.limits.depth:
+        print(f"  warning: the cloth starts {1e3 * depth:.3g} mm inside a body (the limit is "
+              f"{1e3 * prob.limits.depth:.3g} mm): no search can pull it out; check that "
+              f"each body is a closed mesh whose faces point out (see the notes above) and "
+              f"that the cloth starts outside it", file=sys.stderr)
+
+
+def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None, *, deadline=None,
+            start_run=None):
+    """The search ``spec`` asks for from ``u0`` (whose run is ``start_run``) until the
+    run's ``deadline``, its settings passed whole; a resumed one goes on from its
+    checkpoint's metadata (the problem's own mesh, the rounds' round and multipliers)."""
     from ..optimize.search import solve
 
     return solve(spec.problem, spec.settings, u0=u0, quiet=spec.quiet, checkpoint=checkpoint,
-                 resume=resumed.get("meta") if resumed else None)
+                 resume=resumed.get("meta") if resumed else None, deadline=deadline,
+                 start_run=start_run)
 
 
 def resume_controls(spec: SolveRun):

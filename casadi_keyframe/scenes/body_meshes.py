@@ -15,8 +15,9 @@ import numpy as np
 from ..export.obj import write_obj
 from ..export.pc2 import write_pc2
 from ..geometry import basis
+from .. import progress
 from ..loading import OverrideError
-from ..meshes import MeshError
+from ..meshes import MeshError, read_animated
 from ..models.contact.colliders import MeshBody
 from .skeleton import Character, Motion
 
@@ -90,17 +91,43 @@ def write_body(path, body: MeshBody, seconds: float, dt: float) -> Path:
     return write_pc2(path, frames)
 
 
+def read_body(path, dt: float, contact=None) -> MeshBody:
+    """The body in the mesh file ``path`` (OBJ, PLY, USD, or a PC2 cache at one frame per
+    ``dt`` beside its rest OBJ), checked as a body (:func:`~..meshes.check_body`), with
+    ``contact``; what the reading changed or found (quads split, faces turned, an open
+    mesh) printed as notes."""
+    found = read_animated(Path(path).expanduser(), fps=1 / dt)
+    for notice in found.mesh.notices:
+        progress.note(notice)
+    return MeshBody(found.mesh.vertices, found.mesh.faces, found.frames, times=found.times,
+                    contact=contact, source=Path(path).expanduser())
+
+
 def cape_body(problem: str, body: str, character: Character, animation: Motion,
-              seconds: float, dt: float, contact) -> list | None:
+              seconds: float, dt: float, contact, read: MeshBody | None = None) -> list | None:
     """The colliders a cape's ``body`` option names: None for "capsules" (the character's
     own), the capsules as a mesh for "mesh", else the mesh file ``body`` (a PC2 cache at one
-    frame per ``dt``), refused by the option's name when it cannot be read."""
+    frame per ``dt``; ``read``: it, read already by :func:`cape_body_file`)."""
     if body == "capsules":
         return None
     if body == "mesh":
         return [character_body(character, animation, seconds, dt, contact)]
+    return [read if read is not None else cape_body_file(problem, body, dt, contact)]
+
+
+def cape_body_file(problem: str, body: str, dt: float, contact) -> MeshBody | None:
+    """The mesh file a cape's ``body`` names, read (and refused by the option's name when
+    it cannot be), or None for "capsules" and "mesh": what a problem file reads before it
+    simulates anything, so a bad body is refused at once."""
+    if body in BODIES:
+        return None
+    if not Path(body).suffix and not Path(body).expanduser().exists():
+        raise OverrideError(f"{problem}: body: {body!r} is neither {' nor '.join(BODIES)} nor "
+                            "a mesh file: give one of those words, or an OBJ, PLY or USD "
+                            "file (a PC2 cache beside its NAME_rest.obj)", problem,
+                            listed=False)
     try:
-        return [MeshBody.from_file(Path(body).expanduser(), fps=1 / dt, contact=contact)]
+        return read_body(body, dt, contact)
     except (MeshError, ImportError, ValueError) as err:
         raise OverrideError(f"{problem}: body: {err} (give {' or '.join(BODIES)} or a mesh "
                             "file)", problem, listed=False) from None

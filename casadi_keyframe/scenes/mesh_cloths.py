@@ -6,19 +6,20 @@ The option names in messages are the problem file's: ``cloth``, ``keyframes``, `
 """
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import numpy as np
 
 from ..controls import InitialVelocity, StepForces
+from .. import progress
 from ..loading import OverrideError
 from ..objectives import MeshKeyframe
 from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
 from ..models import ClothModel, ClothParams
-from ..models.contact.colliders import MeshBody, Plane, Sphere
+from ..models.contact.colliders import Plane, Sphere
 from ..objectives import Smoothness, StrainLimit
 from ..views import ClothView
+from .body_meshes import read_body
 from .cape_tracking import tracking_forces
 from .cloths import cloth_problem
 from .maths import smoothstep
@@ -57,7 +58,7 @@ def read_option(option: str, path) -> Mesh:
     except MeshError as err:
         raise refuse(option, str(err)) from None
     for notice in mesh.notices:
-        print(f"note: {notice}", file=sys.stderr)
+        progress.note(notice)
     return mesh
 
 
@@ -131,15 +132,16 @@ def colliders_of(ground, spheres) -> list:
 
 
 def bodies_of(files, dt: float) -> list:
-    """A :class:`MeshBody` per mesh file of ``files`` ("body.obj,arm.pc2": OBJ, PLY, USD, or
-    a PC2 cache beside its ``NAME_rest.obj``, one cache frame per ``dt``)."""
+    """A :class:`~..models.MeshBody` per mesh file of ``files`` ("body.obj,arm.pc2": OBJ,
+    PLY, USD, or a PC2 cache beside its ``NAME_rest.obj``, one cache frame per ``dt``),
+    each read by :func:`~.body_meshes.read_body` (its notes printed)."""
     out = []
     for item in (p.strip() for p in str(files).split(",")):
         if not item:
             raise refuse("bodies", "give mesh files separated by commas, e.g. "
                                    "bodies=body.obj,arm.pc2")
         try:
-            out.append(MeshBody.from_file(Path(item).expanduser(), fps=1 / dt))
+            out.append(read_body(item, dt))
         except (MeshError, ImportError, ValueError) as err:
             message = str(err)
             raise refuse("bodies", message if item in message else f"{item}: {message}") \

@@ -1,10 +1,14 @@
 """The sweep's progress on the terminal: one line per finished point, and on a terminal a
-status line kept at the bottom (points done, failed, running, waiting; time left)."""
+status line kept at the bottom (points done, failed, running, waiting; time left); away
+from a terminal (a log) that status is a line of its own whenever
+:data:`~casadi_keyframe.progress.EVERY` seconds pass without one, so a sweep of long points
+never goes silent."""
 from __future__ import annotations
 
 import sys
 import time
 
+from ..progress import EVERY, format_seconds
 from .tasks import ERROR, failed
 
 
@@ -18,7 +22,7 @@ class Progress:
         self.live = enabled and getattr(self.stream, "isatty", lambda: False)()
         self.done = self.failed = 0
         self.seconds: list[float] = []
-        self.started = time.monotonic()
+        self.started = self.last = time.monotonic()
         if enabled:
             extra = f" ({skipped} already complete, skipped)" if skipped else ""
             self._line(f"sweep: {total} point{'s' * (total != 1)} to solve{extra}")
@@ -38,10 +42,13 @@ class Progress:
         self._line(text)
 
     def status(self, running: int, slots: int) -> None:
-        """Rewrite the status line (on a terminal only)."""
+        """Rewrite the status line on a terminal; elsewhere write it as a line once
+        :data:`~casadi_keyframe.progress.EVERY` seconds have passed without one."""
         if self.live:
             self.stream.write("\r\033[K" + self.summary(running, slots))
             self.stream.flush()
+        elif self.enabled and time.monotonic() - self.last >= EVERY:
+            self._line(self.summary(running, slots))
 
     def summary(self, running: int, slots: int) -> str:
         """``"sweep: 5/16 done (1 failed), 2 running, 9 waiting; about 3 min left"``."""
@@ -73,6 +80,7 @@ class Progress:
             self.stream.write("\r\033[K")
         self.stream.write(text + "\n")
         self.stream.flush()
+        self.last = time.monotonic()
 
 
 def describe(row: dict) -> str:
@@ -85,12 +93,3 @@ def describe(row: dict) -> str:
         return (f"{status}, objective {row['objective']:.6g}, {row.get('iterations', '?')} "
                 f"iterations{seconds}")
     return status + seconds
-
-
-def format_seconds(seconds: float) -> str:
-    """``"45 s"``, ``"3.2 min"``, ``"1.5 h"``."""
-    if seconds < 90:
-        return f"{seconds:.0f} s"
-    if seconds < 5400:
-        return f"{seconds / 60:.1f} min"
-    return f"{seconds / 3600:.1f} h"

@@ -22,8 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from ... import progress
 from ...adjoints import get_gradient
 from ...controls import StepForces
+from ...interrupts import OutOfTime, limited
 from ..deadline import Deadline
 from ..outcome import CONVERGED, FAILED, LIMIT
 from ..residual.steps import Damping, Halving
@@ -53,31 +55,37 @@ def land(problem, *, u0=None, window: int = 12, position_tolerance: float | None
 
     Returns a :class:`~.result.Result` (method "land"): status 0 if it ends within the
     tolerances, else 2 when no step brings the keyframes closer, 1 at ``maxiter`` or
-    ``time_limit`` (s).
+    ``time_limit`` (s), which also stops a step or a simulation under way (its gradient is
+    then NaN); :class:`~casadi_keyframe.interrupts.OutOfTime` if the time ends before its
+    start is judged.
     """
     deadline = deadline or Deadline.start(time_limit)
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance)
-    held = WindowSearch(problem, window, (position_tolerance, velocity_tolerance), u0,
-                        iterations, get_gradient(gradient), on_keep=on_keep)
-    rule = Halving(tries)
-    status, message = None, ""
-    for _ in range(maxiter):
-        if held.within(held.traj, LANDED):
-            break
-        if deadline.passed():
+    with limited(deadline), progress.task(f"{problem.name}: finish (landing)", maxiter,
+                                          "steps", limit=deadline, exact=False):
+        held = WindowSearch(problem, window, (position_tolerance, velocity_tolerance), u0,
+                            iterations, get_gradient(gradient), on_keep=on_keep)
+        rule = Halving(tries)
+        status, message = None, ""
+        try:
+            for _ in range(maxiter):
+                if held.within(held.traj, LANDED):
+                    break
+                if deadline.passed():
+                    raise OutOfTime(deadline)
+                if not held.land(rule):
+                    status, message = FAILED, (f"no landing step of {tries} tried brings the "
+                                               "keyframes closer")
+                    break
+        except OutOfTime:
             status, message = LIMIT, f"time limit reached ({deadline.limit:g} s)"
-            break
-        if not held.land(rule):
-            status, message = FAILED, (f"no landing step of {tries} tried brings the keyframes "
-                                       "closer")
-            break
     if held.within(held.traj):
         status, message = CONVERGED, "every keyframe within its tolerances"
     elif status is None:
         status, message = LIMIT, f"{maxiter} landing steps taken (maxiter), still off"
     message = f"{message}: misses {_said(held.constraint.misses(held.traj))}"
-    return held.result("land", status, message)
+    return held.result("land", status, message, gradient=not deadline.passed())
 
 
 def lower_effort(problem, *, window: int = 12, position_tolerance: float | None = None,
@@ -108,28 +116,33 @@ def lower_effort(problem, *, window: int = 12, position_tolerance: float | None 
     _check(problem, window=window, maxiter=maxiter, tries=tries, iterations=iterations,
            position_tolerance=position_tolerance, velocity_tolerance=velocity_tolerance,
            damping=damping, restore=restore)
-    held = WindowSearch(problem, window, (position_tolerance, velocity_tolerance), u0,
-                        iterations, get_gradient(gradient), keep_objective=keep_objective,
-                        on_keep=on_keep)
-    rule = Damping(damping, tries)
-    if not held.within(held.traj):
-        raise ValueError(f"{problem.name}: the start misses its keyframes by "
-                         f"{held.constraint.misses(held.traj)} (rms m, m/s), beyond the "
-                         f"tolerances {held.constraint.tolerances}: lower_effort keeps a "
-                         "landing, it does not find one; start from controls that land (a "
-                         "guess, a solve's result, land())")
-    status, message = CONVERGED, f"{maxiter} steps kept (maxiter)"
-    for _ in range(maxiter):
-        if deadline.passed():
+    with limited(deadline), progress.task(f"{problem.name}: finish (lowering the effort)",
+                                          maxiter, "steps", limit=deadline, exact=False):
+        held = WindowSearch(problem, window, (position_tolerance, velocity_tolerance), u0,
+                            iterations, get_gradient(gradient), keep_objective=keep_objective,
+                            on_keep=on_keep)
+        rule = Damping(damping, tries)
+        if not held.within(held.traj):
+            raise ValueError(f"{problem.name}: the start misses its keyframes by "
+                             f"{held.constraint.misses(held.traj)} (rms m, m/s), beyond the "
+                             f"tolerances {held.constraint.tolerances}: lower_effort keeps a "
+                             "landing, it does not find one; start from controls that land "
+                             "(a guess, a solve's result, land())")
+        status, message = CONVERGED, f"{maxiter} steps kept (maxiter)"
+        try:
+            for _ in range(maxiter):
+                if deadline.passed():
+                    raise OutOfTime(deadline)
+                if not held.lower(rule, restore):
+                    status = CONVERGED if held.history else FAILED
+                    kept = f"{len(held.history)} steps kept, then " if held.history else ""
+                    message = (f"{kept}no step of {tries} tried lowers the control cost with "
+                               f"the keyframes within their tolerances (damping up to "
+                               f"{rule.damping:.3g})")
+                    break
+        except OutOfTime:
             status, message = LIMIT, f"time limit reached ({deadline.limit:g} s)"
-            break
-        if not held.lower(rule, restore):
-            status = CONVERGED if held.history else FAILED
-            kept = f"{len(held.history)} steps kept, then " if held.history else ""
-            message = (f"{kept}no step of {tries} tried lowers the control cost with the "
-                       f"keyframes within their tolerances (damping up to {rule.damping:.3g})")
-            break
-    return held.result("lower_effort", status, message)
+    return held.result("lower_effort", status, message, gradient=not deadline.passed())
 
 
 def _said(misses) -> str:

@@ -14,14 +14,16 @@ from __future__ import annotations
 import signal
 from dataclasses import dataclass
 
+from ... import progress
 from ...controls import StepForces
-from ...interrupts import handled
-from ..deadline import Deadline
+from ...interrupts import OutOfTime, handled
+from ..deadline import Deadline, now
 from ..options import TypedOptions
 from ..goal import verdict
 from ..kept import conclude, kept_outcome
 from ..outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from ..result import assemble
+from ..report import format_stage
+from ..result import assemble, skipped_stage, with_stage
 from .constraint import KeyframeConstraint, control_hessian, factor_window
 from .searches import land, lower_effort
 
@@ -70,6 +72,10 @@ def check_finish(problem, opts: Finish) -> None:
         first = KeyframeConstraint(problem, max(last - opts.window, 0)).first
     except ValueError as err:
         raise ValueError(f"finish={opts.kind!r}: {err}") from None
+    if opts.window > last:
+        progress.note(f"finish: window={opts.window} is longer than the {last} steps before "
+                      f"the last keyframe (frame {last}): the finish moves the controls of "
+                      f"all {last}")
     block = problem.size // problem.steps
     factor_window(problem, control_hessian(problem), slice(first * block, last * block))
 
@@ -77,11 +83,14 @@ def check_finish(problem, opts: Finish) -> None:
 def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = None):
     """The finish from ``result`` (a search's on ``problem``), until the solve's
     ``deadline``: the Result with its stages and history after the search's; where it ends
-    no better or is interrupted, the best point ``kept`` holds (the search's result or a kept
-    step), with a stage saying so."""
+    no better, is interrupted or runs out of time, the best point ``kept`` holds (the
+    search's result or a kept step), with a stage saying so; a finish (or its effort) that
+    the time or a signal leaves unrun is a stage that says so."""
     deadline = deadline or Deadline.start()
+    if result.status == INTERRUPTED or deadline.passed():
+        return _not_run(problem, result, opts, deadline)
     stages, history = list(result.stages), list(result.history)
-    runs = []
+    runs, began = [], now()
 
     def checkpoint(u, trajectory):  # each kept step offered: the best is on disk
         kept.offer(u, "the finish's best step", trajectory=trajectory,
@@ -97,13 +106,20 @@ def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = 
             runs.append(lower_effort(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
                                      deadline=deadline, keep_objective=True,
                                      on_keep=checkpoint, gradient=result.route))
-    except KeyboardInterrupt as err:
-        handled()
+    except (KeyboardInterrupt, OutOfTime) as err:
+        if isinstance(err, KeyboardInterrupt):
+            handled()
         for run in runs:  # those that ended before the signal
             _append(stages, history, run)
-        return _interrupted(problem, result, stages, history, kept, err, deadline.started)
+        spent = now() - began - sum(run.stages[0]["seconds"] for run in runs)
+        return _stopped(problem, result, stages, history, kept, err, deadline, spent)
     for run in runs:
         _append(stages, history, run)
+        progress.say("  " + format_stage(stages[-1]), stage=True)
+    if opts.kind == "effort" and met and runs and runs[-1].method == "land":
+        stages.append(skipped_stage(problem, stages[-1]["stage"] + 1, "lowering the effort: "
+                                    f"the time limit ({deadline.limit:g} s) was reached "
+                                    "before it began", LIMIT))
     if not runs:
         return result
     last, began = runs[-1], deadline.started
@@ -118,27 +134,51 @@ def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = 
                             verdict(problem, last.trajectory))
     if status == CONVERGED and not message.startswith("converged"):
         message = f"converged: {message}"
-    stages[-1] = {**stages[-1], "status": status, "message": message,
+    at = -2 if "skipped" in stages[-1] else -1
+    stages[at] = {**stages[at], "status": status, "message": message,
                   "success": status == CONVERGED}
     return assemble(problem, last.x, fun=last.fun, jac=last.jac, status=status,
                     message=message, method=result.method, route=result.route,
                     stages=stages, history=history, started=began, trajectory=last.trajectory)
 
 
-def _interrupted(problem, result, stages, history, kept, err, began):
-    """The Result of a finish stopped by a signal: the best point kept."""
-    who = "SIGINT" if getattr(err, "signum", signal.SIGINT) == signal.SIGINT else "a signal"
-    message = f"{result.message}; the finish was interrupted ({who}): {kept.where} kept"
-    return _kept(problem, result, stages, history, kept, INTERRUPTED, message, began,
-                 gradient=False)
+def _not_run(problem, result, opts, deadline):
+    """``result`` with a stage saying the finish did not run, and why."""
+    why = ("interrupted before it began" if result.status == INTERRUPTED else
+           f"the time limit ({deadline.limit:g} s) was reached before it began")
+    number = result.stages[-1]["stage"] + 1 if result.stages else 0
+    stage = skipped_stage(problem, number, f"the finish ({opts.kind}): {why}", result.status
+                          if result.status == INTERRUPTED else LIMIT)
+    progress.say("  " + format_stage(stage), stage=True)
+    return with_stage(result, stage)
 
 
-def _kept(problem, result, stages, history, kept, status, message, began, gradient=True):
+def _stopped(problem, result, stages, history, kept, err, deadline, spent):
+    """The Result of a finish stopped by a signal or the time limit (``err``) after
+    ``spent`` seconds in the run it cut: the best point kept, without more work."""
+    if isinstance(err, OutOfTime):  # the time ends no goal already met
+        met = verdict(kept.goal, kept.trajectory).met
+        status, why = (CONVERGED if met else LIMIT), f"ran out of time ({err})"
+    else:
+        status = INTERRUPTED
+        why = ("was interrupted (SIGINT)" if getattr(err, "signum", signal.SIGINT)
+               == signal.SIGINT else "was interrupted (a signal)")
+    message = f"{result.message}; the finish {why}: {kept.where} kept"
+    if status == CONVERGED and not message.startswith("converged"):
+        message = f"converged: {message}"
+    return _kept(problem, result, stages, history, kept, status, message, deadline.started,
+                 gradient=False, seconds=spent)
+
+
+def _kept(problem, result, stages, history, kept, status, message, began, gradient=True,
+          seconds: float = 0.0):
     """The Result at ``kept``'s point (the search's result, or a finish's step that beat
-    it) with a stage that says so (:func:`~.kept.conclude`)."""
+    it) with a stage that says so (:func:`~.kept.conclude`; ``seconds`` the time of work
+    cut short there)."""
     return conclude(problem, kept, result.route, status=status, message=message,
                     stages=stages, history=history, method=result.method, started=began,
-                    known=(result.x, result.fun, result.jac), gradient=gradient)
+                    known=(result.x, result.fun, result.jac), gradient=gradient,
+                    seconds=seconds)
 
 
 def _landed(problem, trajectory, window: int) -> bool:

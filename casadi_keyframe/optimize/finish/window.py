@@ -135,10 +135,15 @@ class WindowSearch:
         self.ev.record(self.history, self.clock, control_cost=self.cost, damping=damping,
                        misses=self.constraint.misses(found.trajectory))
 
-    def result(self, method: str, status: int, message: str) -> Result:
+    def result(self, method: str, status: int, message: str, *,
+               gradient: bool = True) -> Result:
         """The :class:`~..result.Result` at the point reached, with its one stage (``njev``:
-        the sweeps over the window)."""
-        f, jac = self.route(self.problem, self.u)
+        the sweeps over the window); without a ``gradient`` (the time is up) its objective
+        alone, the gradient NaN."""
+        if gradient:
+            f, jac = self.route(self.problem, self.u)
+        else:
+            f, jac = self.value, np.full(self.u.size, np.nan)
         message = (f"{message}; {self.sweeps} sweeps over the {self.last - self.first} steps "
                    f"before frame {self.last}")
         stage = stage_record(self.problem, 0, nit=len(self.history), fun=f, status=status,

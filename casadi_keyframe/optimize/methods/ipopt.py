@@ -23,7 +23,7 @@ import signal
 import casadi as ca
 import numpy as np
 
-from ...interrupts import Interrupted, catching
+from ...interrupts import Interrupted, OutOfTime, catching
 from ..goal import GoalReached
 from ..outcome import ipopt_outcome
 from .base import LibraryOptions
@@ -168,7 +168,7 @@ class IterationHook(ca.Callback):
     def __init__(self, n, on_iteration, *, m: int = 0):
         ca.Callback.__init__(self)
         self.n, self.m, self.on_iteration = n, m, on_iteration
-        self.count, self.interrupted = 0, None
+        self.count, self.interrupted, self.timed_out = 0, None, False
         self.reached = None  # the GoalReached that stopped it
         self.construct("iteration", {})
 
@@ -193,6 +193,9 @@ class IterationHook(ca.Callback):
                 self.on_iteration(np.asarray(arg[0]).ravel())
         except KeyboardInterrupt as err:
             self.interrupted = getattr(err, "signum", signal.SIGINT)
+            return [1]
+        except OutOfTime:
+            self.timed_out = True
             return [1]
         except GoalReached as reached:  # IPOPT stops on 1; the search hears of it below
             self.reached = reached
@@ -253,6 +256,8 @@ def search(ev, x0, bounds, maxiter, tol, options, on_iteration, deadline, *,
         raise Interrupted(signum)
     if it.reached is not None:
         raise it.reached
+    if getattr(ev, "timed_out", False) or it.timed_out:  # a cut evaluation IPOPT swallowed
+        raise OutOfTime(deadline)
     status, message = ipopt_outcome(solver.stats().get("return_status", "unknown"),
                                     maxiter=ipopt["max_iter"])
     return status, message, np.asarray(out["x"]).ravel()

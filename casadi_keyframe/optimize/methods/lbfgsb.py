@@ -14,6 +14,7 @@ import re
 import numpy as np
 from scipy.optimize import minimize, show_options
 
+from ...interrupts import OutOfTime
 from ..outcome import FAILED, LIMIT, lbfgsb_outcome
 from .base import LibraryOptions
 
@@ -43,10 +44,6 @@ class LbfgsbOptions(LibraryOptions):
         return option_names()
 
 
-class _TimeUp(Exception):
-    """Raised from L-BFGS-B's callback past the deadline (scipy lets it through)."""
-
-
 def run(problem, ev, u0, call):
     """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), as ``call``
     (a :class:`~.base.SearchCall`) asks.  Returns ``(status, message)`` (:mod:`..outcome`)."""
@@ -60,7 +57,7 @@ def run(problem, ev, u0, call):
     def callback(intermediate_result):
         on_iteration()
         if deadline.passed():
-            raise _TimeUp
+            raise OutOfTime(deadline)  # scipy lets it through, as it does one from an evaluation
 
     try:
         res = minimize(ev, u0, jac=True, method="L-BFGS-B", bounds=bounds, options=opts,
@@ -78,7 +75,7 @@ def run(problem, ev, u0, call):
         opts["maxfun"] -= res.nfev
         again = minimize(ev, ev.best_u, jac=True, method="L-BFGS-B", bounds=bounds,
                          options=opts, callback=callback)
-    except _TimeUp:
+    except OutOfTime:
         return LIMIT, "time limit reached before converging"
     if _line_search_failed(again) and again.nit == 0:
         return FAILED, ("line search failed: no step along the steepest descent lowers the "

@@ -5,7 +5,25 @@ forward pass's records for its backward pass, as a local worker does
 (:class:`~.workers.LocalPool`)."""
 from __future__ import annotations
 
+from ...interrupts import check
 from .segments import AskedSweeps, SegmentRunner
+
+WAIT = 0.2  # s: how often the pool waiting for an actor checks for a signal and the time
+
+
+def _answer(future, pool):
+    """An actor's answer, a signal or the time limit checked while it comes (the pool
+    stopped on either)."""
+    while True:
+        try:
+            return future.result(timeout=WAIT)
+        except TimeoutError:
+            pass
+        try:
+            check()
+        except BaseException:
+            pool.stop()
+            raise
 
 
 def recipe(problem, origin):
@@ -84,7 +102,7 @@ class DaskPool(AskedSweeps):
                    if any(k in items for k in mine)]
         out = {}
         for future in futures:
-            kind, payload = future.result()
+            kind, payload = _answer(future, self)
             if kind != "ok":
                 raise SimulationError(*payload)
             out.update(payload)
@@ -92,6 +110,11 @@ class DaskPool(AskedSweeps):
 
     def rows(self, ends: dict) -> dict:
         return dict(enumerate(self._ask("rows", [ends.get(k, []) for k in range(self.count)])))
+
+    def stop(self) -> None:
+        """Leave the actors' sweeps unread: the client goes, the cluster stays."""
+        self.actors = []
+        self.client.close()
 
     def close(self) -> None:
         for actor in getattr(self, "actors", []):

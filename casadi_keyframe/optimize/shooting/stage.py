@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...interrupts import handled
+from ... import progress
+from ...interrupts import OutOfTime, handled, limited
 from ...objectives import StateKeyframe
 from ...state import SimulationError
 from ..deadline import now
@@ -37,39 +38,52 @@ from .workers import segment_runner
 
 
 def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, export,
-                 origin=None):
-    """The multiple-shooting stage of ``problem`` from controls ``u0``: ``(Stage, u,
-    aimed)``, ``aimed`` the problem with its keyframes aiming where the multipliers left them
+                 origin=None, limit=None):
+    """The multiple-shooting stage of ``problem`` from controls ``u0`` until ``limit`` (the
+    stage's :class:`~..deadline.Deadline`, default the solve's): ``(Stage, u, aimed)``,
+    ``aimed`` the problem with its keyframes aiming where the multipliers left them
     (``problem`` itself when they hold none).
 
     ``search`` is the solve's shared state (method, limits, history, checkpoint, clock),
     ``goal`` the problem whose keyframes judge, ``export`` maps controls to the solve's
-    final problem (``origin``) for the checkpoint."""
-    t = now()
-    reference = reference_run(problem, u0)
-    spans = (growth_spans(step_growth(problem, u0), opts.segments) if opts.place == "growth"
-             else None)
-    shooting = Shooting(problem, opts.segments, reference, spans=spans)
-    mult = None if opts.formulation == "ipopt" else Multipliers(
-        _start_weights(shooting, opts.penalty), growth=opts.growth, always=False)
-    runner = segment_runner(problem, shooting.spans, opts.workers, opts.scheduler, origin)
-    ev = Evaluator(problem, None, search.checkpoint, stage=stage, export=export, goal=goal,
-                   stop=search.stop, merit=ShootingMerit(problem, shooting, runner, mult),
-                   failed_best=False, final=False)
-    z = shooting.pack(u0, initial_nodes(problem, shooting, opts.init, reference))
+    final problem (``origin``) for the checkpoint.  A signal or the time limit stops it at
+    the next step of any segment's sweep, here or in a worker, with the best point kept."""
+    t, limit = now(), limit or search.deadline
     first, rounds, status, message = len(search.history), 0, None, ""
+    ev = shooting = runner = None
+    label = f"{problem.name}: multiple shooting, {opts.segments} segments"
     try:
-        ev(z)
-        if ev.failures:
-            raise SimulationError(f"multiple shooting: a segment fails at the start nodes "
-                                  f"({ev.last_failure}); try another init", 0)
-        solve_form = _nlp if mult is None else _rounds
-        status, message, rounds = solve_form(problem, opts, search, ev, z)
+        with limited(limit), progress.task(label, search.maxiter, "iterations", limit=limit,
+                                           exact=False):
+            reference = reference_run(problem, u0)
+            spans = (growth_spans(step_growth(problem, u0), opts.segments)
+                     if opts.place == "growth" else None)
+            shooting = Shooting(problem, opts.segments, reference, spans=spans)
+            mult = None if opts.formulation == "ipopt" else Multipliers(
+                _start_weights(shooting, opts.penalty), growth=opts.growth, always=False)
+            runner = segment_runner(problem, shooting.spans, opts.workers, opts.scheduler,
+                                    origin)
+            ev = Evaluator(problem, None, search.checkpoint, stage=stage, export=export,
+                           goal=goal, stop=search.stop,
+                           merit=ShootingMerit(problem, shooting, runner, mult),
+                           failed_best=False, final=False)
+            z = shooting.pack(u0, initial_nodes(problem, shooting, opts.init, reference))
+            ev(z)
+            if ev.failures:
+                raise SimulationError(f"multiple shooting: a segment fails at the start nodes "
+                                      f"({ev.last_failure}); try another init", 0)
+            solve_form = _nlp if mult is None else _rounds
+            status, message, rounds = solve_form(problem, opts, search, ev, z, limit)
     except KeyboardInterrupt:
         handled()
         status, message = INTERRUPTED, "interrupted; best result kept"
+    except OutOfTime:
+        status, message = LIMIT, f"time limit reached ({limit.limit:.3g} s)"
     finally:
-        runner.close()
+        if runner is not None:
+            runner.close()
+    if shooting is None or ev.best_u is None:  # stopped before its first merit ended
+        return _unstarted(problem, stage, u0, status, message, t, opts)
     info = ev.best_info
     u = shooting.unpack(ev.best_u)[0] if ev.best_u is not None else u0
     fun = true_objective(problem, u, info)[1] if info is not None else np.nan
@@ -80,6 +94,17 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
         seconds=now() - t, **ev.counts(), segments=opts.segments,
         defect=shooting.defect_size(info.defects if info is not None else []))
     return record, u, shooting.problem
+
+
+def _unstarted(problem, stage, u0, status, message, t, opts):
+    """The record of a shooting stage stopped before its first evaluation ended: its start
+    ``u0`` handed on."""
+    record = stage_record(problem, stage, nit=0, nfev=0, njev=0, fun=np.nan, status=status,
+                          message=f"multiple shooting, {opts.segments} segments: {message} "
+                                  "before its first evaluation ended",
+                          seconds=now() - t, evaluation_seconds=0.0, failed_simulations=0,
+                          segments=opts.segments)
+    return record, u0, problem
 
 
 def _placed(shooting, opts) -> str:
@@ -104,8 +129,8 @@ def _start_weights(shooting, penalty) -> dict:
             for c, w in (("x", wx * sx ** 2), ("v", wv * sv ** 2))}
 
 
-def _rounds(problem, opts, search, ev, z):
-    """The augmented-Lagrangian rounds: ``(status, message, rounds run)``."""
+def _rounds(problem, opts, search, ev, z, limit):
+    """The augmented-Lagrangian rounds until ``limit``: ``(status, message, rounds run)``."""
     shooting, mult, run = ev.merit.shooting, ev.merit.mult, get_method(search.method).run
     budget = search.maxiter
     # the keyframes' weights stay the problem's: grown by the LANCELOT rule where the miss on
@@ -114,17 +139,24 @@ def _rounds(problem, opts, search, ev, z):
     hard = (KeyframeMultipliers(problem, 1.0, always=False) if opts.hold and any(
         isinstance(t, StateKeyframe) for t in problem.objective_terms.state_terms) else None)
     for r in range(opts.rounds):
+        last = (ev.best_u, ev.best_f, ev.best_g, ev.best_info, ev.best_met)
         ev.reset()
         maxiter, before = max(budget // (opts.rounds - r), 1), len(search.history)
         try:
             inner, said = run(shooting, ev, z, search.call(
-                maxiter, lambda r=r: ev.record(search.history, search.clock, round=r)))
+                maxiter, lambda r=r: ev.record(search.history, search.clock, round=r), limit))
         except GoalReached:
             return CONVERGED, f"the goal is met in round {r}", r + 1
+        except (KeyboardInterrupt, OutOfTime) as err:
+            if ev.best_u is None:  # stopped before this round's first evaluation ended
+                ev.best_u, ev.best_f, ev.best_g, ev.best_info, ev.best_met = last
+            if isinstance(err, KeyboardInterrupt):
+                raise
+            return LIMIT, f"time limit reached ({limit.limit:.3g} s) in round {r}", r + 1
         budget -= len(search.history) - before
         z = ev.best_u
         c = ev.best_info.defects
-        if inner == INTERRUPTED or search.deadline.passed():
+        if inner == INTERRUPTED or limit.passed():
             return (INTERRUPTED if inner == INTERRUPTED else LIMIT), said, r + 1
         if budget <= 0:
             return LIMIT, "iteration limit reached before the goal was met", r + 1
@@ -136,9 +168,9 @@ def _rounds(problem, opts, search, ev, z):
     return LIMIT, f"{opts.rounds} rounds ended before the goal was met", opts.rounds
 
 
-def _nlp(problem, opts, search, ev, z):
-    """IPOPT on the constrained form: ``(status, message, 1)``; each iterate, and its last
-    point, becomes the evaluator's best."""
+def _nlp(problem, opts, search, ev, z, limit):
+    """IPOPT on the constrained form until ``limit``: ``(status, message, 1)``; each
+    iterate, and its last point, becomes the evaluator's best."""
     from ..methods.ipopt import IpoptOptions
     from .ipopt_form import run_nlp
 
@@ -149,7 +181,7 @@ def _nlp(problem, opts, search, ev, z):
     try:
         options = search.options.as_dict() if isinstance(search.options, IpoptOptions) else {}
         status, message, z = run_nlp(ev.merit.shooting, ev.merit.runner, ev, z, search.maxiter,
-                                     search.tol, options, on_iteration, search.deadline)
+                                     search.tol, options, on_iteration, limit)
     except GoalReached as reached:
         return CONVERGED, f"the goal is met at iteration {reached.iteration}", 1
     ev.take(z)

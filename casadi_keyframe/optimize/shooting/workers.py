@@ -19,8 +19,11 @@ import os
 import signal
 import traceback
 
+from ...interrupts import check
 from ...state import SimulationError
 from .segments import AskedSweeps, SegmentRunner
+
+WAIT = 0.1  # s: how often a pool waiting for its workers checks for a signal and the time
 
 
 class Serial:
@@ -102,6 +105,7 @@ class LocalPool(AskedSweeps):
                 asked.append(pipe)
         out, failure = {}, None
         for pipe in asked:
+            self._wait(pipe)
             kind, payload = pipe.recv()
             if kind == "ok":
                 out.update(payload)
@@ -117,6 +121,27 @@ class LocalPool(AskedSweeps):
     def rows(self, ends: dict) -> dict:
         per_segment = [ends.get(k, []) for k in range(sum(map(len, self.owned)))]
         return dict(enumerate(self._ask("rows", per_segment)))
+
+    def _wait(self, pipe) -> None:
+        """Wait for a worker's answer, checking for a signal and the time limit; on either
+        the workers, busy with a sweep no one will read, are stopped at once."""
+        while not pipe.poll(WAIT):
+            try:
+                check()
+            except BaseException:
+                self.stop()
+                raise
+
+    def stop(self) -> None:
+        """End every worker now (their answers are not needed)."""
+        for proc in self.processes:
+            if proc.is_alive():
+                proc.terminate()
+        for proc in self.processes:
+            proc.join(timeout=5)
+        for pipe in self.pipes:
+            pipe.close()
+        self.pipes, self.processes = [], []
 
     def close(self) -> None:
         for pipe in self.pipes:

@@ -50,3 +50,7 @@ class GravityAndDrag(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=(None, ca.DM(np.asarray(self.damping_blocks).T)))
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        drag = self.air_drag * ca.repmat(ca.DM(self.masses).T, 3, 1)
+        return dt * (ca.DM(self.gravity.T) - drag * V) - dt * drag * Q

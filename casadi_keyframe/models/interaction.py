@@ -176,6 +176,13 @@ class Interaction:
         systems), given what the step decided (:meth:`decision_parameters`; None: nothing)."""
         raise NotImplementedError
 
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        """``dt f + dt^2 K W + dt D Q`` as a ``3 x n`` CasADi expression: the family's part
+        of a linearized step's right side, written per interaction (no assembled K or D,
+        so a transcription of many steps stays small); X, V, W, Q ``3 x n``."""
+        raise NotImplementedError(f"{type(self).__name__} has no symbolic step: the "
+                                  "transcription cannot write its inverse step")
+
 
 class PairInteraction(Interaction):
     """A law of two particles, ``(d = x_j - x_i, dv = v_j - v_i, *params) -> f_i``, lifted
@@ -259,6 +266,13 @@ class PairInteraction(Interaction):
         i, j, blocks = self._symbolic("jac", X, V, decisions)
         return FamilyBlocks(i, j, tuple(blocks))
 
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        i, j = self.all_pairs()
+        params = self.symbolic_pair_parameters(i, j, decisions)
+        g = self.kernels["step"].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i], *params,
+                                             W[:, j] - W[:, i], Q[:, j] - Q[:, i], dt)
+        return ca.mtimes(g, pair_incidence(i, j, self.n))
+
 
 class ParticleInteraction(Interaction):
     """A law of one particle, ``(x, v, *columns) -> f``, over every particle; its Jacobian
@@ -312,6 +326,12 @@ class ParticleInteraction(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S, decisions)))
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        n = X.shape[1]
+        columns = [c if c.shape[1] == n else ca.repmat(c, 1, n)
+                   for c in self.symbolic_columns(S, decisions)]
+        return self.kernels["step"].map(n)(X, V, *columns, W, Q, dt)
 
 
 class StencilInteraction(Interaction):
@@ -376,3 +396,12 @@ class StencilInteraction(Interaction):
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(stencil=self.stencils,
                             stencil_blocks=tuple(self._symbolic("jac", X, V)))
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        P, k = self.stencils.shape
+        columns = self.stencils.ravel().tolist()
+        stacked = [ca.reshape(A[:, columns], 3 * k, P) for A in (X, V, W, Q)]
+        params = [ca.DM(np.asarray(a).T) for a in self.stencil_parameters()]
+        g = self.kernels["step"].map(P)(*stacked[:2], *params, *stacked[2:], dt)
+        return ca.mtimes(ca.reshape(g, 3, self.stencils.size),
+                         stencil_incidence(self.stencils, self.n))

@@ -1,0 +1,219 @@
+r"""Least effort under the goal, in positions: a sequential quadratic programme with the
+effort's Gauss-Newton Hessian.
+
+At an iterate z, with the controls ``u(z)`` (:class:`~.transcription.Transcription`), their
+Jacobian ``J`` and the control terms' constant Hessian ``Q``, each step solves
+
+    minimise  g^T p + 1/2 p^T (J^T Q J + sum_k lambda_k C_k + mu D) p
+    subject to c_k + a_k^T p <= 0   (every goal constraint, :mod:`.goal`)
+
+(``g = J^T grad u``: the effort's gradient; ``C_k`` the constraints' constant Hessians;
+``D`` the diagonal of the Gauss-Newton matrix): one sparse Cholesky factorisation, one
+solve per constraint and a tiny active-set problem for the multipliers.  A step is kept when
+the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a share of what the model
+predicts; ``mu`` (Levenberg-Marquardt) shrinks after a good step and grows after a poor one.
+It ends when the constraints hold and a step changes the effort by less than ``tol``
+(relative), or at ``maxiter``, the deadline or a signal.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+try:
+    from cvxopt import cholmod, matrix, spmatrix
+except ImportError:  # SuperLU instead (slower, same answer)
+    cholmod = None
+from scipy.sparse.linalg import splu
+
+from .restore import LengthRestoration
+
+ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
+MU_START, MU_MIN, MU_MAX = 1e-2, 1e-10, 1e12  # damping, in the mass metric
+THETA_START, THETA_MIN = 0.25, 1e-3  # the share of the constraints' violation a step removes
+
+
+@dataclass
+class Point:
+    """An iterate: unknowns, controls, effort, its gradient in z, constraint values."""
+
+    z: np.ndarray
+    u: np.ndarray
+    effort: float
+    gradient: np.ndarray
+    c: np.ndarray
+    J: object = None
+
+    def violation(self) -> float:
+        return float(np.sum(np.maximum(self.c, 0.0)))
+
+
+@dataclass
+class Progress:
+    """What each iteration reports (the method turns it into history records)."""
+
+    iteration: int
+    effort: float
+    violation: float
+    misses: list
+    mu: float
+    step: float
+    kept: bool
+    theta: float = 1.0
+    ratio: float = 1.0
+
+
+@dataclass
+class Outcome:
+    z: np.ndarray
+    reason: str  # "converged", "maxiter", "stalled", "stopped"
+    iterations: int
+    history: list = field(default_factory=list)
+
+
+class Factor:
+    """Sparse Cholesky (CHOLMOD through cvxopt, its analysis kept while the pattern holds;
+    SuperLU without cvxopt) of a symmetric positive definite matrix."""
+
+    def __init__(self):
+        self._pattern = None
+        self._symbolic = None
+        self._matrix = None
+
+    def __call__(self, B: sp.csc_matrix):
+        B = sp.csc_matrix(B)
+        B.sort_indices()
+        if cholmod is None:
+            lu = splu(B)
+            return lambda rhs: lu.solve(np.asarray(rhs, float))
+        lower = sp.tril(B, format="csc")
+        lower.sort_indices()
+        key = (lower.indptr.tobytes(), lower.indices.tobytes())
+        if key != self._pattern:
+            col = np.repeat(np.arange(lower.shape[1]), np.diff(lower.indptr))
+            self._matrix = spmatrix(matrix(lower.data), matrix(lower.indices.astype(np.int64)),
+                                    matrix(col.astype(np.int64)), lower.shape)
+            self._symbolic, self._pattern = cholmod.symbolic(self._matrix, uplo="L"), key
+        else:
+            self._matrix.V = matrix(lower.data)
+        cholmod.numeric(self._matrix, self._symbolic)
+        factor = self._symbolic
+
+        def solve(rhs):
+            b = matrix(np.asarray(rhs, float).reshape(B.shape[0], -1))
+            cholmod.solve(factor, b)
+            return np.asarray(b).reshape(np.shape(rhs))
+
+        return solve
+
+
+class PositionSQP:
+    """The module docstring's search on a transcription ``tr`` under ``constraints``."""
+
+    def __init__(self, tr, constraints, Q: sp.spmatrix):
+        self.tr, self.constraints = tr, constraints
+        self.Q = sp.csr_matrix(Q)
+        self.C = [c.hessian() for c in constraints]
+        self.factor = Factor()
+        self.evaluations = 0
+        self.sigma = 0.0  # the merit's penalty weight, never lowered
+        self.restore = LengthRestoration(tr)
+        masses = np.repeat(tr.problem.model.masses, 3)[tr.free_flat]
+        self.metric = np.tile(masses, tr.N) / tr.dt ** 2  # kinetic-energy-like, per unknown
+
+    def point(self, z, jacobian: bool = True) -> Point:
+        """The iterate at ``z`` (with the control Jacobian when asked)."""
+        self.evaluations += 1
+        u = self.tr.controls(z)
+        effort, grad_u = self.tr.problem.control_cost(u)
+        J = self.tr.control_jacobian(z) if jacobian else None
+        gradient = None if J is None else J.T @ grad_u
+        c = np.array([k.value(z) for k in self.constraints])
+        return Point(z, u, effort, gradient, c, J)
+
+    def run(self, z0, *, maxiter: int, tol: float, on_iteration=None, should_stop=None):
+        """From ``z0``: the :class:`Outcome` (``on_iteration(Progress, point)`` after each,
+        ``should_stop()`` checked before each, True to end the search)."""
+        x = self.point(z0)
+        lam = np.zeros(len(self.constraints))
+        mu, theta, history = MU_START, THETA_START, []
+        reason, it = "maxiter", 0
+        for it in range(1, maxiter + 1):
+            if should_stop is not None and should_stop():
+                reason = "stopped"
+                break
+            step, lam_new, predicted, sigma = self._step(x, lam, mu, theta)
+            merit = lambda p: p.effort + sigma * p.violation()  # noqa: E731
+            trial = self.point(self.restore(x.z, x.z + step), jacobian=False)
+            actual = merit(x) - merit(trial)
+            ratio = actual / predicted if predicted > 0 else -np.inf
+            kept = ratio >= ACCEPT
+            previous = x
+            if kept:
+                x, lam = self.point(trial.z), lam_new
+                if ratio > 0.5:
+                    mu, theta = max(mu / 3.0, MU_MIN), min(2.0 * theta, 1.0)
+            else:
+                mu, theta = min(4.0 * mu + MU_MIN, MU_MAX), max(theta / 2.0, THETA_MIN)
+            report = Progress(it, x.effort, x.violation(),
+                              [k.miss(x.z) for k in self.constraints], mu,
+                              float(np.linalg.norm(step)), kept, theta, ratio)
+            history.append(report)
+            if on_iteration is not None:
+                on_iteration(report, x)
+            if kept and x.violation() == 0 and abs(previous.effort - x.effort) <= tol * max(
+                    abs(x.effort), 1e-300):
+                reason = "converged"
+                break
+            if not kept and mu >= MU_MAX:
+                reason = "stalled"
+                break
+        return Outcome(x.z, reason, it, history), x
+
+    def _step(self, x: Point, lam, mu, theta):
+        """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
+        violated constraints asked to fall by the share ``theta``."""
+        JQ = self.Q @ x.J
+        H = (x.J.T @ JQ).tocsc()
+        for l, C in zip(lam, self.C):
+            if l > 0:
+                H = H + l * C
+        B = H + sp.diags(mu * self.metric)
+        solve = self.factor(B.tocsc())
+        A = np.stack([k.gradient(x.z) for k in self.constraints], axis=1)
+        p0 = -solve(x.gradient)
+        W = solve(A)
+        aim = x.c - theta * np.maximum(x.c, 0.0)  # c + a^T p <= c - theta max(c, 0)
+        step, lam_a = _active_set(aim, A, p0, W)
+        self.sigma = sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
+        linear = x.c + A.T @ step
+        model = -(x.gradient @ step + 0.5 * step @ (H @ step))
+        predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
+        return step, lam_a, predicted, sigma
+
+
+def _active_set(c, A, p0, W):
+    """``(step, multipliers)`` of the QP's few constraints ``c + A^T p <= 0`` given the
+    unconstrained step ``p0`` and ``W = B^-1 A``: a primal active set (a constraint is
+    added while its linearization is violated, dropped while its multiplier is negative)."""
+    m = c.size
+    active = [k for k in range(m) if c[k] + A[:, k] @ p0 > 0]
+    lam = np.zeros(m)
+    for _ in range(4 * m + 4):
+        lam[:] = 0.0
+        if active:
+            S = A[:, active].T @ W[:, active]
+            rhs = c[active] + A[:, active].T @ p0
+            lam[active] = np.linalg.lstsq(S, rhs, rcond=1e-12)[0]
+        step = p0 - W @ lam
+        negative = [k for k in active if lam[k] < 0]
+        if negative:
+            active.remove(min(negative, key=lambda k: lam[k]))
+            continue
+        violated = [k for k in range(m) if k not in active and c[k] + A[:, k] @ step > 0]
+        if not violated:
+            break
+        active.append(max(violated, key=lambda k: c[k] + A[:, k] @ step))
+    return step, lam

@@ -28,8 +28,8 @@ import numpy as np  # noqa: E402
 
 from casadi_keyframe import solve  # noqa: E402
 from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
-from casadi_keyframe.loading import (build_problem, default_resolutions, load_module,  # noqa: E402
-                                     solve_defaults)
+from casadi_keyframe.loading import build_problem, load_module, solve_defaults  # noqa: E402
+from casadi_keyframe.optimize.settings import settings_from  # noqa: E402
 from casadi_keyframe.scenes.maths import turn_angle  # noqa: E402
 
 FIGURES = ("cloth_toss", "cloth_arch", "cloth_shapes")
@@ -39,11 +39,9 @@ STRETCH = 1.3
 def run(name: str, route: str, overrides: dict) -> dict:
     module = load_module(name)
     prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module)
-    resolutions = default_resolutions(module, prob)
+    asked = settings_from(solve_defaults(module), {"gradient": route})
     cpu, wall = time.process_time(), time.perf_counter()
-    r = solve(prob, method=defaults["method"], gradient=route, maxiter=defaults["maxiter"],
-              resolutions=resolutions or None, quiet=True)
+    r = solve(prob, asked, quiet=True)
     cpu, wall = time.process_time() - cpu, time.perf_counter() - wall
     x = r.trajectory.x
     stretch = np.array([prob.model.max_stretch(frame) for frame in x])

@@ -43,7 +43,7 @@ def sphere_center(t):
 def build(k: int, steps: int, collider: str, solver: str, max_factor_gb: float = 2.0):
     """A k x k hanging sheet (1 m, 1 kg, no ground) swung forward and up."""
     from casadi_keyframe.integrators import LinearizedBackwardEuler
-    from casadi_keyframe.models.colliders import Sphere
+    from casadi_keyframe.models.contact.colliders import Sphere
     from casadi_keyframe.scenes.sheets import hanging_sheet, swing_problem
     colliders = [Sphere(sphere_center, 0.2)] if collider == "sphere" else []
     return swing_problem(hanging_sheet(k, ground=False, colliders=colliders), steps, 1 / 60,

@@ -10,8 +10,9 @@ array's largest entry.  The scenes cover each integrator and gradient route: a f
 (symplectic Euler, exact adjoint), a 6 x 6 sheet with a pin, an attachment, a moving sphere,
 a capsule, the ground and self-contact (linearized backward Euler: trajectory, exact adjoint,
 swapped adjoint, one tangent pass, CasADi reverse mode; full backward Euler), the toss at
-12 x 12 and the cape at 6 x 4 from its passive start.  Only public entry points are used, so
-the script runs on any revision since the first architecture pass.
+12 x 12, the cape at 6 x 4 from its passive start, and a sheet sticking and sliding on two
+bodies with friction (under the guarded and the held collision).  Only public entry points
+are used, so the script runs on any revision since the first architecture pass.
 """
 import argparse
 import os
@@ -31,7 +32,10 @@ def contact_sheet(integrator, **options):
         from casadi_keyframe.models import Attachment
     except ImportError:  # before the second architecture pass
         from casadi_keyframe.models.cloth import Attachment
-    from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
+    try:
+        from casadi_keyframe.models import Capsule, Contact, Plane, Sphere
+    except ImportError:  # before the second architecture pass
+        from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
 
     model = ClothModel.grid(
         6, 6, pinned=[5],
@@ -47,6 +51,32 @@ def contact_sheet(integrator, **options):
     return ControlProblem(model=model, integrator=integrator, x0=x0, v0=np.zeros_like(x0),
                           steps=steps, dt=1 / 30, controls=StepForces(), objective=obj,
                           name="contact_sheet")
+
+
+def friction_sheet(collision):
+    """A 5 x 5 sheet thrown across a tilted ground and a rising, turning sphere, both with
+    Coulomb friction: particles stick, slide and switch between them within the steps."""
+    from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe
+    from casadi_keyframe.controls import StepForces
+    from casadi_keyframe.integrators import LinearizedBackwardEuler
+    from casadi_keyframe.models import ClothModel, Contact, Plane, Sphere
+
+    def spin(t):
+        return (np.array([[np.cos(3 * t), -np.sin(3 * t), 0], [np.sin(3 * t), np.cos(3 * t), 0],
+                          [0, 0, 1.0]]), np.array([0.45, 0.3, -0.27 + 0.5 * t]))
+
+    ground = Plane((0, 0, 0), (0, -0.2, 1), contact=Contact(friction=0.4))
+    ball = Sphere((0, 0, 0), 0.3, contact=Contact(friction=0.5), motion=spin)
+    model = ClothModel.grid(5, 5, width=0.6, height=0.6, plane="xy", mass=0.3,
+                            colliders=[ground, ball], collision=collision)
+    x0 = model.rest_positions + [0, 0, 0.012]
+    v0 = np.zeros_like(x0)
+    v0[:, 0], v0[:5, 0], v0[:, 2] = 1.0, 0.1, -0.3
+    steps = 10
+    obj = StateKeyframe(steps, x=x0 + [0.1, 0.05, 0.0]) + Smoothness(1e-4)
+    return ControlProblem(model=model, integrator=LinearizedBackwardEuler("direct"), x0=x0,
+                          v0=v0, steps=steps, dt=1 / 60, controls=StepForces(), objective=obj,
+                          name="friction_sheet")
 
 
 def scenes():
@@ -67,6 +97,8 @@ def scenes():
         "toss": (ck.load_problem("cloth_toss", rows=12, cols=12), ("adjoint", "swapped"), 4),
         "cape": (ck.load_problem("cape_blend", rows=6, cols=4, guess="passive"),
                  ("adjoint",), 5),
+        "friction": (friction_sheet("guarded"), ("adjoint", "casadi"), 6),
+        "friction_held": (friction_sheet("constraint"), ("adjoint",), 7),
     }
 
 

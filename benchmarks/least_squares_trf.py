@@ -1,5 +1,5 @@
 """scipy's trust-region reflective ``least_squares`` (LSMR on the matrix-free products,
-:class:`~casadi_keyframe.optimize.residuals.Linearization`) against the library's own
+:class:`~casadi_keyframe.optimize.residual.linearization.Linearization`) against the library's own
 trust region (``solve(..., "gauss-newton")``) on one problem, from its start: why the method
 is the library's own.  One BLAS thread, CPU time.
 
@@ -24,7 +24,7 @@ from scipy.optimize import least_squares  # noqa: E402
 from casadi_keyframe.cli.values import parse_overrides  # noqa: E402
 from casadi_keyframe.loading import load_problem  # noqa: E402
 from casadi_keyframe.optimize import solve  # noqa: E402
-from casadi_keyframe.optimize.residuals import Linearization  # noqa: E402
+from casadi_keyframe.optimize.residual.linearization import linearize  # noqa: E402
 
 
 class Linearized:
@@ -33,13 +33,14 @@ class Linearized:
 
     def __init__(self, problem):
         self.problem, self.lin, self.simulations, self.products = problem, None, 0, 0
+        self.u = None
 
     def at(self, u):
-        if self.lin is None or not np.array_equal(self.lin.u, u):
+        if self.lin is None or not np.array_equal(self.u, u):
             if self.lin is not None:
                 self.products += self.lin.products
                 self.lin.release()
-            self.lin = Linearization(self.problem, u)
+            self.lin, self.u = linearize(self.problem, u), u.copy()
             self.simulations += 1
         return self.lin
 

@@ -11,6 +11,7 @@ import statistics
 import time
 
 from casadi_keyframe.loading import build_problem, load_module, solve_defaults
+from casadi_keyframe.optimize.settings import settings_from
 
 
 def timed(fn) -> tuple[float, float]:
@@ -29,7 +30,7 @@ def main():
     for name in args.problems:
         module = load_module(name)
         prob = build_problem(module)
-        route = solve_defaults(module)["gradient"]
+        route = settings_from(solve_defaults(module)).gradient
         u = prob.initial_controls()
         prob.objective_and_gradient(u, route)  # compiles the kernels
         runs = [(timed(lambda: prob.objective(u)),

@@ -36,7 +36,7 @@ from casadi_keyframe.models import ClothModel  # noqa: E402
 from casadi_keyframe.models.interaction import PairInteraction  # noqa: E402
 from casadi_keyframe.models.springs import BEND, REST_TOLERANCE, sinc_inverse_squared  # noqa: E402
 from casadi_keyframe.optimize import solve  # noqa: E402
-from casadi_keyframe.optimize.residuals import Linearization  # noqa: E402
+from casadi_keyframe.optimize.residual.linearization import linearize  # noqa: E402
 from casadi_keyframe.problem import ControlProblem  # noqa: E402
 
 
@@ -104,7 +104,7 @@ def branches(prob, traj) -> np.ndarray:
 def linearity(prob, u, label: str) -> None:
     """The objective along the gradient against its linear prediction, and the springs
     that switch branch on the way."""
-    lin = Linearization(prob, u)
+    lin = linearize(prob, u)
     g = lin.gradient()
     d, f0 = -g / np.linalg.norm(g), lin.value
     before = branches(prob, lin.trajectory)

@@ -118,9 +118,10 @@ def run_case(name, method, folder, args) -> dict:
         extra["finish"] = args.finish
     shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
                                                           "place=growth"), None)
-    spec = solve_run(module, problem, overrides, out, maxiter=args.maxiter, quiet=True,
-                     pictures=False, animation=False, viewer=False, shooting=shooting,
-                     time_limit=args.time_limit, **extra)
+    given = {"maxiter": args.maxiter, "shooting": shooting, "time_limit": args.time_limit,
+             **extra}
+    spec = solve_run(module, problem, overrides, out, given=given, quiet=True,
+                     pictures=False, animation=False, viewer=False)
     prob = spec.problem
     start_u = prob.initial_controls()
     start = prob.breakdown(start_u)
@@ -133,17 +134,18 @@ def run_case(name, method, folder, args) -> dict:
     u, summary = run["u"], json.loads((out / "summary.json").read_text())
     end = prob.breakdown(u)
     rms, peak = effort(prob, u)
-    found = {"case": name, "method": spec.method, "start": misses(start),
+    found = {"case": name, "method": spec.settings.method, "start": misses(start),
              "end": misses(end), "stretch": stretch(end), "rms": rms, "peak": peak,
              "start_rms": effort(prob, start_u)[0], "nit": summary["nit"],
              "nfev": summary["nfev"], "cpu": cpu, "exit": code,
              "message": summary.get("message", "")}
     if args.radius:
         t = time.process_time()
-        first = linearity(prob, spec.gradient, start_u)  # the result may be the start
+        route = spec.settings.gradient.name
+        first = linearity(prob, route, start_u)  # the result may be the start
         found["at"] = [first, first if np.array_equal(u, start_u) else
-                       linearity(prob, spec.gradient, u)]
-        found["radius_cpu"], found["route"] = time.process_time() - t, spec.gradient
+                       linearity(prob, route, u)]
+        found["radius_cpu"], found["route"] = time.process_time() - t, route
     return found
 
 

@@ -49,12 +49,11 @@ def main(argv=None) -> int:
                 u = tracking_guess(prob, land=False, aim=runs)
                 cpu = time.process_time() - t
                 b = prob.breakdown(u)
-                adjoint = Adjoint()
-                _, g = adjoint(prob, u)
+                found = Adjoint().evaluate(prob, u)
                 rms, peak = effort(prob, u)
                 print(f"{sheet:12s} {band:5.2f} {runs:4d} {misses(b):>10s} {stretch(b):7.3f} "
-                      f"{rms:7.1f} {peak:7.1f} {np.linalg.norm(g):9.2e} "
-                      f"{adjoint.growth.growth:9.2e} {cpu:6.1f}", flush=True)
+                      f"{rms:7.1f} {peak:7.1f} {np.linalg.norm(found.gradient):9.2e} "
+                      f"{found.growth.growth:9.2e} {cpu:6.1f}", flush=True)
     return 0
 
 

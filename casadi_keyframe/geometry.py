@@ -1,16 +1,20 @@
-"""Plotting-free geometry that pictures and exports share: colliders at a time, circles,
-capsule surfaces and plane patches, the triangles of a surface grid, and the rigid motion
-that best carries one set of points onto another (keyframes and scenes measure by it).
+"""Plotting-free geometry that pictures and exports share: the typed shapes of colliders at
+a time (:class:`Patch`, :class:`Round`, :class:`TriangleMesh`), circles, capsule surfaces
+and plane patches, the polygons of a surface grid, and the rigid motion that best carries
+one set of points onto another (keyframes and scenes measure by it).
 
-Both the matplotlib renderers (:mod:`.render`) and the exporters (:mod:`.export`) draw or
-write the same bodies, so they read them here, once, without importing a plotting library.
+A collider gives its shape at time t (``body.shape(t)``, :mod:`.models.contact.colliders`);
+the matplotlib renderers (:mod:`.render`) and the exporters (:mod:`.export`) draw or write
+any shape through what it says of itself (:class:`BodyShape`: its extent, its polygons,
+whether it lies beneath), so they never ask which kind it is, and read it here, once,
+without importing a plotting library.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, fields
+
 import numpy as np
 from scipy.spatial.transform import Rotation
-
-from .models.colliders import Plane, Sphere
 
 
 def basis(normal):
@@ -42,6 +46,14 @@ def capsule_grid(a, b, radius, k: int = 12) -> np.ndarray:
                                       + np.sin(theta)[:, None, None] * n))
 
 
+def grid_faces(rows: int, cols: int) -> np.ndarray:
+    """``((rows-1) (cols-1), 4)`` vertex indices of the quads of a ``rows x cols`` grid of
+    points stored row by row (as :func:`capsule_grid`'s, reshaped to ``(-1, 3)``)."""
+    r, c = np.meshgrid(np.arange(rows - 1), np.arange(cols - 1), indexing="ij")
+    a = (r * cols + c).ravel()
+    return np.c_[a, a + cols, a + cols + 1, a + 1]
+
+
 def grid_triangles(rows: int, cols: int) -> np.ndarray:
     """``(2 (rows-1) (cols-1), 3)`` vertex indices triangulating a ``rows x cols`` grid of
     points stored row by row (as :func:`capsule_grid`'s, reshaped to ``(-1, 3)``)."""
@@ -51,20 +63,6 @@ def grid_triangles(rows: int, cols: int) -> np.ndarray:
     return np.r_[np.c_[a, b, d + 1], np.c_[a, d + 1, d]]
 
 
-def body_geometry(body, t: float):
-    """``("plane", point, normal)``, ``("round", a, b, radius)`` (a sphere is a round body
-    with ``a == b``) or ``("mesh", vertices, faces)`` from ``body.geometry(t)``."""
-    if body.kind == "mesh":
-        vertices, faces = body.geometry(t)
-        return "mesh", vertices, faces
-    g = [np.asarray(p, dtype=float) for p in body.geometry(t)]
-    if isinstance(body, Plane):
-        return "plane", g[0], g[1]
-    if isinstance(body, Sphere):  # center, radius, velocity
-        return "round", g[0], g[0], float(g[1][0])
-    return "round", g[0], g[1], float(g[2][0])  # Capsule: a, b, radius, va, vb
-
-
 def plane_patch(point, normal, mid, half: float) -> np.ndarray:
     """The 4 corners of a square of half-side ``half`` on the plane, centred below ``mid``."""
     n, e1, e2 = basis(normal)
@@ -72,11 +70,96 @@ def plane_patch(point, normal, mid, half: float) -> np.ndarray:
     return np.array([c + half * (s * e1 + r * e2) for s, r in ((-1, -1), (1, -1), (1, 1), (-1, 1))])
 
 
-def moves(body, times) -> bool:
-    """Whether ``body``'s geometry changes over ``times``."""
-    first = body_geometry(body, times[0])
-    return any(not all(np.array_equal(p, q) for p, q in zip(first[1:], body_geometry(body, t)[1:]))
-               for t in times[1:])
+class BodyShape:
+    """What a collider looks like at one time, for pictures and exports: a typed shape knows
+    its extent, the polygons that show it and whether it lies ``beneath`` the rest (an
+    unbounded plane, drawn as a square sized to what is around it, under everything).
+    ``mid`` and ``half`` are the middle and half-size of that square; ``detail`` how finely
+    a curved surface is cut.  An output with a better form for a shape (USD's analytic
+    sphere) keys it by the shape's type; any other shape it writes as its :meth:`polygons`."""
+
+    beneath = False
+
+    def extent(self, mid) -> np.ndarray:
+        """``(k, 3)`` points that bound the shape (a plane: its point below ``mid``)."""
+        raise NotImplementedError
+
+    def polygons(self, mid=None, half=None, detail: int = 8):
+        """``(vertices (v, 3), faces (f, k))``: the polygons (triangles or quads) that show it."""
+        raise NotImplementedError
+
+    def triangles(self, mid=None, half=None, detail: int = 8):
+        """``(vertices, triangles (f, 3))``: :meth:`polygons` cut into triangles."""
+        vertices, faces = self.polygons(mid, half, detail)
+        if faces.shape[1] == 3:
+            return vertices, faces
+        return vertices, np.vstack([faces[:, [0, 1, 2]], faces[:, [0, 2, 3]]])
+
+    def same(self, other) -> bool:
+        """Whether ``other`` is this shape at the same place."""
+        return type(other) is type(self) and all(
+            np.array_equal(getattr(self, f.name), getattr(other, f.name)) for f in fields(self))
+
+
+@dataclass(frozen=True, eq=False)
+class Patch(BodyShape):
+    """An unbounded plane through ``point`` with ``normal``, shown as a square patch."""
+
+    point: np.ndarray
+    normal: np.ndarray
+
+    beneath = True
+
+    def extent(self, mid) -> np.ndarray:
+        normal = self.normal[None] / np.linalg.norm(self.normal[None], axis=1, keepdims=True)
+        return mid - np.sum((mid - self.point[None]) * normal, 1, keepdims=True) * normal
+
+    def polygons(self, mid=None, half=None, detail: int = 8):
+        return plane_patch(self.point, self.normal, mid, half), np.array([[0, 1, 2, 3]])
+
+
+@dataclass(frozen=True, eq=False)
+class Round(BodyShape):
+    """A capsule from ``a`` to ``b`` of ``radius``; a sphere where they coincide."""
+
+    a: np.ndarray
+    b: np.ndarray
+    radius: float
+
+    @property
+    def sphere(self) -> bool:
+        return bool(np.array_equal(self.a, self.b))
+
+    def extent(self, mid=None) -> np.ndarray:
+        r = self.radius
+        return np.array([self.a - r, self.a + r, self.b - r, self.b + r])
+
+    def polygons(self, mid=None, half=None, detail: int = 8):
+        grid = capsule_grid(self.a, self.b, self.radius, detail)
+        return grid.reshape(-1, 3), grid_faces(*grid.shape[:2])
+
+    def triangles(self, mid=None, half=None, detail: int = 8):
+        grid = capsule_grid(self.a, self.b, self.radius, detail)
+        return grid.reshape(-1, 3), grid_triangles(*grid.shape[:2])
+
+
+@dataclass(frozen=True, eq=False)
+class TriangleMesh(BodyShape):
+    """A triangle mesh: ``vertices`` ``(v, 3)`` and ``faces`` ``(f, 3)``."""
+
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    def extent(self, mid=None) -> np.ndarray:
+        return self.vertices
+
+    def polygons(self, mid=None, half=None, detail: int = 8):
+        return self.vertices, self.faces
+
+
+def moves(shapes) -> bool:
+    """Whether a body's ``shapes`` (one per time) differ."""
+    return any(not shapes[0].same(shape) for shape in shapes[1:])
 
 
 def best_rigid_motion(source, dest, weights=None) -> tuple[np.ndarray, np.ndarray]:

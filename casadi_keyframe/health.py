@@ -58,10 +58,6 @@ class Growth:
     fastest_step: int
     steps: int
 
-    def as_dict(self) -> dict:
-        return {"growth": self.growth, "frame": self.frame, "fastest": self.fastest,
-                "fastest_step": self.fastest_step}
-
 
 class BackwardWatch:
     """Watches one backward pass (:func:`~casadi_keyframe.simulate.backward` calls it) of
@@ -162,9 +158,9 @@ class GrowthLog:
     def __init__(self):
         self.last, self.largest, self.refused = None, None, 0
 
-    def seen(self, strategy) -> None:
-        """After an evaluation by ``strategy``: read the growth it recorded."""
-        growth = getattr(strategy, "growth", None)
+    def seen(self, growth: Growth | None) -> None:
+        """After an evaluation whose backward pass grew by ``growth`` (None: it watched
+        none)."""
         self.last = None if growth is None else growth.growth
         if self.last is not None:
             self.largest = self.last if self.largest is None else max(self.largest, self.last)

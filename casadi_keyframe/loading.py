@@ -205,25 +205,16 @@ def build_problem(module, **overrides) -> ControlProblem:
 
 
 def solve_defaults(module, overrides: dict | None = None) -> dict:
-    """How the problem file asks to be solved: its ``SOLVE`` over the library's defaults
-    (L-BFGS-B, 200 iterations, the exact "adjoint" gradient route; it may add ``rounds``,
-    ``weight_growth``, ``resolutions``, ``shooting``).  ``SOLVE`` may also be a function of
-    ``build``'s keyword values returning that dict (a problem solved one way from one start
-    and another from another); it gets the defaults with ``overrides`` over them."""
+    """How the problem file asks to be solved: its ``SOLVE``, a dict of solve settings (the
+    names :class:`~casadi_keyframe.optimize.SolveSettings` takes; what it leaves out is the
+    library's default).  ``SOLVE`` may also be a function of ``build``'s keyword values
+    returning that dict (a problem solved one way from one start and another from another);
+    it gets the defaults with ``overrides`` over them."""
     solve = getattr(module, "SOLVE", {})
     if callable(solve):
         values = {o.name: o.default for o in overrides_of(module)}
         solve = solve(**{**values, **(overrides or {})})
-    return {"method": "lbfgsb", "maxiter": 200, "gradient": "adjoint", **solve}
-
-
-def default_resolutions(module, problem) -> list[dict]:
-    """The coarser meshes the problem file's ``SOLVE["resolutions"]`` asks to solve first
-    (build overrides), keeping only those with fewer particles than ``problem``: none when
-    it is built that coarse itself."""
-    overrides = getattr(problem.source, "overrides", None)
-    return [dict(r) for r in solve_defaults(module, overrides).get("resolutions", [])
-            if problem.at_resolution(**r).model.n < problem.model.n]
+    return dict(solve)
 
 
 _INTERVAL = re.compile(r"^\s*([\[(])\s*([^,\s]+)\s*,\s*([^,\s]+)\s*([\])])\s*$")

@@ -222,9 +222,9 @@ class ControlProblem:
         traj = self.simulate(u, records=False)
         return self.state_cost(traj, gradient=False)[0] + self.control_cost(u)[0]
 
-    def objective_and_gradient(self, u, gradient="adjoint"):
+    def objective_and_gradient(self, u, gradient=None):
         """``(phi, dphi/du)`` by the named route ("adjoint", "swapped", "casadi" or "fd", see
-        :mod:`casadi_keyframe.adjoints`) or a strategy object."""
+        :mod:`casadi_keyframe.adjoints`; None: the registry's default) or a route object."""
         from .adjoints import get_gradient
         return get_gradient(gradient)(self, self.controls.check(u))
 

@@ -3,15 +3,12 @@
 A problem file passes one as ``ControlProblem(view=...)`` and the renderers in
 :mod:`casadi_keyframe.render` read it: :class:`FlockView` for a flock seen from above,
 :class:`ClothView` for a cloth in 3-D, :class:`BlendView` for fig. 6's blend drawn beside
-its source clips.  Each keyframe term describes what it shows as a :class:`Marker`, which
-renderers and exporters draw without knowing the term's class, with its
-:class:`KeyframeGoal`: how the search's goal judges it, so that a picture says what the goal
-says (:class:`Check`).  Plotting-free, so that a problem can hold one without importing
-matplotlib.
+its source clips.  What each keyframe term shows, and how the goal judges it, is the term's
+(:mod:`casadi_keyframe.objectives.markers`).  Plotting-free, so that a problem can hold one
+without importing matplotlib.
 """
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
 from dataclasses import MISSING, dataclass, field, fields
 from typing import TYPE_CHECKING, TypeVar
 
@@ -19,122 +16,6 @@ import numpy as np
 
 if TYPE_CHECKING:
     from .state import Trajectory
-
-
-MARKER_KINDS = ("shape", "particles", "center", "outline", "velocity")
-
-# What each entry of a term's miss (StateTerm.miss) measures: (name, quantity, bound); a
-# "length" in the model's length unit, a "speed" in that per second, a "fraction" of agents.
-# A bound "most" is met at or below its tolerance, "least" at or above it.
-MEASURES = {"rms_position_error": ("rms miss", "length", "most"),
-            "max_position_error": ("max", "length", "most"),
-            "rms_velocity_error": ("velocity rms miss", "speed", "most"),
-            "position_error": ("centre-of-mass miss", "length", "most"),
-            "velocity_error": ("velocity miss", "speed", "most"),
-            "fraction_inside": ("inside", "fraction", "least")}
-
-
-@dataclass(frozen=True)
-class Miss:
-    """One measure of a keyframe's miss (``key`` of :data:`MEASURES`, named ``name``) in a
-    trajectory: its ``value`` and the ``tolerance`` it is held to (None: not checked)."""
-
-    key: str
-    name: str
-    quantity: str
-    bound: str
-    value: float
-    tolerance: float | None
-
-
-@dataclass(frozen=True)
-class Check:
-    """How a trajectory does against one keyframe (``label`` at ``frame``): its ``misses``
-    and ``met``, the goal's verdict on it (None: the keyframe declares no tolerance)."""
-
-    label: str
-    frame: int
-    misses: tuple
-    met: bool | None
-
-    @property
-    def verdict(self) -> str:
-        """``"HIT"``, ``"MISSED"`` or ``"no tolerance"``."""
-        return "no tolerance" if self.met is None else ("HIT" if self.met else "MISSED")
-
-
-@dataclass(frozen=True)
-class KeyframeGoal:
-    """How the search's goal judges a keyframe term: its ``tolerances`` (a key of
-    :data:`MEASURES` -> tolerance, None or inf: not checked), whether the goal counts it
-    (``judged``: the term declares a tolerance), and the term's own ``miss`` and
-    ``shortfall`` (a phrase, or None when every tolerance holds), which the goal calls
-    (:func:`casadi_keyframe.optimize.goal.verdict`): a picture never tests a tolerance
-    itself."""
-
-    tolerances: Mapping
-    judged: bool
-    miss: Callable = field(repr=False, compare=False)
-    shortfall: Callable = field(repr=False, compare=False)
-
-    def __post_init__(self):
-        unknown = set(self.tolerances) - set(MEASURES)
-        if unknown:
-            raise ValueError(f"a keyframe goal's tolerances are keyed by {list(MEASURES)}, "
-                             f"got {sorted(unknown)}")
-        object.__setattr__(self, "tolerances", {k: None if v is None else float(v)
-                                                for k, v in self.tolerances.items()})
-
-    def check(self, label: str, frame: int, trajectory) -> Check:
-        """The :class:`Check` of ``trajectory``: the term's misses beside their tolerances,
-        met when the goal's test (the term's ``shortfall``) finds nothing short."""
-        miss = self.miss(trajectory)
-        misses = tuple(Miss(key, *MEASURES[key], float(miss[key]), self.tolerances.get(key))
-                       for key in MEASURES if key in miss)
-        met = (self.shortfall(trajectory) is None) if self.judged else None
-        return Check(label, int(frame), misses, met)
-
-
-@dataclass(frozen=True)
-class Marker:
-    """What a keyframe term shows at its ``frame``, labelled ``label``.
-
-    ``kind`` is "shape" (a target for every particle: ``points`` is ``(n, dim)`` in particle
-    order, drawn with the surface's faces where the model has a surface), "particles" (targets
-    of some particles: ``points`` ``(k, dim)`` for ``particles``), "center" (a centre-of-mass
-    target: ``points`` ``(1, dim)``), "outline" (a region: its closed 2-D outline) or
-    "velocity" (velocity targets of ``particles`` only: nothing to show in space, ``points``
-    empty).  ``goal``, if given, is how the search's goal judges the term (:meth:`check`).
-    """
-
-    label: str
-    frame: int
-    kind: str
-    points: np.ndarray
-    particles: np.ndarray | None = None
-    goal: KeyframeGoal | None = None
-
-    def __post_init__(self):
-        if self.kind not in MARKER_KINDS:
-            raise ValueError(f"a marker's kind is one of {MARKER_KINDS}, got {self.kind!r}")
-        points = np.array(np.atleast_2d(self.points), dtype=float)
-        points.flags.writeable = False
-        object.__setattr__(self, "points", points)
-        object.__setattr__(self, "frame", int(self.frame))
-
-    def check(self, trajectory) -> Check | None:
-        """How ``trajectory`` does against this keyframe (None without a ``goal``)."""
-        return None if self.goal is None else self.goal.check(self.label, self.frame,
-                                                               trajectory)
-
-    @property
-    def position_tolerance(self) -> float | None:
-        """The tolerance on this keyframe's position miss (rms over its particles, or the
-        centre's distance), in length units; None where none is checked."""
-        tolerances = {} if self.goal is None else self.goal.tolerances
-        found = [t for key in ("rms_position_error", "position_error")
-                 if (t := tolerances.get(key)) is not None and np.isfinite(t)]
-        return found[0] if found else None
 
 
 @dataclass(frozen=True)

@@ -15,7 +15,7 @@ import numpy as np
 
 from casadi_keyframe.controls import StepForces
 from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION, ClothModel
-from casadi_keyframe.models.colliders import Contact, Plane
+from casadi_keyframe.models.contact.colliders import Contact, Plane
 from casadi_keyframe.objectives import StateKeyframe, Smoothness, StrainLimit
 from casadi_keyframe.scenes.cloths import bend_into_arch, cloth_problem, weight_support
 from casadi_keyframe.views import ClothView

@@ -19,7 +19,7 @@ import numpy as np
 
 from casadi_keyframe.controls import InitialVelocity
 from casadi_keyframe.models import COLLISIONS, DEFAULT_COLLISION, ClothModel
-from casadi_keyframe.models.colliders import Contact, Plane
+from casadi_keyframe.models.contact.colliders import Contact, Plane
 from casadi_keyframe.objectives import (CenterOfMassKeyframe, ParticleKeyframe, Smoothness,
                                         StrainLimit)
 from casadi_keyframe.scenes.cloths import cloth_problem, rotate_about

@@ -37,11 +37,11 @@ class InterruptAfter(Adjoint):
     def __init__(self, calls):
         self.calls = calls
 
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         self.calls -= 1
         if self.calls < 0:
             raise KeyboardInterrupt
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
 
 def assert_exact_routes(prob, u):

@@ -164,12 +164,15 @@ def _code_strings(path: Path) -> list[str]:
             and isinstance(n.value, str) and id(n) not in docs]
 
 
-def test_no_route_is_known_by_name_in_the_health_modules():
-    from casadi_keyframe.adjoints import ROUTES
+def test_no_route_is_known_by_name_outside_the_registry():
+    """A route is asked for its facts and passed as an object; its name is written in the
+    adjoints' registry (each route's ``name``) and nowhere else in the package."""
+    from casadi_keyframe.adjoints import GRADIENTS
 
-    for rel in ("health.py", "studies/health_report.py"):
-        named = [s for s in _code_strings(PACKAGE / rel) if s in ROUTES]
-        assert named == [], f"{rel} branches on route names {named}: ask the route object"
+    registry = PACKAGE / "adjoints"
+    named = [f"{p.relative_to(PACKAGE)}: {s!r}" for p in sorted(PACKAGE.rglob("*.py"))
+             if registry not in p.parents for s in _code_strings(p) if s in GRADIENTS]
+    assert named == [], f"route names written outside the registry: {named}"
 
 
 def test_export_formats_go_through_one_table():
@@ -182,7 +185,7 @@ def test_export_formats_go_through_one_table():
 def test_the_collision_choices_are_written_once():
     from casadi_keyframe.models import COLLISIONS
 
-    here = PACKAGE / "models" / "collisions.py"
+    here = PACKAGE / "models" / "contact" / "collisions.py"
     files = [p for p in PACKAGE.rglob("*.py") if p != here]
     files += sorted((PACKAGE.parent / "problems").glob("*.py"))
     written = [f"{p.name}: {s!r}" for p in files for s in _code_strings(p) if s in COLLISIONS
@@ -192,3 +195,147 @@ def test_the_collision_choices_are_written_once():
               and {getattr(e, "value", None) for e in n.elts} <= set(COLLISIONS)]
     assert tuples == [], f"the collision choices listed again: {tuples}; use models.COLLISIONS"
     assert all("DEFAULT_COLLISION" not in w for w in written)
+
+
+BODY_KINDS = {"plane", "round", "mesh"}  # the body shapes' old names (geometry's types now)
+
+
+def kind_branches(source: str, names) -> list[int]:
+    """The lines where ``source`` knows a kind by its name: a comparison with one of
+    ``names`` written as a string (``kind == "plane"``, ``kind in ("round", "mesh")``), a
+    ``match`` case on one, or a table keyed by one."""
+    def named(node):
+        if isinstance(node, ast.Constant):
+            return node.value in names
+        return isinstance(node, (ast.Tuple, ast.List, ast.Set)) and any(map(named, node.elts))
+
+    lines = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Compare) and any(map(named, [node.left, *node.comparators])):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.MatchValue) and named(node.value):
+            lines.append(node.lineno)
+        elif isinstance(node, ast.Dict) and any(k is not None and named(k) for k in node.keys):
+            lines.append(node.lineno)
+    return sorted(lines)
+
+
+def _outputs() -> list[Path]:
+    return sorted((PACKAGE / "render").glob("*.py")) + sorted((PACKAGE / "export").glob("*.py"))
+
+
+def test_pictures_and_exports_know_no_body_kind_by_name():
+    found = {p.relative_to(PACKAGE).as_posix(): lines for p in _outputs()
+             if (lines := kind_branches(p.read_text(), BODY_KINDS))}
+    assert found == {}, (f"branches on a body's kind by name {found}: ask its shape "
+                         f"(geometry.BodyShape) or key a table by the shape's type")
+
+
+def test_pictures_and_exports_know_no_marker_kind_by_name():
+    from casadi_keyframe.objectives.markers import MARKER_KINDS
+
+    found = {p.relative_to(PACKAGE).as_posix(): lines for p in _outputs()
+             if (lines := kind_branches(p.read_text(), set(MARKER_KINDS)))}
+    assert found == {}, (f"branches on a marker's kind by name {found}: ask its kind or key "
+                         f"a table by its figure (objectives.markers.Figure)")
+
+
+def test_the_kind_check_sees_a_branch_by_name():
+    source = ('if body.kind == "plane":\n    pass\n'
+              'x = [b for b in bodies if b.kind in ("round", "mesh")]\n'
+              'TABLE = {"mesh": 1}\n'
+              'match kind:\n    case "round":\n        pass\n'
+              'ok = record.get("round") == before.get("round")\n')
+    assert kind_branches(source, BODY_KINDS) == [1, 3, 4, 6]
+
+
+def clock_reads(tree) -> list[int]:
+    """The lines of ``time.X()`` calls (and of calls of names imported from ``time``)."""
+    imported = {alias.asname or alias.name for node in ast.walk(tree)
+                if isinstance(node, ast.ImportFrom) and node.module == "time"
+                for alias in node.names}
+    return [node.lineno for node in ast.walk(tree) if isinstance(node, ast.Call) and (
+        (isinstance(node.func, ast.Attribute) and isinstance(node.func.value, ast.Name)
+         and node.func.value.id == "time")
+        or (isinstance(node.func, ast.Name) and node.func.id in imported))]
+
+
+def test_the_optimizer_reads_the_clock_only_through_its_deadline():
+    """One deadline: no ``time.*()`` call in optimize/ outside its deadline module (a stage,
+    a method or the finish asks the Deadline it is handed; a time is read with its now())."""
+    clock = PACKAGE / "optimize" / "deadline.py"
+    found = [f"{p.relative_to(PACKAGE)}:{line}"
+             for p in sorted((PACKAGE / "optimize").rglob("*.py")) if p != clock
+             for line in clock_reads(ast.parse(p.read_text()))]
+    assert found == [], f"clock read outside optimize/deadline.py: {found}"
+    sample = ast.parse("import time\nfrom time import perf_counter as pc\n"
+                       "t = time.perf_counter()\nu = pc()\n")
+    assert clock_reads(sample) == [3, 4]
+
+
+def written_defaults(tree, defaults: dict) -> list[int]:
+    """The lines where a name of ``defaults`` is given its default value: a parameter's
+    default, a dict's entry, a call's keyword."""
+    def same(name, node):
+        return (name in defaults and isinstance(node, ast.Constant)
+                and type(node.value) is type(defaults[name]) and node.value == defaults[name])
+
+    found = []
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            a = node.args
+            pairs = list(zip(a.args[len(a.args) - len(a.defaults):], a.defaults))
+            pairs += [(k, d) for k, d in zip(a.kwonlyargs, a.kw_defaults) if d is not None]
+            found += [d.lineno for arg, d in pairs if same(arg.arg, d)]
+        elif isinstance(node, ast.Dict):
+            found += [v.lineno for k, v in zip(node.keys, node.values)
+                      if isinstance(k, ast.Constant) and same(k.value, v)]
+        elif isinstance(node, ast.Call):
+            found += [kw.value.lineno for kw in node.keywords if same(kw.arg, kw.value)]
+    return found
+
+
+def test_the_solve_requests_defaults_are_written_once():
+    """Every default of a solve request is a field of SolveSettings (optimize/settings.py):
+    no function of the package takes a setting with its default value of its own, no dict
+    or call writes it again (the default route is the registry's: see the route names)."""
+    from dataclasses import fields
+
+    from casadi_keyframe.optimize.settings import SolveSettings
+
+    defaults = {f.name: f.default for f in fields(SolveSettings)
+                if f.default is not None and not isinstance(f.default, bool)}
+    assert set(defaults) == {"method", "maxiter", "tol"}
+    settings = PACKAGE / "optimize" / "settings.py"
+    found = [f"{p.relative_to(PACKAGE)}:{line}" for p in sorted(PACKAGE.rglob("*.py"))
+             if p != settings for line in written_defaults(ast.parse(p.read_text()), defaults)]
+    assert found == [], f"a solve default written again: {found}"
+    sample = ast.parse('def solve(p, method="lbfgsb", *, tol=1e-8, maxiter=10):\n'
+                       '    return run(p, maxiter=200, **{"method": "ipopt"})\n')
+    assert written_defaults(sample, defaults) == [1, 1, 2]
+
+
+def test_the_evaluators_bookkeeping_is_kept_by_the_evaluator_alone():
+    """Evaluations, failures and their seconds are counted in one place: no other class of
+    optimize/ keeps them (the finish judges its trials through the Evaluator)."""
+    counters = {"nfev", "failures", "seconds"}
+    evaluator = PACKAGE / "optimize" / "evaluator.py"
+    kept = [f"{p.relative_to(PACKAGE)}:{node.lineno}"
+            for p in sorted((PACKAGE / "optimize").rglob("*.py")) if p != evaluator
+            for node in ast.walk(ast.parse(p.read_text()))
+            if isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store)
+            and isinstance(node.value, ast.Name) and node.value.id == "self"
+            and node.attr in counters]
+    assert kept == [], f"the evaluator's bookkeeping kept again: {kept}"
+
+
+def test_the_optimizers_face_names_every_module():
+    """optimize/__init__.py's docstring is the wing's map: it names each of its modules and
+    folders (the drift the third pass left: 12 of 21 named)."""
+    import casadi_keyframe.optimize as optimize
+
+    rooms = sorted({p.stem for p in (PACKAGE / "optimize").glob("*.py")} - {"__init__"}
+                   | {p.name for p in (PACKAGE / "optimize").iterdir()
+                      if p.is_dir() and (p / "__init__.py").is_file()})
+    unnamed = [room for room in rooms if f":mod:`.{room}`" not in optimize.__doc__]
+    assert unnamed == [], f"optimize/__init__.py does not name {unnamed}"

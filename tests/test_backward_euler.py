@@ -9,7 +9,7 @@ from casadi_keyframe.adjoints import FiniteDifference
 from casadi_keyframe.integrators import BackwardEuler, LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models import Attachment
-from casadi_keyframe.models.colliders import Contact, Plane, Sphere
+from casadi_keyframe.models.contact.colliders import Contact, Plane, Sphere
 from casadi_keyframe.simulate import simulate
 
 

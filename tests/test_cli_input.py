@@ -227,3 +227,24 @@ def test_each_option_names_itself_and_what_it_needs(args, said, capsys, tmp_path
     code = main(["solve", "flock_path", "--set", "agents=4", "--set", "steps=10", "--quiet",
                  "--out", str(tmp_path), *args])
     assert code == 2 and said in capsys.readouterr().err
+
+
+def test_a_method_option_reaches_the_method_checked_before_the_build(tmp_path, capsys,
+                                                                     monkeypatch):
+    """--option KEY=VALUE reaches any option the method documents (gauss-newton's radius),
+    is checked against the method's own before the problem is built, and the run's resume
+    line gives it back."""
+    import casadi_keyframe.loading as loading
+
+    common = ["solve", "flock_race", "--set", "agents=8", "--set", "steps=40", "--method",
+              "gauss-newton", "--quiet", "--no-animation", "--no-viewer", "--out",
+              str(tmp_path)]
+    assert main([*common, "--maxiter", "1", "--option", "radius=0.5"]) == 3
+    assert "--method gauss-newton --gradient adjoint --option radius=0.5" in (
+        capsys.readouterr().out)
+    built = []
+    monkeypatch.setattr(loading, "build_problem", lambda *a, **k: built.append(a))
+    assert main([*common, "--option", "radius=-1"]) == 2
+    assert "Gauss-Newton option 'radius' must be a number > 0" in capsys.readouterr().err
+    assert main([*common, "--option", "radiu=1"]) == 2
+    assert "did you mean 'radius'?" in capsys.readouterr().err and built == []

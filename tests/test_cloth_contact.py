@@ -9,7 +9,7 @@ from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.simulate import simulate
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models import Attachment
-from casadi_keyframe.models.colliders import Capsule, Contact, Plane, Sphere
+from casadi_keyframe.models.contact.colliders import Capsule, Contact, Plane, Sphere
 
 
 def moving_scene():

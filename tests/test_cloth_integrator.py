@@ -131,7 +131,7 @@ def swapped_and_exact(dt, seed=0, amp=0.05, **kw):
 @pytest.mark.parametrize("collision", ["guarded", "constraint", "penalty"])
 def test_hand_exact_adjoint_equals_casadi_with_moving_contacts_and_attachments(collision):
     from casadi_keyframe.models import Attachment
-    from casadi_keyframe.models.colliders import Capsule, Contact, Sphere
+    from casadi_keyframe.models.contact.colliders import Capsule, Contact, Sphere
     bodies = [Sphere(lambda t: np.array([0.5, 0.5, -0.33 + 0.2 * t]), 0.3),
               Capsule((0.0, 0.1, -0.1), lambda t: np.array([1.0, 0.2 + t, -0.06]), 0.05)]
     model = ClothModel.grid(4, 4, plane="xy", colliders=bodies, pinned=[3], collision=collision,

@@ -7,7 +7,7 @@ import pytest
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces
 from casadi_keyframe.integrators import LinearizedBackwardEuler
-from casadi_keyframe.models.hold import TOLERANCE
+from casadi_keyframe.models.contact.hold import TOLERANCE
 from casadi_keyframe.scenes.drops import drop, drop_model, drop_start
 from casadi_keyframe.state import State
 

@@ -11,7 +11,7 @@ from casadi_keyframe.linear import cholmod_available
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models.blocks import GrowingPattern
 from casadi_keyframe.models import Attachment
-from casadi_keyframe.models.colliders import Capsule, Contact, Sphere
+from casadi_keyframe.models.contact.colliders import Capsule, Contact, Sphere
 from casadi_keyframe.objectives import CenterOfMassKeyframe
 
 SOLVERS = ["direct", "auto"] + (["cholmod"] if cholmod_available() else [])

@@ -8,10 +8,9 @@ import pytest
 from test_augmented_lagrangian import swing
 
 from casadi_keyframe import InitialVelocity, Smoothness, StateKeyframe, load_problem
-from casadi_keyframe.optimize import CONVERGED, solve
-from casadi_keyframe.optimize.constrained import land, lower_effort
-from casadi_keyframe.optimize.finish import Finish, check_finish, finish_options
-from casadi_keyframe.optimize.window_step import KeyframeConstraint
+from casadi_keyframe.optimize import CONVERGED, SolveSettings, solve
+from casadi_keyframe.optimize.finish import (Finish, KeyframeConstraint, check_finish,
+                                             finish_options, land, lower_effort)
 from casadi_keyframe.simulate import tangent
 
 
@@ -35,7 +34,8 @@ def test_the_window_products_are_exact_and_transposes(first):
     d = rng.standard_normal(prob.size)
     d[:first * block] = 0.0
     w = rng.standard_normal(constraint.size)
-    Jd, JTw = constraint.jvp(traj, d), constraint.vjp(traj, w)
+    lin = constraint.linearize(traj)
+    Jd, JTw = lin.jvp(d), lin.vjp(w)
     assert w @ Jd == pytest.approx(d @ JTw, rel=1e-10)
     h = 1e-6
     fd = (constraint.residual(prob.simulate(u + h * d, records=False))
@@ -115,7 +115,10 @@ def test_the_finish_refuses_what_it_cannot_hold_before_searching():
 ])
 def test_bad_finish_options_are_refused_by_name(finish, message):
     with pytest.raises(ValueError, match=message):
-        finish_options(finish)
+        SolveSettings(finish=finish)  # the request reads the text form, the finish checks it
+    if not isinstance(finish, str):
+        with pytest.raises(ValueError, match=message):
+            finish_options(finish)
 
 
 SWING_FILE = '''"""The swing of tests/test_augmented_lagrangian.py, its keyframe held to 1 mm."""
@@ -166,16 +169,19 @@ def test_finish_and_rounds_are_refused_together(capsys):
     from casadi_keyframe.cli import main
 
     assert main(["solve", "flock_path", "--rounds", "2", "--finish", "land"]) != 0
-    assert "--finish holds the keyframes after one search" in capsys.readouterr().err
+    assert "the finish holds the keyframes after one search" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="choose one"):  # the request itself, from Python too
+        SolveSettings(rounds=2, finish="land")
 
 
 def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
     """The effort finish starts from a landing: stopped by the clock it has still converged."""
-    import casadi_keyframe.optimize.finish as finish
+    import casadi_keyframe.optimize.finish.stage as finish
+    from casadi_keyframe.optimize.deadline import Deadline
 
     real = finish.lower_effort
     monkeypatch.setattr(finish, "lower_effort",
-                        lambda *a, **k: real(*a, **{**k, "time_limit": 1e-9}))
+                        lambda *a, **k: real(*a, **{**k, "deadline": Deadline.start(1e-9)}))
     prob = tight(swing(), tolerance=5e-3)
     result = solve(prob, maxiter=50, quiet=True, finish="effort")
     assert result.status == CONVERGED, result.message
@@ -185,16 +191,16 @@ def test_a_time_limit_while_lowering_the_effort_keeps_the_goal_met(monkeypatch):
 def test_an_interrupted_finish_returns_and_keeps_its_best_step(monkeypatch, tmp_path):
     """Ctrl-C after the landing's first kept step: that step (it meets the goal, the search's
     result did not) is the result and the checkpoint's, the run says it was interrupted."""
-    import casadi_keyframe.optimize.constrained as constrained
     from casadi_keyframe.optimize import INTERRUPTED
+    from casadi_keyframe.optimize.finish.window import WindowSearch
 
-    real = constrained._Held.land
+    real = WindowSearch.land
 
-    def land_then_stop(self, tries):
-        real(self, tries)
+    def land_then_stop(self, rule):
+        real(self, rule)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(constrained._Held, "land", land_then_stop)
+    monkeypatch.setattr(WindowSearch, "land", land_then_stop)
     prob = tight(swing())
     result = solve(prob, maxiter=50, quiet=True, finish="land",
                    checkpoint=tmp_path / "checkpoint.npz")
@@ -211,7 +217,7 @@ def test_a_finish_that_ends_worse_returns_its_best_point(monkeypatch, tmp_path):
     checkpoint's, and the message says it is kept."""
     import time
 
-    import casadi_keyframe.optimize.finish as finish
+    import casadi_keyframe.optimize.finish.stage as finish
     from casadi_keyframe.optimize.result import assemble
 
     real = finish.land
@@ -220,7 +226,7 @@ def test_a_finish_that_ends_worse_returns_its_best_point(monkeypatch, tmp_path):
         landed = real(problem, **kwargs)
         zero = np.zeros(problem.size)
         return assemble(problem, zero, fun=problem.objective(zero), jac=np.zeros(problem.size),
-                        status=2, message="made worse", method="land", gradient="adjoint",
+                        status=2, message="made worse", method="land", route=landed.route,
                         stages=landed.stages, history=[], started=time.perf_counter())
 
     monkeypatch.setattr(finish, "land", land_then_worse)

@@ -7,7 +7,8 @@ import pytest
 
 from casadi_keyframe import ControlProblem, Smoothness, StateKeyframe, StepForces
 from casadi_keyframe.integrators import LinearizedBackwardEuler
-from casadi_keyframe.models import Capsule, ClothModel, ClothParams, Contact, Plane, Sphere
+from casadi_keyframe.models import (Capsule, ClothModel, ClothParams, Contact, Coulomb, Plane,
+                                    Sphere)
 from casadi_keyframe.simulate import simulate
 
 from helpers import assert_exact_routes
@@ -167,7 +168,7 @@ def test_set_friction_reaches_every_body_of_the_problems_that_have_bodies(name):
     model = load_problem(name, **SMALL[name], **parse_overrides(["friction=0.4"])).model
     hold = model.family("body hold")
     assert model.colliders and all(b.contact.friction == 0.4 for b in model.colliders)
-    assert [b.friction for b in hold.bodies] == [0.4] * len(model.colliders)
-    assert hold.coulomb is not None
+    assert [b.law for b in hold.bodies] == [Coulomb(0.4)] * len(model.colliders)
+    assert hold.stick_slide is not None
     with pytest.raises(OverrideError, match="friction"):
         load_problem(name, **SMALL[name], friction=-0.1)

@@ -3,6 +3,7 @@ solution cut at the radius; it and scipy's least_squares, as methods of solve, l
 objective, never end above their start, keep bounds, stop at the time limit and on Ctrl-C,
 refuse bad options and multiple shooting, and say how they ended."""
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,7 +12,7 @@ from helpers import InterruptAfter
 from casadi_keyframe import Adjoint, Smoothness, StateKeyframe, StepForces, load_problem, solve
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
-from casadi_keyframe.optimize.gauss_newton import SteihaugPath, trust_region_small
+from casadi_keyframe.optimize.residual.descents import SteihaugPath, trust_region_small
 from casadi_keyframe.scenes.cloths import cloth_problem
 
 
@@ -99,9 +100,9 @@ def test_interrupt_keeps_the_best_point(race, method):
 
 
 class Slow(Adjoint):
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         time.sleep(0.05)
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
 
 @pytest.mark.parametrize("method, limit", [("gauss-newton", {"maxfun": 4}),
@@ -129,9 +130,10 @@ def test_a_jump_in_the_objective_collapses_the_region_and_fails_honestly(race):
     """An objective that jumps up at every move (as a cloth's does where a spring's law
     switches inside a step) is reported as a collapsed trust region, best point kept."""
     class Jumps(Adjoint):
-        def __call__(self, problem, u):
-            f, g = super().__call__(problem, u)
-            return f + (1e6 if np.any(u != problem.initial_controls()) else 0.0), g
+        def evaluate(self, problem, u):
+            found = super().evaluate(problem, u)
+            jump = 1e6 if np.any(u != problem.initial_controls()) else 0.0
+            return replace(found, value=found.value + jump)
 
     r = solve(race, "gauss-newton", gradient=Jumps(), maxiter=50, quiet=True,
               stop="method", options={"maxfun": 200})

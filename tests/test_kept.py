@@ -4,7 +4,9 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import CenterOfMassKeyframe, Smoothness, load_problem, solve
+from casadi_keyframe.adjoints import Evaluation
 from casadi_keyframe.optimize.evaluator import Evaluator
+from casadi_keyframe.optimize.kept import Standing
 from casadi_keyframe.optimize.goal import verdict
 from casadi_keyframe.saved import Checkpoint, read_run
 
@@ -60,7 +62,7 @@ class _Merit:
     route = None
 
     def __call__(self, u):
-        return float(u @ u), 2 * u, {"trajectory": None}
+        return Evaluation(float(u @ u), 2 * u)
 
     def meets(self, goal, info):
         return self.last[0] > 0
@@ -82,7 +84,7 @@ def test_the_evaluator_keeps_a_point_that_meets_the_goal_over_a_lower_one(flock)
 
 def test_a_checkpoint_takes_only_points_at_least_as_good(tmp_path):
     ckpt = Checkpoint(tmp_path / "c.npz", problem="p")
-    wrote = [ckpt.write(np.array([k]), fun=f, met=m, final=final, stage=s)
+    wrote = [ckpt.write(np.array([k]), Standing(m, f), final=final, stage=s)
              for k, (f, m, final, s) in enumerate([
                  (5.0, False, False, 0),   # a coarse stage's point
                  (9.0, False, False, 1),   # a later coarse stage wins whatever its objective
@@ -94,8 +96,8 @@ def test_a_checkpoint_takes_only_points_at_least_as_good(tmp_path):
     assert wrote == [True, True, True, False, True, False, True]
     assert read_run(tmp_path / "c.npz")["u"].tolist() == [6.0]
     later = ckpt.with_meta(generation=1, rounds_round=1)  # a later round of hard keyframes
-    assert later.write(np.array([7]), fun=8.0, met=True) and not later.write(
-        np.array([8]), fun=1.0, met=False)
+    assert later.write(np.array([7]), Standing(True, 8.0)) and not later.write(
+        np.array([8]), Standing(False, 1.0))
     assert read_run(tmp_path / "c.npz")["meta"]["rounds_round"] == 1
 
 

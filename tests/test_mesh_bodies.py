@@ -14,7 +14,7 @@ from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.meshes import MeshError
 from casadi_keyframe.meshes.distance import EDGE, FACE, VERTEX, MeshShape, pieces
 from casadi_keyframe.models import ClothModel, Contact, MeshBody
-from casadi_keyframe.models.colliders import signed_distances
+from casadi_keyframe.models.contact.colliders import signed_distances
 
 from helpers import assert_exact_routes
 

@@ -118,7 +118,7 @@ def test_a_small_sheet_from_obj_files_reaches_its_wave_and_fold(files, tmp_path,
 def test_colliders_control_kind_and_pin_box_overrides(files):
     from casadi_keyframe.controls import InitialVelocity
     from casadi_keyframe.loading import load_problem
-    from casadi_keyframe.models.colliders import Plane, Sphere
+    from casadi_keyframe.models.contact.colliders import Plane, Sphere
 
     prob = load_problem("mesh_keyframes", cloth=files["sheet"], keyframes=f"10:{files['wave']}",
                         pin_box=(-1, -1, -0.01, 2, 1, 1), ground=-1.5,

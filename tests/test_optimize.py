@@ -4,6 +4,8 @@ import os
 import signal
 import threading
 import time
+from dataclasses import dataclass, replace
+from typing import ClassVar
 
 import numpy as np
 import pytest
@@ -11,6 +13,7 @@ import pytest
 from casadi_keyframe import Adjoint, SimulationError, load_problem, solve
 from casadi_keyframe.saved import Checkpoint, read_run
 from casadi_keyframe.optimize import CONVERGED, FAILED, INTERRUPTED, LIMIT
+from casadi_keyframe.optimize.methods import TypedOptions
 
 from helpers import InterruptAfter
 
@@ -39,7 +42,8 @@ def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
     import casadi as ca
     import scipy.sparse as sp
 
-    from casadi_keyframe.optimize.ipopt import search
+    from casadi_keyframe.optimize.deadline import Deadline
+    from casadi_keyframe.optimize.methods.ipopt import search
 
     def ev(x):
         return float(x @ x), 2 * x
@@ -58,8 +62,8 @@ def test_ipopt_holds_equality_constraints_given_with_a_sparse_jacobian():
 
     seen = []
     free = (np.full(4, -np.inf), np.full(4, np.inf))
-    status, message, x = search(ev, np.zeros(4), free, 50, 1e-10, {}, seen.append, None,
-                                constraints=Lines())
+    status, message, x = search(ev, np.zeros(4), free, 50, 1e-10, {}, seen.append,
+                                Deadline.start(), constraints=Lines())
     assert status == CONVERGED, message
     assert seen and all(s.shape == (4,) for s in seen)  # each iterate handed over
     np.testing.assert_allclose(x, [0.5, 0.5, 0.2, -0.4], atol=1e-8)
@@ -90,11 +94,11 @@ def test_failed_simulations_during_the_search_are_counted_not_returned(race):
     class Fails(Adjoint):
         count = 0
 
-        def __call__(self, problem, u):
+        def evaluate(self, problem, u):
             Fails.count += 1
             if Fails.count in (3, 4):
                 raise SimulationError("blew up", 1)
-            return super().__call__(problem, u)
+            return super().evaluate(problem, u)
 
     r = solve(race, gradient=Fails(), maxiter=30, quiet=True)
     assert r.timings["failed_simulations"] >= 1 and np.isfinite(r.fun)
@@ -105,9 +109,9 @@ def test_failed_simulations_during_the_search_are_counted_not_returned(race):
 class Counting(Adjoint):
     calls = 0
 
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         Counting.calls += 1
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
 
 @pytest.mark.parametrize("kwargs, message", [
@@ -125,7 +129,7 @@ class Counting(Adjoint):
                                   r"\(did you mean 'maxcor'\?\); scipy's L-BFGS-B takes .*maxls"),
     ({"method": "ipopt", "options": {"max_itr": 5}},
      r"unknown option 'max_itr' \(did you mean 'max_iter'.*listed by "
-     r"casadi_keyframe.optimize.ipopt.option_names\(\)"),
+     r"casadi_keyframe.optimize.methods.ipopt.option_names\(\)"),
     ({"method": "ipopt", "options": {"hessian_approximation": "exakt"}},
      r"(?s)IPOPT refuses option 'hessian_approximation' = 'exakt'.*limited-memory"),
     ({"method": "ipopt", "options": {"max_iter": "ten"}},
@@ -148,7 +152,7 @@ def test_valid_options_reach_the_method(race, method, options):
 
 
 def test_option_names_are_read_from_the_libraries():
-    from casadi_keyframe.optimize import ipopt, lbfgsb
+    from casadi_keyframe.optimize.methods import ipopt, lbfgsb
 
     assert {"maxcor", "ftol", "gtol", "maxfun", "maxiter", "maxls"} <= set(lbfgsb.option_names())
     assert {"tol", "max_iter", "hessian_approximation", "limited_memory_max_history",
@@ -156,28 +160,53 @@ def test_option_names_are_read_from_the_libraries():
     assert "sb" not in ipopt.option_names()  # undocumented: IPOPT itself is asked (above)
 
 
-def test_solve_dispatches_through_the_method_table(race, monkeypatch):
-    """A new method is one entry of METHODS: solve runs it with the evaluator, its
-    iterations land in the history, and its options are checked against its names."""
+@dataclass(frozen=True)
+class DescentOptions(TypedOptions):
+    """A method's own typed options, as the transcription's ``start=rest|blend|zero`` are."""
+
+    label: ClassVar[str] = "descent"
+    CHECKS: ClassVar[dict] = {"step": ("a number > 0", lambda v: v > 0)}
+    step: float = 1e-3
+
+
+def descend(problem, ev, u0, call):
+    """Gradient steps whose trial halfway is judged without a gradient (``ev.offer``: kept
+    if it is the best point), until ``call.deadline`` passes."""
+    u = u0
+    for _ in range(call.maxiter):
+        if call.deadline.passed():
+            return LIMIT, "time limit reached"
+        f, g = ev(u)
+        ev.offer(u - 0.5 * call.options.step * g)
+        u = u - call.options.step * g
+        call.on_iteration()
+    return LIMIT, f"{call.maxiter} steps taken"
+
+
+def test_solve_dispatches_through_the_method_table(race, monkeypatch, tmp_path, capsys):
+    """A new method is one entry of METHODS (the way the transcription comes in): solve runs
+    it with the evaluator, the one deadline and its own typed options, from the settings or
+    the command line's --option, checked against its names before anything is built; the
+    points it offers without a gradient are judged and kept like any other; its iterations
+    land in the history."""
+    from casadi_keyframe.cli import main
     from casadi_keyframe.optimize import METHODS, Method
 
-    def descend(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
-        u = u0
-        for _ in range(maxiter):
-            f, g = ev(u)
-            u = u - options.get("step", 1e-3) * g
-            ev(u)
-            on_iteration()
-        return LIMIT, f"{maxiter} steps taken"
-
-    names = lambda: ("step",)  # noqa: E731
-    monkeypatch.setitem(METHODS, "descent", Method(
-        "descent", descend, names, lambda o: [k for k in o if k not in names()]))
+    monkeypatch.setitem(METHODS, "descent", Method("descent", descend, DescentOptions))
     r = solve(race, "descent", maxiter=4, quiet=True, options={"step": 1e-4})
     assert r.method == "descent" and r.nit == 4 and r.status == LIMIT
     assert r.fun < race.objective(race.initial_controls())
+    assert (r.njev, r.nfev) == (4, 8)  # the start (memoised) and four offers, no gradient
+    assert r.fun == pytest.approx(race.objective(r.x), rel=1e-12)
     with pytest.raises(ValueError, match="did you mean 'step'"):
         solve(race, "descent", quiet=True, options={"stepp": 1e-4})
+    with pytest.raises(ValueError, match="descent option 'step' must be a number > 0"):
+        solve(race, "descent", quiet=True, options={"step": -1.0})
+    small = ["solve", "flock_race", "--set", "agents=8", "--set", "steps=40", "--quiet",
+             "--no-animation", "--no-viewer", "--method", "descent", "--out", str(tmp_path)]
+    assert main([*small, "--maxiter", "2", "--option", "step=1e-4"]) == 3
+    assert main([*small, "--option", "stepp=1e-4"]) == 2
+    assert "unknown option 'stepp' (did you mean 'step'?)" in capsys.readouterr().err
 
 
 def test_the_command_line_offers_the_method_table():
@@ -195,15 +224,15 @@ def test_the_command_line_offers_the_method_table():
 class WrongSign(Adjoint):
     """The gradient's opposite: every search direction climbs."""
 
-    def __call__(self, problem, u):
-        f, g = super().__call__(problem, u)
-        return f, -g
+    def evaluate(self, problem, u):
+        found = super().evaluate(problem, u)
+        return replace(found, gradient=-found.gradient)
 
 
 class Slow(Adjoint):
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         time.sleep(0.05)
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
 
 def test_the_status_says_how_the_search_ended(race):
@@ -241,11 +270,11 @@ def test_ctrl_c_inside_ipopt_is_an_interrupt_not_an_ipopt_error(race):
     class SignalAt(Adjoint):
         calls = 0
 
-        def __call__(self, problem, u):
+        def evaluate(self, problem, u):
             SignalAt.calls += 1
             if SignalAt.calls == 8:
                 threading.Timer(0.002, os.kill, (os.getpid(), signal.SIGINT)).start()
-            return super().__call__(problem, u)
+            return super().evaluate(problem, u)
 
     r = solve(race, "ipopt", gradient=SignalAt(), maxiter=500, quiet=True)
     assert r.status == INTERRUPTED and r.message.startswith("interrupted by user (SIGINT)")
@@ -272,7 +301,7 @@ def test_a_line_search_failure_is_converged_only_when_the_goal_is_met(monkeypatc
     round-off floor).  That is "converged" only with every keyframe within its tolerance;
     otherwise it failed (status 2) and says which keyframes it misses and by how much.  A
     failure at the very first step stays a failure too."""
-    import casadi_keyframe.optimize.lbfgsb as lbfgsb
+    import casadi_keyframe.optimize.methods.lbfgsb as lbfgsb
     from scipy.optimize import OptimizeResult
 
     starts = []
@@ -313,7 +342,7 @@ def test_a_line_search_failure_off_the_goal_exits_1_and_still_writes_its_best_po
         monkeypatch, tmp_path, capsys):
     """The command line's side of the same path: status 2 is exit 1, the message names the
     keyframes missed, and result.npz holds the best point."""
-    import casadi_keyframe.optimize.lbfgsb as lbfgsb
+    import casadi_keyframe.optimize.methods.lbfgsb as lbfgsb
     from casadi_keyframe.cli import main
     from scipy.optimize import OptimizeResult
 
@@ -343,8 +372,10 @@ def test_advice_never_suggests_an_option_in_use(capsys):
     from casadi_keyframe.runs.report import hint
 
     failed = SimpleNamespace(status=FAILED, message="search failed: ...; still missed: x")
-    spec = SimpleNamespace(rounds={"rounds": 3}, shooting={"segments": 4}, method="ipopt",
-                           gradient="swapped", overrides={}, problem_arg="p", out="o")
+    from casadi_keyframe.optimize import SolveSettings
+
+    asked = SolveSettings(rounds=3, shooting=4, method="ipopt", gradient="swapped")
+    spec = SimpleNamespace(settings=asked, overrides={}, problem_arg="p", out="o")
     hint(failed, spec)
     assert capsys.readouterr().out == ""  # every remedy is in use, the gradient not in question
     failed.message += "; the gradient may be inaccurate"

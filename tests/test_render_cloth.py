@@ -7,7 +7,7 @@ from casadi_keyframe import (CenterOfMassKeyframe, ControlProblem, ParticleKeyfr
                              StepForces, render)
 from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.models import ClothModel
-from casadi_keyframe.models.colliders import Capsule, Plane, Sphere
+from casadi_keyframe.models.contact.colliders import Capsule, Plane, Sphere
 from casadi_keyframe.render import cloth as render_cloth
 from casadi_keyframe.views import ClothView, Ring
 

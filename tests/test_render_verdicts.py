@@ -110,7 +110,7 @@ def test_a_keyframe_on_velocities_alone_is_judged_in_cm_per_s(sheet):
     term = StateKeyframe(4, v=start.v[4] + [0.0, 0.0, 0.3]).bind(prob.model, prob.steps)
     marker = term.marker()
     check = marker.check(start)
-    assert marker.kind == "velocity" and marker.points.shape == (0, 3)
+    assert marker.kind.name == "velocity" and marker.points.shape == (0, 3)
     assert check.met is (term.shortfall(start) is None) and check.met is False
     assert check_text(check, metres=True).startswith(
         "MISSED  StateKeyframe@4: velocity rms miss 30 cm/s (tol")

@@ -12,7 +12,7 @@ from casadi_keyframe.integrators import LinearizedBackwardEuler
 from casadi_keyframe.meshes import check_mesh
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.objectives import MeshKeyframe, RegionTarget
-from casadi_keyframe.optimize.residuals import Linearization
+from casadi_keyframe.optimize.residual.linearization import linearize
 from casadi_keyframe.scenes.cloths import cloth_problem
 from casadi_keyframe.scenes.drops import drop_model, drop_start
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
@@ -67,7 +67,7 @@ def test_every_term_is_half_its_squared_residual(name):
     for term in prob.objective_terms.control_terms:
         r = term.residual(u, prob.controls, prob.dt)
         assert 0.5 * r @ r == pytest.approx(prob.control_cost(u)[0], rel=1e-12)
-    lin = Linearization(prob, u)
+    lin = linearize(prob, u)
     assert lin.value == pytest.approx(prob.objective(u), rel=1e-12)
     if name == "held contact":
         assert any(r.held is not None for r in lin.trajectory.records)
@@ -80,15 +80,15 @@ def test_jacobian_products_agree_with_differences_each_other_and_the_gradient(na
     prob = PROBLEMS[name]()
     rng = np.random.default_rng(1)
     u = point(prob)
-    lin = Linearization(prob, u)
+    lin = linearize(prob, u)
     p, w = rng.standard_normal(prob.size), rng.standard_normal(lin.shape[0])
     jp, jtw = lin.jvp(p), lin.vjp(w)
     assert w @ jp == pytest.approx(jtw @ p, rel=1e-10)  # the dot test
     g = prob.objective_and_gradient(u, "adjoint")[1]
     assert np.linalg.norm(lin.gradient() - g) <= 1e-10 * np.linalg.norm(g)
     h = 1e-6 if prob.model.dim == 2 else 1e-7
-    central = (Linearization(prob, u + h * p).residual
-               - Linearization(prob, u - h * p).residual) / (2 * h)
+    central = (linearize(prob, u + h * p).residual
+               - linearize(prob, u - h * p).residual) / (2 * h)
     if name == "mesh aligned":  # Kaufman's Jacobian: off by a term of the residual's size
         assert np.linalg.norm(central - jp) <= 0.05 * np.linalg.norm(central)
     else:

@@ -9,8 +9,8 @@ import pytest
 from helpers import small_flock
 
 from casadi_keyframe import solve
-from casadi_keyframe.adjoints import (DEFAULT, DEPRECATED, GRADIENTS, ROUTES, Route,
-                                      get_gradient, route_help)
+from casadi_keyframe.adjoints import (DEFAULT, DEPRECATED, GRADIENTS, ROUTES, Evaluation,
+                                      Route, get_gradient, route_help)
 from casadi_keyframe.health import GROWTH_BOUND, GradientError, check_finite
 from casadi_keyframe.studies.health_report import format_health, gradient_health
 
@@ -47,11 +47,11 @@ class Tangent(Route):
     exact = True
     help = "forward mode, one tangent pass per control"
 
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         eye = np.eye(u.size)
         grad = np.array([problem.directional_derivative(u, e) for e in eye])
         check_finite(self, grad, problem)
-        return problem.objective(u), grad
+        return Evaluation(problem.objective(u), grad)
 
     def likely_cause(self, model) -> str:
         return "a tangent pass overflowed. Fix: use --gradient adjoint"

@@ -4,6 +4,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -115,9 +116,9 @@ def test_an_interrupt_while_drawing_leaves_no_truncated_gif(tmp_path):
 def test_a_failed_search_exits_1_with_its_cause_and_keeps_the_best(tmp_path, capsys,
                                                                     monkeypatch):
     class WrongSign(adjoints.Adjoint):
-        def __call__(self, problem, u):
-            f, g = super().__call__(problem, u)
-            return f, -g
+        def evaluate(self, problem, u):
+            found = super().evaluate(problem, u)
+            return replace(found, gradient=-found.gradient)
 
     monkeypatch.setitem(adjoints.GRADIENTS, "adjoint", WrongSign)
     assert main(["solve", *SMALL, "--out", str(tmp_path), "--quiet", "--no-animation"]) == 1

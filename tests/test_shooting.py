@@ -340,7 +340,7 @@ def test_a_new_round_evaluates_its_own_merit_at_the_point_the_last_one_ended():
     merit = ShootingMerit(prob, shooting, Serial(prob, shooting.spans), mult)
     ev = Evaluator(prob, None, None, merit=merit, report="best", failed_best=False)
     before = ev(z)[0]
-    c = ev.last_info["defects"]
+    c = ev.last_info.defects
     mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},
                  **{(k, "v"): cv for k, (_, cv) in enumerate(c)}})
     ev.reset()

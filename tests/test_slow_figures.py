@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from casadi_keyframe import solve
-from casadi_keyframe.loading import (build_problem, default_resolutions, load_module,
-                                     solve_defaults)
+from casadi_keyframe.loading import build_problem, load_module, solve_defaults
 from casadi_keyframe.optimize import CONVERGED
+from casadi_keyframe.optimize.settings import settings_from
 from casadi_keyframe.scenes.capes import clip_report
 from casadi_keyframe.scenes.maths import turn_angle
 
@@ -29,12 +29,9 @@ def solve_figure(name, time_limit=None, goal=True, **overrides):
     with ``goal`` the search must have converged (every keyframe within its tolerance)."""
     module = load_module(name)
     prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module, overrides)
+    asked = settings_from(solve_defaults(module, overrides), {"time_limit": time_limit})
     start = time.process_time()
-    result = solve(prob, method=defaults["method"], maxiter=defaults["maxiter"], quiet=True,
-                   resolutions=default_resolutions(module, prob) or None,
-                   shooting=defaults.get("shooting"), finish=defaults.get("finish"),
-                   time_limit=time_limit)
+    result = solve(prob, asked, quiet=True)
     seconds = time.process_time() - start
     TABLE.append({"figure": name, "size": prob.size, "iterations": result.nit,
                   "cpu_seconds": round(seconds, 1), "message": result.message,

@@ -15,7 +15,7 @@ from casadi_keyframe.integrators import BackwardEuler, LinearizedBackwardEuler
 from casadi_keyframe.linear import cholmod_available
 from casadi_keyframe.models import ClothModel
 from casadi_keyframe.models import Attachment
-from casadi_keyframe.models.colliders import Contact, Plane, Sphere
+from casadi_keyframe.models.contact.colliders import Contact, Plane, Sphere
 from casadi_keyframe.simulate import backward, simulate
 from helpers import small_flock
 

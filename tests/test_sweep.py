@@ -95,7 +95,8 @@ def test_a_sweep_equals_each_point_solved_alone_bit_for_bit(tmp_path, capsys):
         else:  # the same solve from the perturbed start
             alone.mkdir()
             spec = solve_run(load_module("flock_path"), "flock_path",
-                             {**SMALL, "weight": row["weight"]}, alone, maxiter=4, quiet=True)
+                             {**SMALL, "weight": row["weight"]}, alone,
+                             given={"maxiter": 4}, quiet=True)
             spec.u0 = start_controls(spec.problem, row["start"])
             code = run_solve(spec)
         assert code == row["exit_code"] == 3  # stopped at --maxiter

@@ -11,7 +11,9 @@ from casadi_keyframe.integrators import SymplecticEuler
 from casadi_keyframe.models import FlockModel, FlockParams
 from casadi_keyframe.objectives import RegionTarget
 from casadi_keyframe.shapes import square
-from casadi_keyframe.views import ClothView, FlockView, KeyframeGoal, Marker, Ring, view_of
+from casadi_keyframe.objectives.keyframe_goal import KeyframeGoal
+from casadi_keyframe.objectives.markers import Marker
+from casadi_keyframe.views import ClothView, FlockView, Ring, view_of
 
 
 def _problem(**kw):

@@ -1,5 +1,7 @@
 """Gradient routes, passed as ``gradient=`` (an object or its name); each owns its backward
-pass, is called as ``route(problem, u) -> (phi, dphi/du)`` and carries its own facts
+pass, returns what it computed whole (``route.evaluate(problem, u)`` ->
+:class:`~.base.Evaluation`: value, gradient, run, backward growth; ``route(problem, u)`` ->
+``(phi, dphi/du)`` is the short form) and carries its own facts
 (:class:`~.base.Route`: exact or approximate, growth bound, known limits, likely cause of a
 refusal, help line), which the health guard, the health report, a search's result and the
 command line ask instead of branching on its name.
@@ -14,13 +16,13 @@ command line ask instead of branching on its name.
 "exact" is a deprecated name of "casadi".  The routes by name: :mod:`.registry`.
 """
 from .adjoint import Adjoint
-from .base import Route
+from .base import Evaluation, Route
 from .casadi_reverse import CasADiReverse, step_parameters, unrolled_objective
 from .exact import Exact
 from .finite_difference import FiniteDifference
-from .registry import DEFAULT, DEPRECATED, GRADIENTS, ROUTES, get_gradient, route_help
+from .registry import DEFAULT, DEPRECATED, GRADIENTS, ROUTES, Strategy, get_gradient, route_help
 from .swapped import Swapped
 
-__all__ = ["DEFAULT", "DEPRECATED", "GRADIENTS", "ROUTES", "Adjoint", "CasADiReverse", "Exact",
-           "FiniteDifference", "Route", "Swapped", "get_gradient", "route_help",
-           "step_parameters", "unrolled_objective"]
+__all__ = ["DEFAULT", "DEPRECATED", "GRADIENTS", "ROUTES", "Adjoint", "CasADiReverse",
+           "Evaluation", "Exact", "FiniteDifference", "Route", "Strategy", "Swapped",
+           "get_gradient", "route_help", "step_parameters", "unrolled_objective"]

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from ..health import BackwardWatch, check_finite
 from ..simulate import backward
-from .base import Route
+from .base import Evaluation, Route, bare
 
 
 class Adjoint(Route):
@@ -20,7 +20,7 @@ class Adjoint(Route):
 
     ``guard`` (default): the evaluation fails with a GradientError if the backward pass
     grows past ``bound`` (default: the route's) or overflows; without, its growth is only
-    recorded (``growth``)."""
+    recorded (the evaluation's ``growth``)."""
 
     name = "adjoint"
     exact = True
@@ -36,8 +36,7 @@ class Adjoint(Route):
         """The integrator's backward step this strategy runs in eq. (5)."""
         return integrator.step_vjp
 
-    def __call__(self, problem, u):
-        self.growth = None
+    def evaluate(self, problem, u) -> Evaluation:
         step_vjp = self.backward_step(problem.integrator)
         traj = problem.simulate(u)
         value, gx, gv = problem.state_cost(traj)
@@ -46,13 +45,12 @@ class Adjoint(Route):
             g_ext, g0 = backward(problem.integrator, problem.model, traj, gx, gv,
                                  step_vjp=step_vjp, watch=watch)
         finally:
-            self.growth = watch.result()
             problem.integrator.release(traj)
         c_val, c_grad = problem.control_cost(u)
         grad = problem.controls.pullback(g_ext, g0.v) + c_grad
         if self.guard:
             check_finite(self, grad, problem)
-        return value + c_val, grad
+        return Evaluation(value + c_val, grad, bare(traj), watch.result())
 
     def likely_cause(self, model) -> str:
         return ("the motion itself is this sensitive (a long horizon through many contact "

@@ -9,7 +9,7 @@ import casadi as ca
 import numpy as np
 
 from ..health import check_finite
-from .base import Route
+from .base import Evaluation, Route, bare
 
 
 def unrolled_objective(problem, U, P):
@@ -39,12 +39,15 @@ def unrolled_objective(problem, U, P):
     return J + problem.control_expression(U)
 
 
-def step_parameters(problem, u) -> np.ndarray:
+def step_parameters(problem, u, run=None) -> np.ndarray:
     """Every step's symbolic parameters for controls u: what depends on time and, for a
     scheme that decides something per step (the contacts a step holds), what the numeric
-    simulation decided, so the unrolled graph follows the path actually simulated."""
+    simulation decided (``run``, the run of ``u`` with its records, simulated if not given),
+    so the unrolled graph follows the path actually simulated."""
     integrator, model, dt = problem.integrator, problem.model, problem.dt
-    records = problem.simulate(u).records if integrator.decides_per_step(model) else None
+    records = None
+    if integrator.decides_per_step(model):
+        records = (problem.simulate(u) if run is None else run).records
     return np.concatenate([integrator.step_parameters(model, n * dt, dt,
                                                       None if records is None else records[n])
                            for n in range(problem.steps)] or [np.zeros(0)])
@@ -71,8 +74,12 @@ class CasADiReverse(Route):
                                                         [J, ca.gradient(J, U)])
         return fn
 
-    def __call__(self, problem, u):
-        val, grad = self.function(problem)(u, step_parameters(problem, u))
+    def evaluate(self, problem, u) -> Evaluation:
+        """Its gradient, with the run it simulated where the model decides per step (none
+        otherwise: the graph needs no run)."""
+        decides = problem.integrator.decides_per_step(problem.model)
+        run = problem.simulate(u) if decides else None
+        val, grad = self.function(problem)(u, step_parameters(problem, u, run))
         grad = np.asarray(grad).ravel()
         check_finite(self, grad, problem)
-        return float(val), grad
+        return Evaluation(float(val), grad, None if run is None else bare(run))

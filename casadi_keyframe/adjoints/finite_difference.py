@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..health import check_finite
-from .base import Route
+from .base import Evaluation, Route, bare
 
 
 class FiniteDifference(Route):
@@ -19,12 +19,14 @@ class FiniteDifference(Route):
     def __init__(self, h: float = 1e-6):
         self.h = h
 
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u) -> Evaluation:
         grad = np.empty_like(u)
         for i in range(u.size):
             grad[i] = self.directional(problem, u, _unit(u.size, i))
         check_finite(self, grad, problem)
-        return problem.objective(u), grad
+        run = problem.simulate(u, records=False)  # the objective, as problem.objective says
+        value = problem.state_cost(run, gradient=False)[0] + problem.control_cost(u)[0]
+        return Evaluation(value, grad, bare(run))
 
     def directional(self, problem, u, direction) -> float:
         """Central difference of phi along ``direction``."""

@@ -6,6 +6,7 @@ from __future__ import annotations
 import warnings
 
 from .adjoint import Adjoint
+from .base import Evaluation, Route
 from .casadi_reverse import CasADiReverse
 from .exact import Exact
 from .finite_difference import FiniteDifference
@@ -23,8 +24,11 @@ DEFAULT = Adjoint  # exact at a forward pass's cost: the default, where refusals
 #                    what the health report measures the other routes against
 
 
-def get_gradient(gradient):
-    """A strategy object from a name or an object."""
+def get_gradient(gradient=None) -> Route:
+    """The route ``gradient`` names (None: :data:`DEFAULT`), or the route object itself; a
+    plain callable ``f(problem, u) -> (phi, grad)`` is made a route (:class:`Strategy`)."""
+    if gradient is None:
+        gradient = DEFAULT.name
     if isinstance(gradient, str):
         if gradient in DEPRECATED:
             old = DEPRECATED[gradient]
@@ -33,9 +37,25 @@ def get_gradient(gradient):
         if gradient not in GRADIENTS:
             raise ValueError(f"unknown gradient {gradient!r}; choose one of {sorted(GRADIENTS)}")
         return GRADIENTS[gradient]()
+    if isinstance(gradient, Route):
+        return gradient
     if not callable(gradient):
         raise TypeError("gradient must be a name or a callable strategy")
-    return gradient
+    return Strategy(gradient)
+
+
+class Strategy(Route):
+    """A plain callable ``f(problem, u) -> (phi, grad)`` as a route: its evaluation has no run
+    and no growth (the function keeps them to itself); its name is the function's ``name``
+    attribute, else its type's."""
+
+    def __init__(self, function):
+        self.function = function
+        self.name = getattr(function, "name", type(function).__name__)
+
+    def evaluate(self, problem, u) -> Evaluation:
+        value, gradient = self.function(problem, u)
+        return Evaluation(value, gradient)
 
 
 def route_help(lead: str = "gradient route") -> str:

@@ -4,7 +4,7 @@ to a growth bound and known not to apply to some models (:meth:`Swapped.limits`)
 from __future__ import annotations
 
 from ..health import GROWTH_BOUND, warn_route_limits
-from ..models.penalty import BodyPenalty, SelfPenalty
+from ..models.contact.penalty import BodyPenalty, SelfPenalty
 from .adjoint import Adjoint
 
 
@@ -29,9 +29,9 @@ class Swapped(Adjoint):
                 "exact adjoint")
         return step
 
-    def __call__(self, problem, u):
+    def evaluate(self, problem, u):
         warn_route_limits(self, problem.model)  # once per model
-        return super().__call__(problem, u)
+        return super().evaluate(problem, u)
 
     def limits(self, model) -> list[str]:
         """Penalty springs on curved bodies (sphere, capsule), whose curvature and damping

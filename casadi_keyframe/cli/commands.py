@@ -12,6 +12,7 @@ import numpy as np
 from ..adjoints import ROUTES as GRADIENT_ROUTES
 from ..loading import (check_overrides, list_problems, load_module, load_problem,
                        overrides_of, solve_defaults)
+from ..optimize.settings import settings_from
 from ..runs import run_export, run_render, run_solve, solve_run
 from ..runs.report import format_value
 from ..saved import writable_folder
@@ -42,10 +43,9 @@ def cmd_show(args) -> int:
     widths = [max(len(r[i]) for r in [head, *rows]) for i in range(3)]
     for row in [head, *rows]:
         print("  " + "  ".join(c.ljust(w) for c, w in zip(row, widths)) + "  " + row[3])
-    solve = solve_defaults(module)
-    print("\nsolve defaults: " + ", ".join(f"{k} {v}" for k, v in solve.items())
-          + " (--method, --gradient, --maxiter, --rounds, --weight-growth, --finish change "
-            "them)")
+    solve = settings_from(solve_defaults(module))
+    print(f"\nsolve defaults: {solve.describe()} (--method, --option, --gradient, --maxiter, "
+          "--rounds, --weight-growth, --finish, ... change them)")
     return 0
 
 
@@ -65,24 +65,29 @@ def cmd_solve(args) -> int:
         check_library(fmt)  # before the solve, not after it
     module = load_module(args.problem)
     overrides = check_overrides(module, parse_overrides(args.set))  # as build gets them
-    continuation = parse_time_steps(args.continuation)
     out = writable_folder(args.out, "--out") if args.out is not None else None
     shooting = parse_shooting(args.segments, option_items(args.shooting, "--shooting",
                                                           "init=blend,workers=2"),
                               args.scheduler)
-    homotopy = parse_levels(module, option_items(args.homotopy, "--homotopy", "contact=3"))
-    spec = solve_run(module, args.problem, overrides, out, method=args.method,
-                     gradient=args.gradient, maxiter=args.maxiter, rounds=args.rounds,
-                     weight_growth=args.weight_growth, continuation=continuation,
-                     resolutions=parse_resolutions(module, args.resolution), homotopy=homotopy,
-                     shooting=shooting, time_limit=args.time_limit, stop=args.stop,
-                     **({} if args.finish is None else {"finish": args.finish}),
-                     resume=args.resume,
-                     quiet=args.quiet,
-                     animation=not args.no_animation, exports=tuple(args.export or ()),
-                     viewer=not args.no_viewer)
+    given = {**asked(args), "rounds": args.rounds, "weight_growth": args.weight_growth,
+             "resolutions": parse_resolutions(module, args.resolution), "shooting": shooting,
+             "homotopy": parse_levels(module, option_items(args.homotopy, "--homotopy",
+                                                           "contact=3")),
+             "stop": args.stop, "finish": args.finish}
+    spec = solve_run(module, args.problem, overrides, out, given=given, resume=args.resume,
+                     quiet=args.quiet, animation=not args.no_animation,
+                     exports=tuple(args.export or ()), viewer=not args.no_viewer)
     writable_folder(spec.out, "--out")
     return run_solve(spec)
+
+
+def asked(args) -> dict:
+    """The solve settings ``solve`` and ``sweep`` both take from the command line (None:
+    not given)."""
+    return {"method": args.method, "gradient": args.gradient, "maxiter": args.maxiter,
+            "options": parse_overrides(args.option, "--option", "radius=0.5") or None,
+            "continuation": parse_time_steps(args.continuation),
+            "time_limit": args.time_limit}
 
 
 def cmd_render(args) -> int:
@@ -97,7 +102,7 @@ def cmd_gradcheck(args) -> int:
     from ..studies.health_report import compare_routes, format_health, gradient_health
 
     prob = load_problem(args.problem, **parse_overrides(args.set))
-    route = args.gradient or solve_defaults(load_module(args.problem))["gradient"]
+    route = args.gradient or settings_from(solve_defaults(load_module(args.problem))).gradient
     names = [n.strip() for n in args.routes.split(",")] if args.routes else []
     unknown = [n for n in names if n not in GRADIENT_ROUTES]
     if unknown:
@@ -157,9 +162,7 @@ def cmd_sweep(args) -> int:
                    overrides=parse_overrides(args.set), seed=args.seed, perturb=args.perturb,
                    figure=args.figure, pictures=args.pictures,
                    group_by=args.group_by.split(",") if args.group_by else None,
-                   continuation=parse_time_steps(args.continuation),
-                   **{k: getattr(args, k) for k in ("method", "gradient", "maxiter",
-                                                    "time_limit")},
+                   **{k: v for k, v in asked(args).items() if v is not None},
                    **runner_options(args))
     report(result, out)
     return result.exit_code

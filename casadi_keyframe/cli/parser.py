@@ -48,6 +48,7 @@ def add_sweep_parser(sub) -> None:
     w.add_argument("--set", action="append", metavar="KEY=VALUE",
                    help="override a build() argument at every point")
     w.add_argument("--method", choices=list(METHODS))
+    add_option_option(w)
     w.add_argument("--gradient", choices=GRADIENT_ROUTES, help=route_help())
     w.add_argument("--maxiter", type=positive_int, help="iteration limit of each point")
     w.add_argument("--continuation", metavar="DT,DT,...", help="as for solve")
@@ -97,6 +98,7 @@ def solve_parser(sub) -> None:
     s.add_argument("problem", help="problem name (see 'list') or path to a problem file")
     s.add_argument("--set", action="append", metavar="KEY=VALUE", help="override a build() argument")
     s.add_argument("--method", choices=list(METHODS))
+    add_option_option(s)
     s.add_argument("--gradient", choices=GRADIENT_ROUTES, help=route_help())
     s.add_argument("--maxiter", type=positive_int, help="iteration limit (per stage with --continuation)")
     s.add_argument("--continuation", metavar="DT,DT,...",
@@ -215,6 +217,15 @@ def build_parser() -> argparse.ArgumentParser:
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS,
                              help=debug)
     return p
+
+
+def add_option_option(s) -> None:
+    """``--option KEY=VALUE``: any option the method documents, checked before the build."""
+    s.add_argument("--option", action="append", metavar="KEY=VALUE",
+                   help="an option of the method, by the name it documents (repeatable), "
+                        "e.g. --option radius=0.5 for gauss-newton, --option maxcor=40 for "
+                        "lbfgsb, --option mu_strategy=adaptive for ipopt; checked against "
+                        "the method's options before anything is built")
 
 
 def add_shooting_options(s, whole) -> None:

@@ -1,15 +1,16 @@
 """What the command line's options read: overrides and grids (``KEY=VALUE``), numbers with
 a lower bound, time steps, coarser meshes, multiple shooting's options and homotopy levels,
-each refused by the option's name when it does not parse."""
+each refused by the option's name when it does not parse.  A ``KEY=VALUE`` item is read by
+the solve request's one reader (:mod:`casadi_keyframe.optimize.settings`)."""
 from __future__ import annotations
 
 import argparse
-import ast
 from fractions import Fraction
 
 import numpy as np
 
 from ..loading import OverrideError, check_overrides
+from ..optimize.settings import key_value, parse_value, split_top
 
 
 def parse_overrides(items, option: str = "--set", example: str = "agents=50") -> dict:
@@ -37,48 +38,9 @@ def parse_grid(items) -> dict:
     return out
 
 
-def key_value(item: str, option: str, example: str) -> tuple[str, str]:
-    key, sep, value = item.partition("=")
-    key = key.strip()
-    if not sep or not key.isidentifier():
-        raise ValueError(f"{option} expects KEY=VALUE such as {example}, got {item!r}")
-    return key, value
-
-
-def split_top(text: str) -> list[str]:
-    """``"1,(2,3),'a,b'"`` -> ``["1", "(2,3)", "'a,b'"]``; empty items dropped."""
-    parts, depth, quote, current = [], 0, None, ""
-    for char in text:
-        if quote:
-            quote = None if char == quote else quote
-        elif char in "'\"":
-            quote = char
-        elif char in "([{":
-            depth += 1
-        elif char in ")]}":
-            depth -= 1
-        elif char == "," and depth == 0:
-            parts.append(current)
-            current = ""
-            continue
-        current += char
-    return [p.strip() for p in parts + [current] if p.strip()]
-
-
 def option_items(texts, option: str, example: str) -> list[dict]:
     """``["init=blend,workers=2", ...]`` (a repeatable KEY=VALUE,... ``option``) as dicts."""
     return [parse_overrides(split_top(t), option, example) for t in texts or []]
-
-
-def parse_value(text: str):
-    """A command-line value: a Python literal, else a fraction as a float, else the text."""
-    try:
-        return ast.literal_eval(text.strip())
-    except (ValueError, SyntaxError, MemoryError, RecursionError):
-        try:
-            return float(Fraction(text.strip()))
-        except (ValueError, ZeroDivisionError):
-            return text
 
 
 def at_least(kind, low, *, strict: bool = False):

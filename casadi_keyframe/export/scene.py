@@ -11,9 +11,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..geometry import body_geometry, moves
+from ..geometry import moves
 from ..models.base import PhysicalReport, Surface
 from ..optimize.report import format_misses
+from ..objectives.markers import Points, WholeShape
 from ..views import BlendView, ClothView, FlockView
 
 
@@ -27,56 +28,62 @@ def points3(x) -> np.ndarray:
 
 @dataclass
 class Body:
-    """A collider: ``kind`` "plane" (``a`` a point, ``b`` the normal), "round" (a capsule
-    from ``a`` to ``b``, a sphere when they coincide, of ``radius``), per frame
-    ``(frames, 3)``, or "mesh" (``a`` its vertices per frame ``(frames, v, 3)``, ``b`` its
-    faces); ``moving`` says whether it changes over the frames."""
+    """A collider: its typed ``shapes`` per frame (:class:`~casadi_keyframe.geometry.BodyShape`:
+    a plane's patch, a round body, a triangle mesh); ``moving`` says whether it changes over
+    the frames."""
 
     name: str
-    kind: str
-    a: np.ndarray
-    b: np.ndarray
-    radius: np.ndarray
+    shapes: list
     moving: bool
 
     @property
-    def sphere(self) -> bool:
-        return self.kind == "round" and np.array_equal(self.a, self.b)
+    def shape(self):
+        """The shape at the first frame (a still body's, at every frame)."""
+        return self.shapes[0]
+
+    def at(self, n: int):
+        """The shape at frame ``n``."""
+        return self.shapes[n if self.moving else 0]
+
+    def frames(self) -> list:
+        """The shapes an output writes: every frame's if the body moves, else the first."""
+        return self.shapes if self.moving else self.shapes[:1]
 
 
 def bodies(model, times, prefix: str = "") -> list[Body]:
     """The colliders of ``model`` at each of ``times``."""
     out = []
     for i, body in enumerate(model.colliders):
-        geo = [body_geometry(body, t) for t in times]
-        kind = geo[0][0]
-        radius = np.array([g[3] if kind == "round" else 0.0 for g in geo])
-        b = geo[0][2] if kind == "mesh" else np.array([g[2] for g in geo])
-        out.append(Body(f"{prefix}{type(body).__name__}{i}", kind, np.array([g[1] for g in geo]),
-                        b, radius, moves(body, list(times))))
+        shapes = [body.shape(t) for t in times]
+        out.append(Body(f"{prefix}{type(body).__name__}{i}", shapes, moves(shapes)))
     return out
 
 
 @dataclass
 class Target:
-    """A keyframe's target at ``frame``: ``kind`` "shape" (``points`` for every particle,
-    drawn with the surface's faces), "points" (some particles or a centre of mass) or
-    "outline" (a region's closed outline in z = 0); ``label`` the term's."""
+    """A keyframe's target at ``frame``: its ``figure`` (:class:`~..objectives.markers.Figure`:
+    ``WholeShape``, ``points`` for every particle, drawn with the surface's faces;
+    ``Points``, some particles or a centre of mass; ``Outline``, a region's closed outline
+    in z = 0), which each exporter keys its writer by; ``label`` the term's."""
 
     label: str
     frame: int
-    kind: str
+    figure: type
     points: np.ndarray
 
 
 def targets(problem) -> list[Target]:
-    """The targets of the problem's keyframe terms that have a position to show (their
-    markers; a whole-body target is a "shape" where the model has a surface)."""
+    """The targets of the problem's keyframe terms that have a figure to show (their
+    markers; a whole-body target is drawn as points where the model has no surface)."""
     surface = isinstance(problem.model, Surface)
-    kinds = {"shape": "shape" if surface else "points", "particles": "points",
-             "center": "points", "outline": "outline"}
-    return [Target(m.label, m.frame, kinds[m.kind], points3(m.points))
-            for m in problem.objective_terms.markers() if m.kind != "velocity"]
+    out = []
+    for m in problem.objective_terms.markers():
+        figure = m.kind.figure
+        if figure is WholeShape and not surface:
+            figure = Points
+        if figure is not None:
+            out.append(Target(m.label, m.frame, figure, points3(m.points)))
+    return out
 
 
 @dataclass

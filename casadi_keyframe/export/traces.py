@@ -10,8 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import capsule_grid, circle, grid_triangles, plane_patch
+from ..geometry import circle
 from ..models.topology import mesh_edges
+from ..objectives.markers import Outline, Points, WholeShape
 
 CLOTH, CLIP, BLEND, AGENT, HIGHLIGHT = "#6a8fc7", "#8d9bb0", "#e1812c", "#4c72b0", "#e1812c"
 TARGET, BODY, RING, COM, REGION = "#d62728", "#9a9a9a", "#e1812c", "#7b4ea3", "#3a923a"
@@ -49,14 +50,7 @@ def bodies_mesh(body_list, n: int, mid, half, k: int = 6):
     half-side ``half`` below ``mid``, round bodies as coarse capsule grids)."""
     verts, tris = [], []
     for body in body_list:
-        m = n if body.moving else 0
-        if body.kind == "plane":
-            v, t = plane_patch(body.a[m], body.b[m], mid, half), np.array([[0, 1, 2], [0, 2, 3]])
-        elif body.kind == "mesh":
-            v, t = body.a[m], body.b
-        else:
-            grid = capsule_grid(body.a[m], body.b[m], body.radius[m], k)
-            v, t = grid.reshape(-1, 3), grid_triangles(*grid.shape[:2])
+        v, t = body.at(n).triangles(mid, half, k)
         tris.append(t + sum(len(x) for x in verts))
         verts.append(v)
     return np.vstack(verts), np.vstack(tris)
@@ -84,24 +78,32 @@ def target_opacity(target):
     return lambda n: {"opacity": 1.0 if n == target.frame else 0.2}
 
 
+def _edges(go, t, faces, common):
+    line = polylines(t.points[e] for e in mesh_edges(faces))
+    return go.Scatter3d(**xyz(line), mode="lines", line=dict(color=TARGET, width=2), **common)
+
+
+def _diamonds(go, t, faces, common):
+    return go.Scatter3d(**xyz(t.points), mode="markers",
+                        marker=dict(symbol="diamond", size=4, color=TARGET), **common)
+
+
+def _loop(go, t, faces, common):
+    return go.Scatter3d(**xyz(np.vstack([t.points, t.points[:1]])), mode="lines",
+                        line=dict(color=REGION, width=4), **common)
+
+
+# a 3-D panel's trace of each figure of a keyframe target (objectives.markers.Figure)
+TARGET_TRACES = {WholeShape: _edges, Points: _diamonds, Outline: _loop}
+
+
 def target_traces(go, targets, faces, scene):
-    """Each keyframe target: a whole-cloth shape as its edges, points as crosses, a region
-    as its outline; all in one legend group, each named with its frame."""
-    out = []
-    for t in targets:
-        common = dict(name=target_name(t), legendgroup="targets", scene=scene,
-                      hoverinfo="name")
-        if t.kind == "shape":
-            line = polylines(t.points[e] for e in mesh_edges(faces))
-            out.append(go.Scatter3d(**xyz(line), mode="lines",
-                                    line=dict(color=TARGET, width=2), **common))
-        elif t.kind == "points":
-            out.append(go.Scatter3d(**xyz(t.points), mode="markers",
-                                    marker=dict(symbol="diamond", size=4, color=TARGET), **common))
-        else:
-            out.append(go.Scatter3d(**xyz(np.vstack([t.points, t.points[:1]])), mode="lines",
-                                    line=dict(color=REGION, width=4), **common))
-    return out
+    """Each keyframe target by its figure (:data:`TARGET_TRACES`): a whole-cloth shape as
+    its edges, points as diamonds, a region as its outline; all in one legend group, each
+    named with its frame."""
+    return [TARGET_TRACES[t.figure](go, t, faces, dict(name=target_name(t), legendgroup="targets",
+                                                       scene=scene, hoverinfo="name"))
+            for t in targets]
 
 
 def ring_trace(go, ring, scene):
@@ -148,16 +150,25 @@ def trails(go, positions, three_d: bool, scene):
     return trace, at
 
 
+def _filled(go, t, common):
+    p = np.vstack([t.points, t.points[:1]])
+    return go.Scatter(x=f32(p[:, 0]), y=f32(p[:, 1]), mode="lines", fill="toself",
+                      line=dict(color=REGION, width=1.5), **common)
+
+
+def _crosses(go, t, common):
+    return go.Scatter(x=f32(t.points[:, 0]), y=f32(t.points[:, 1]), mode="markers",
+                      marker=dict(symbol="x", size=9, color=COM), **common)
+
+
+# a 2-D flock's trace of each figure of a keyframe target (a flock has no surface: a whole
+# shape is drawn as its points)
+FLAT_TARGET_TRACES = {Outline: _filled, Points: _crosses, WholeShape: _crosses}
+
+
 def flat_targets(go, targets):
-    """A 2-D flock's targets: region outlines filled lightly, point targets as crosses."""
-    out = []
-    for t in targets:
-        common = dict(name=target_name(t), legendgroup="targets", hoverinfo="name")
-        if t.kind == "outline":
-            p = np.vstack([t.points, t.points[:1]])
-            out.append(go.Scatter(x=f32(p[:, 0]), y=f32(p[:, 1]), mode="lines", fill="toself",
-                                  line=dict(color=REGION, width=1.5), **common))
-        else:
-            out.append(go.Scatter(x=f32(t.points[:, 0]), y=f32(t.points[:, 1]), mode="markers",
-                                  marker=dict(symbol="x", size=9, color=COM), **common))
-    return out
+    """A 2-D flock's targets by their figure (:data:`FLAT_TARGET_TRACES`): region outlines
+    filled lightly, point targets as crosses."""
+    return [FLAT_TARGET_TRACES[t.figure](go, t, dict(name=target_name(t), legendgroup="targets",
+                                                     hoverinfo="name"))
+            for t in targets]

@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import basis, circle, plane_patch
+from ..geometry import Round, basis, circle
 from ..interrupts import check
 from ..saved import atomic_path
+from ..objectives.markers import Outline, Points, WholeShape
 
 INSTALL = "pip install casadi_keyframe[usd]"
 CLOTH, CLIP, HIGHLIGHT, AGENT, TARGET, BODY, RING = (
@@ -177,47 +178,44 @@ class _Writer:
         return cone
 
     def colliders(self, path, bodies):
-        """One prim per collider under ``path``."""
+        """One prim per collider under ``path``: by its shape's writer in :data:`SHAPES`,
+        else as a mesh of its polygons."""
         if not bodies:
             return
         self.UsdGeom.Scope.Define(self.stage, path)
         for body in bodies:
-            where = f"{path}/{prim_name(body.name)}"
-            if body.kind == "plane":
-                self._plane(where, body)
-            elif body.kind == "mesh":
-                self.mesh(where, body.a if body.moving else body.a[:1], BODY, faces=body.b)
-            else:
-                self._round(where, body)
+            SHAPES.get(type(body.shape), _Writer.polygons)(self, f"{path}/{prim_name(body.name)}",
+                                                          body)
 
-    def _plane(self, path, body):
-        corners = [plane_patch(a, b, self.mid, self.half) for a, b in zip(body.a, body.b)]
-        positions = np.array(corners if body.moving else corners[:1])
-        self.mesh(path, positions, BODY, faces=np.array([[0, 1, 2, 3]]))
+    def polygons(self, path, body):
+        """A body as a mesh of its shape's polygons (:meth:`~..geometry.BodyShape.polygons`;
+        a plane's patch below the stage's middle), time-sampled if it moves."""
+        surfaces = [shape.polygons(self.mid, self.half) for shape in body.frames()]
+        self.mesh(path, np.array([v for v, _ in surfaces]), BODY, faces=surfaces[0][1])
 
-    def _round(self, path, body):
+    def round(self, path, body):
         """A sphere, or a capsule along z placed by a transform from ``a`` to ``b``."""
         Gf, UsdGeom = self.Gf, self.UsdGeom
-        if body.sphere:
+        sphere = body.shape.sphere
+        if sphere:
             prim = UsdGeom.Sphere.Define(self.stage, path)
         else:
             prim = UsdGeom.Capsule.Define(self.stage, path)
             prim.CreateAxisAttr(UsdGeom.Tokens.z)
         op = prim.AddTransformOp()
-        frames = range(len(body.a)) if body.moving else [0]
-        for n in frames:
-            a, b, r = body.a[n], body.b[n], float(body.radius[n])
+        for n, shape in enumerate(body.frames()):
+            a, b, r = shape.a, shape.b, float(shape.radius)
             axis, e1, e2 = basis(b - a)
-            if body.sphere:
+            if sphere:
                 axis, e1, e2 = np.eye(3)[2], np.eye(3)[0], np.eye(3)[1]
             matrix = Gf.Matrix4d(*np.r_[e1, 0, e2, 0, axis, 0, (a + b) / 2, 1].tolist())
             length = float(np.linalg.norm(b - a))
             time = float(n) if body.moving else self.Usd.TimeCode.Default()
             op.Set(matrix, time)
             prim.GetRadiusAttr().Set(r, time)
-            half = np.array([r, r, r + (0 if body.sphere else length / 2)])
+            half = np.array([r, r, r + (0 if sphere else length / 2)])
             prim.CreateExtentAttr().Set(self._vec3(np.array([-half, half])), time)
-            if not body.sphere:
+            if not sphere:
                 prim.GetHeightAttr().Set(length, time)
         self._color(prim, BODY)
 
@@ -228,13 +226,7 @@ class _Writer:
             return
         self.UsdGeom.Scope.Define(self.stage, path)
         for t in scene.targets:
-            where = f"{path}/{prim_name(t.label)}"
-            if t.kind == "shape":
-                prim = self.mesh(where, t.points[None], TARGET)
-            elif t.kind == "points":
-                prim = self.points(where, t.points[None], TARGET, width=0.05)
-            else:
-                prim = self.curve(where, t.points, TARGET, width=0.05)
+            prim = TARGET_PRIMS[t.figure](self, f"{path}/{prim_name(t.label)}", t.points)
             prim.GetPrim().SetCustomDataByKey("keyframe_frame", int(t.frame))
         if scene.ring is not None:
             ring = scene.ring
@@ -256,6 +248,14 @@ class _Writer:
         self._points_over_time(curve, points[None], pad=width / 2)
         self._color(curve, rgb)
         return curve
+
+
+# a shape's own prim where USD has one (else its polygons as a mesh: _Writer.polygons)
+SHAPES = {Round: _Writer.round}
+# the prim of each figure of a keyframe target (objectives.markers.Figure), from its points
+TARGET_PRIMS = {WholeShape: lambda w, path, p: w.mesh(path, p[None], TARGET),
+                Points: lambda w, path, p: w.points(path, p[None], TARGET, width=0.05),
+                Outline: lambda w, path, p: w.curve(path, p, TARGET, width=0.05)}
 
 
 def heading_quaternions(velocities) -> np.ndarray:

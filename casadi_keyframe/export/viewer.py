@@ -57,15 +57,7 @@ def panels(scene) -> list[dict]:
 def _extent(panel) -> tuple[np.ndarray, np.ndarray]:
     pts = [panel["positions"].reshape(-1, 3)] + [t.points for t in panel["targets"]]
     middle = np.mean([p.mean(0) for p in pts], 0)
-    for b in panel["bodies"]:
-        if b.kind == "round":
-            r = b.radius[:, None]
-            pts += [b.a - r, b.a + r, b.b - r, b.b + r]
-        elif b.kind == "mesh":
-            pts.append(b.a.reshape(-1, 3))
-        else:  # the plane's point below the middle
-            normal = b.b / np.linalg.norm(b.b, axis=1, keepdims=True)
-            pts.append(middle - np.sum((middle - b.a) * normal, 1, keepdims=True) * normal)
+    pts += [shape.extent(middle) for b in panel["bodies"] for shape in b.shapes]
     return np.min([p.min(0) for p in pts], 0), np.max([p.max(0) for p in pts], 0)
 
 

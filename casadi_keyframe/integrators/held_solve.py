@@ -1,8 +1,8 @@
-r"""The implicit step's solve with a held set (the hold, :mod:`~..models.hold`; Baraff and
+r"""The implicit step's solve with a held set (the hold, :mod:`~..models.contact.hold`; Baraff and
 Witkin's filter), forward, backward and tangent.
 
 With the step matrix A, its right-hand side b and the held set's projector ``P`` (``n n^T``
-per held particle, :class:`~casadi_keyframe.models.hold.HeldSet`), ``S = I - P``, the step
+per held particle, :class:`~casadi_keyframe.models.contact.hold.HeldSet`), ``S = I - P``, the step
 solves
 
     S (A dv - b) = 0,    P (dv - z) = 0,    z = n (c - n . v)
@@ -17,7 +17,7 @@ Backward (the cotangent ``w`` of dv): ``mu = A_hat^-1 S w`` and ``lam = mu + P (
 solve ``(S A + P)^T lam = w``; ``mu`` takes the place of the unheld step's multiplier, and
 ``lam`` with ``q = (dv - z) - r`` weighs the normals' and targets' derivatives.  With
 friction ``P`` also holds sticking particles' tangents, and the sliding ones' lagged
-impulses join b (:mod:`~casadi_keyframe.models.friction`); ``r`` is then the hold's own.  Tangent:
+impulses join b (:mod:`~casadi_keyframe.models.contact.tangential`); ``r`` is then the hold's own.  Tangent:
 with ``g`` the derivative of the residual's right side, ``d(dv) = P g + A_hat^-1 S (g - A P g)``.
 """
 from __future__ import annotations

@@ -46,7 +46,7 @@ class LinearizedStep:
     over at its start, self-contact pairs, springs taken taut, the held set), how its linear
     solve went, within the integrator's memory budget the prepared step matrix (``factor``,
     e.g. its Cholesky factor) for the derivative passes, the set its hold held
-    (:class:`~casadi_keyframe.models.hold.HeldSet`, None if none) and how many times it was
+    (:class:`~casadi_keyframe.models.contact.hold.HeldSet`, None if none) and how many times it was
     solved (more than once when it was revised)."""
 
     decisions: object

@@ -67,10 +67,6 @@ class Plan:
     def __init__(self, free: np.ndarray):
         self.free = np.asarray(free, bool)
 
-    @property
-    def free_index(self) -> np.ndarray:
-        return np.flatnonzero(self.free)
-
     def system(self, A, symmetric: bool = True) -> System:
         """``A`` itself if a :class:`System`, else :meth:`System.from_matrix`."""
         return A if isinstance(A, System) else System.from_matrix(A, self.free, symmetric)

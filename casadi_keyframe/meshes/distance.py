@@ -1,5 +1,5 @@
 r"""Closest points on a triangle mesh, signed, and the feature each lies on: what a mesh
-body's contact needs (:class:`~casadi_keyframe.models.colliders.MeshBody`).
+body's contact needs (:class:`~casadi_keyframe.models.contact.colliders.MeshBody`).
 
 libigl's AABB tree finds each point's closest point on the triangles.  The sign comes from
 the pseudonormal of the feature the closest point lies on (a face's normal, an edge's mean

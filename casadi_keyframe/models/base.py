@@ -186,7 +186,7 @@ class BlockJacobians(ForceJacobians):
 
 class StepHold(abc.ABC):
     """Particles an implicit step holds on bodies by prescribing their velocity along the
-    body's normal (the hold, :mod:`~.hold`): the held set among a step's decisions, the
+    body's normal (the hold, :mod:`~.contact.hold`): the held set among a step's decisions, the
     derivative contractions of its normals and targets for the exact adjoint and tangent,
     and the same in CasADi."""
 
@@ -197,7 +197,8 @@ class StepHold(abc.ABC):
 
     @abc.abstractmethod
     def held(self, decisions):
-        """The :class:`~.hold.HeldSet` among a step's ``decisions`` (None: nothing held)."""
+        """The :class:`~.contact.held_set.HeldSet` among a step's ``decisions`` (None: nothing
+        held)."""
 
     @abc.abstractmethod
     def hold_vjp(self, x, v, t: float, dt: float, held, lam, q, nu):

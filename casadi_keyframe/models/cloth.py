@@ -2,8 +2,8 @@ r"""Mass-spring cloth in 3-D: a list of interaction families (:mod:`.families` s
 
 A cloth's families are, in this order: its springs (:class:`~.springs.ChoiKoSprings`),
 gravity and air drag (:class:`~.gravity_drag.GravityAndDrag`), how it touches its bodies
-(``collision``, :mod:`.collisions`: the paper's penalty springs, the step's hold, or both),
-self-contact (:class:`~.penalty.SelfPenalty`) and any further ``families`` given (a
+(``collision``, :mod:`.contact.collisions`: the paper's penalty springs, the step's hold, or both),
+self-contact (:class:`~.contact.penalty.SelfPenalty`) and any further ``families`` given (a
 dihedral bending, :mod:`.bending`).  :class:`ClothModel` builds them from a grid or a mesh
 and owns its constraints (:mod:`.constraints`: pinned and attached particles) and its
 reports (stretch, penetration).  A new force law is one family file, given to a cloth as
@@ -18,12 +18,12 @@ import numpy as np
 
 from ..state import SimulationError
 from .base import Model, PhysicalReport, Surface
-from .colliders import Body, Contact, signed_distances
-from .collisions import DEFAULT_COLLISION, check_collision, collision_families
+from .contact.colliders import Body, Contact, signed_distances
+from .contact.collisions import DEFAULT_COLLISION, check_collision, collision_families
 from .constraints import Constraints
 from .families import FamilyModel, check_families
 from .gravity_drag import GravityAndDrag
-from .penalty import SelfPenalty
+from .contact.penalty import SelfPenalty
 from .springs import ChoiKoSprings, Springs
 from .topology import grid_topology, lumped_masses, mesh_topology
 
@@ -80,11 +80,11 @@ class ClothModel(FamilyModel, Model, PhysicalReport, Surface):
     """An immutable cloth of n particles with fixed springs; build with :meth:`grid` or
     :meth:`from_mesh`.  States are ``(n, 3)`` arrays; the flat 3n ordering is ``x.ravel()``.
 
-    ``colliders``: bodies the cloth touches (``collision``, :mod:`.collisions`): by default
+    ``colliders``: bodies the cloth touches (``collision``, :mod:`.contact.collisions`): by default
     the paper's stiff springs in the contact layer with the step holding every particle on
     the body's surface, so none passes through (``"guarded"``); the hold on the layer's
     surface with no spring (``"constraint"``); or the springs alone (``"penalty"``, the
-    paper's); ``self_contact``: the :class:`~.colliders.Contact` of cloth with itself
+    paper's); ``self_contact``: the :class:`~.contact.colliders.Contact` of cloth with itself
     (penalty; None: none); ``attachments``: particles led along paths; ``families``:
     further interaction families, summed after the others.
     """

@@ -152,7 +152,7 @@ class FamilyModel(BlockJacobians, StepHold):
         (damping's position derivative omitted, as in Baraff-Witkin) without each law's
         destabilising part (compressed springs' transverse term, contact surfaces'
         curvature, a hinge's angle curvature: :func:`.springs.spring_law`,
-        :func:`.penalty.penalty_law`, :func:`.bending.hinge_law`).  The adjoints of full
+        :func:`.contact.penalty.penalty_law`, :func:`.bending.hinge_law`).  The adjoints of full
         backward Euler (exact and swapped) need the true ``df/dx``, damping's part included.
         """
         blocks = self.jacobian_blocks(x, v, t, with_df_dx, interactions)

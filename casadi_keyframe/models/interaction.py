@@ -31,7 +31,6 @@ import numpy as np
 
 from ..kernels import (MappedKernel, pair_difference, pair_incidence, scatter_pairs,
                        scatter_stencils, stencil_incidence, stencil_values)
-from .colliders import signed_distances
 
 KERNELS = ("force", "jac", "df_dx", "vjp", "jvp")  # every family's, see interaction_kernels
 OUTPUTS = {"jac": 2, "df_dx": 1}  # blocks per kernel: (K, D) and J
@@ -70,7 +69,7 @@ class StepSpan:
     def distances(self, body) -> np.ndarray:
         """Every particle's signed distance to ``body`` at the step's end (x1, t + dt)."""
         return self.kept(("distances", id(body)),
-                         lambda: signed_distances(body, self.x1, self.t + self.dt))
+                         lambda: body.signed_distances(self.x1, self.t + self.dt))
 
     def kept(self, key, compute):
         """``compute()``, computed once for this span and ``key`` (what the families
@@ -85,7 +84,7 @@ class Interaction:
 
     ``name`` says what the family is; ``role`` what kind of force it is: "internal" (sums to
     zero: springs, bending), "external" (gravity, drag) or "contact" (bodies, self-contact);
-    ``holds`` whether its decision is a set the step's solve holds (:mod:`.hold`)."""
+    ``holds`` whether its decision is a set the step's solve holds (:mod:`.contact.hold`)."""
 
     name = "interaction"
     role = "external"

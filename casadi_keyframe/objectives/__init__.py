@@ -4,7 +4,8 @@
 * :mod:`.keyframes`: state and centre-of-mass keyframes; :mod:`.regions`: region targets;
   :mod:`.mesh`: a keyframe given as a mesh;
 * :mod:`.effort`: the control effort; :mod:`.strain`: the soft strain limit;
-* :mod:`.tolerances`: when a keyframe counts as met, and a motion as physical.
+* :mod:`.tolerances`: when a keyframe counts as met, and a motion as physical;
+* :mod:`.markers`: what a keyframe term shows; :mod:`.keyframe_goal`: how the goal judges it.
 """
 from .effort import Smoothness
 from .keyframes import CenterOfMassKeyframe, ParticleKeyframe, StateKeyframe

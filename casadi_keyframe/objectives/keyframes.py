@@ -7,7 +7,8 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..views import KeyframeGoal, Marker
+from .keyframe_goal import KeyframeGoal
+from .markers import CENTER, PARTICLES, SHAPE, VELOCITY, Marker
 from .tolerances import center_tolerance, keyframe_tolerance, shortfall_phrase, tolerance_pair
 from .terms import StateTerm, checked_target, particle_indices
 
@@ -85,13 +86,13 @@ class StateKeyframe(WeightedErrors):
                              "rms_velocity_error": self._tol[1]},
                             self.has_tolerance, self.miss, self.shortfall)
         if self._x is None:
-            return Marker(self.label, self.frame, "velocity", np.zeros((0, self._v.shape[1])),
+            return Marker(self.label, self.frame, VELOCITY, np.zeros((0, self._v.shape[1])),
                           self._idx, goal=goal)
         if np.unique(self._idx).size == self._n:
             shape = np.empty((self._n, self._x.shape[1]))
             shape[self._idx] = self._x
-            return Marker(self.label, self.frame, "shape", shape, goal=goal)
-        return Marker(self.label, self.frame, "particles", self._x, self._idx, goal=goal)
+            return Marker(self.label, self.frame, SHAPE, shape, goal=goal)
+        return Marker(self.label, self.frame, PARTICLES, self._x, self._idx, goal=goal)
 
     def _params(self, model):
         zeros = np.zeros((self._idx.size, model.dim))
@@ -194,9 +195,9 @@ class CenterOfMassKeyframe(WeightedErrors):
                              "velocity_error": self.tolerance[1]},
                             self.has_tolerance, self.miss, self.shortfall)
         if self._x is None:
-            return Marker(self.label, self.frame, "velocity", np.zeros((0, self._v.size)),
+            return Marker(self.label, self.frame, VELOCITY, np.zeros((0, self._v.size)),
                           self._idx, goal=goal)
-        return Marker(self.label, self.frame, "center", self._x, goal=goal)
+        return Marker(self.label, self.frame, CENTER, self._x, goal=goal)
 
     def center(self, traj, frame=None):
         return self._w @ traj.x[self.frame if frame is None else frame][self._idx]

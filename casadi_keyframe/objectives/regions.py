@@ -7,7 +7,8 @@ import casadi as ca
 import numpy as np
 
 from ..shapes import Shape
-from ..views import KeyframeGoal, Marker
+from .keyframe_goal import KeyframeGoal
+from .markers import OUTLINE, Marker
 from .terms import StateTerm, particle_indices
 
 
@@ -55,7 +56,7 @@ class RegionTarget(StateTerm):
         """The region's outline, judged by the fraction of the agents inside it."""
         goal = KeyframeGoal({"fraction_inside": self.fill}, self.has_tolerance, self.miss,
                             self.shortfall)
-        return Marker(self.label, self.frame, "outline", self.shape.outline(), self._idx,
+        return Marker(self.label, self.frame, OUTLINE, self.shape.outline(), self._idx,
                       goal=goal)
 
     @property

@@ -14,7 +14,7 @@ import copy
 import casadi as ca
 import numpy as np
 
-from ..views import Marker
+from .markers import Marker
 
 
 class Objective:
@@ -53,7 +53,7 @@ class Objective:
                           else t for t in self.terms])
 
     def markers(self) -> list:
-        """What the bound keyframe terms show (:class:`~.views.Marker`), term by term."""
+        """What the bound keyframe terms show (:class:`~.markers.Marker`), term by term."""
         return [m for t in self.state_terms if (m := t.marker()) is not None]
 
     def retimed(self, frame_of) -> "Objective":

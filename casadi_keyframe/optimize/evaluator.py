@@ -2,67 +2,67 @@
 best point, counting failed simulations, writing the history and the checkpoint) of what
 it is given to evaluate (:class:`RouteMerit`, a problem's objective by a gradient route, or
 multiple shooting's merit of stacked variables), and :class:`MetricView`, the same
-evaluator in a smooth metric's variables."""
+evaluator in a smooth metric's variables.  A merit returns an
+:class:`~casadi_keyframe.adjoints.Evaluation` whole (value, gradient, run, growth): the
+evaluator reads nothing else."""
 from __future__ import annotations
 
-import copy
 import signal
-import time
 
 import numpy as np
 
-from ..adjoints import get_gradient
+from ..adjoints import Evaluation, get_gradient
 from ..health import GrowthLog
 from ..interrupts import check
-from ..state import SimulationError, Trajectory
+from ..state import SimulationError
+from .deadline import now
 from .goal import GoalReached, verdict
+from .kept import Standing
 from .result import history_record
 
 
 class RouteMerit:
     """What a single-shooting search evaluates: ``problem``'s objective and its gradient by
-    the ``gradient`` route (a name or strategy, :attr:`route`).
+    the ``gradient`` route (a name or route, :attr:`route`).
 
-    An evaluation's ``info`` keeps the trajectory the route simulated (:func:`watched`), so
-    judging the goal (``goal``, default ``problem``: the true targets where ``problem``'s
-    keyframes aim elsewhere) costs no simulation.  A merit of other variables (multiple
-    shooting's :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
+    An evaluation keeps the run the route simulated, so judging the goal (``goal``, default
+    ``problem``: the true targets where ``problem``'s keyframes aim elsewhere) costs no
+    simulation.  A merit of other variables (multiple shooting's
+    :class:`~.shooting.merit.ShootingMerit`) gives the same methods.
     """
 
     def __init__(self, problem, gradient, goal=None):
         self.problem, self.route = problem, get_gradient(gradient)
         self.goal = goal or problem
-        self._seen = {}
-        self._watched = watched(problem, self._seen)
 
     def __call__(self, u):
-        """``(f, gradient, info)`` at ``u``; ``info["trajectory"]``: its run, or None."""
-        self._seen.clear()
-        f, g = self.route(self._watched, u)
-        seen = self._seen.get("u")
-        kept = self._seen["trajectory"] if seen is not None and np.array_equal(seen, u) else None
-        return f, g, {"trajectory": kept}
+        """The route's :class:`~casadi_keyframe.adjoints.Evaluation` at ``u``."""
+        return self.route.evaluate(self.problem, u)
 
-    def describe(self, u, f, info):
+    def describe(self, u, f, found):
         """What an iteration's record says of an evaluated point: ``(controls, objective,
-        keyframe error, extra record keys)``, of the goal's true targets."""
+        keyframe error, extra record keys)``, of the goal's true targets (a point judged
+        without a gradient: its state terms' part computed on its run)."""
         control = self.goal.control_cost(u)[0]
+        if found is not None and found.gradient is None:
+            state = self.goal.state_cost(self.run(u, found), gradient=False)[0]
+            return u, state + control, state, {}
         if self.goal is not self.problem:
-            f = self.goal.state_cost(self.run(u, info), gradient=False)[0] + control
+            f = self.goal.state_cost(self.run(u, found), gradient=False)[0] + control
         return u, f, f - control, {}
 
-    def meets(self, goal, info) -> bool:
+    def meets(self, goal, found) -> bool:
         """Whether the evaluated point meets ``goal`` (judged on the run it kept)."""
-        traj = None if info is None else info["trajectory"]
+        traj = None if found is None else found.trajectory
         return traj is not None and verdict(goal, traj).met
 
-    def may_meet(self, goal, info) -> bool:
+    def may_meet(self, goal, found) -> bool:
         """Whether the point may meet ``goal`` (the merit's cheap test before its run)."""
         return True
 
-    def run(self, u, info):
+    def run(self, u, found):
         """The controls' own run at ``u``: kept by its evaluation, or simulated now."""
-        kept = None if info is None else info["trajectory"]
+        kept = None if found is None else found.trajectory
         return self.problem.simulate(u, records=False) if kept is None else kept
 
 
@@ -72,12 +72,14 @@ class Evaluator:
     Search methods ask for f and its gradient at the same point in separate calls (IPOPT)
     or together (L-BFGS-B): the last point's pair is kept, so each point is simulated once.
     It evaluates ``merit`` (default: ``problem``'s objective by the ``gradient`` route,
-    :class:`RouteMerit`).  ``stage`` is the stage it serves; ``export`` maps its controls to
-    the final problem's grid for the checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint`
-    or None; ``final``: its points are the final problem's, comparable with any other
-    there).  The best point is judged by the goal (:mod:`.goal`, the terms and limits of
-    ``goal``, default ``problem``) first, then by the merit; each iteration's record
-    describes the ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
+    :class:`RouteMerit`); a point a search needs no gradient at is judged by its value and
+    run alone (:meth:`judge`, ranked with the others by :meth:`offer`).  ``stage`` is the
+    stage it serves; ``export`` maps its controls to the final problem's grid for the
+    checkpoint (a :class:`~casadi_keyframe.saved.Checkpoint` or None; ``final``: its points
+    are the final problem's, comparable with any other there).  The best point is ranked by
+    its :class:`~.kept.Standing`: the goal (:mod:`.goal`, the terms and limits of ``goal``,
+    default ``problem``) first, then the merit; each iteration's record describes the
+    ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
     ``failed_best`` a failed evaluation stands as the best while there is no other.  With
     ``stop="goal"`` each iteration raises :class:`~.goal.GoalReached` once the best point
     meets the goal.
@@ -96,6 +98,7 @@ class Evaluator:
             raise ValueError(f"Evaluator report must be 'last' or 'best', got {report!r}")
         self.report, self.failed_best = report, failed_best
         self.nfev = 0
+        self.judged = 0  # evaluations without a gradient (judge)
         self.failures = 0
         self.last_failure = ""
         self.last_error = None
@@ -115,8 +118,8 @@ class Evaluator:
 
     @property
     def njev(self) -> int:
-        """Gradients computed: the evaluations that did not fail."""
-        return self.nfev - self.failures
+        """Gradients computed: the evaluations that did not fail and asked for one."""
+        return self.nfev - self.failures - self.judged
 
     def counts(self) -> dict:
         """Its evaluations, gradients, seconds and failed simulations, as a
@@ -126,13 +129,15 @@ class Evaluator:
 
     def __call__(self, u):
         u = np.array(u, dtype=float).ravel()
-        if self.last_u is not None and np.array_equal(u, self.last_u):
+        if (self.last_u is not None and self.last[1] is not None
+                and np.array_equal(u, self.last_u)):
             return self.last
-        t = time.perf_counter()
+        t = now()
         try:
             check()  # a signal caught by interrupts.catching stops the search here
-            f, g, info = self.merit(u)
-            self.health.seen(self.gradient)
+            info = self.merit(u)
+            f, g = info.value, info.gradient
+            self.health.seen(info.growth)
         except SimulationError as err:  # health.GradientError too: a refused gradient
             # a finite value well above the best lets L-BFGS-B backtrack (with inf it gives
             # up: measured, one iteration and "RELATIVE REDUCTION OF F"); IPOPT rejects it too
@@ -145,15 +150,56 @@ class Evaluator:
         except KeyboardInterrupt as err:  # IPOPT would swallow it: remember, then re-raise
             self.interrupted = getattr(err, "signum", signal.SIGINT)
             raise
-        self.seconds += time.perf_counter() - t
+        self.seconds += now() - t
         self.nfev += 1
         self.last_u, self.last, self.last_info = u, (f, g), info
+        self._rank(u, f, g, info)
+        return f, g
+
+    def _rank(self, u, f, g, info) -> None:
+        """Make the point ``u`` the best if its standing beats the best's."""
         met = info is not None and self.merit.meets(self.goal, info)
-        if (not met, f) < (not self.best_met, self.best_f) and (
+        if Standing(met, f).beats(Standing(self.best_met, self.best_f)) and (
                 info is not None or self.failed_best):
             self.best_u, self.best_f, self.best_g, self.best_info = u, f, g, info
             self.best_traj, self.best_met = None, met
-        return f, g
+
+    def judge(self, u, *, records: bool = False) -> Evaluation | None:
+        """The problem's objective and run at the controls ``u`` without a gradient (an
+        :class:`~casadi_keyframe.adjoints.Evaluation` whose gradient is None; ``records``:
+        the run keeps its records, for products made on it), or None where its simulation
+        fails; counted as an evaluation (its failure too), timed, a pending signal raised
+        first.  It becomes the last point, not the best: :meth:`offer` ranks it."""
+        u = np.array(u, dtype=float).ravel()
+        t = now()
+        found = None
+        try:
+            check()
+            run = self.problem.simulate(u, records=records)
+            value = self.problem.state_cost(run, gradient=False)[0]
+            found = Evaluation(value + self.problem.control_cost(u)[0], None, run)
+        except SimulationError as err:
+            self.failures += 1
+            self.last_failure = str(err)
+        except KeyboardInterrupt as err:
+            self.interrupted = getattr(err, "signum", signal.SIGINT)
+            raise
+        finally:
+            self.seconds += now() - t
+        self.nfev += 1
+        self.judged += found is not None
+        self.last_u, self.last_info = u, found
+        self.last = (np.nan if found is None else found.value, None)
+        return found
+
+    def offer(self, u, *, records: bool = False) -> Evaluation | None:
+        """:meth:`judge` the controls ``u`` and rank them with every point evaluated (the
+        best point, its objective and run kept, no gradient asked for): a search that needs
+        none where it steps (the transcription) offers its iterates here."""
+        found = self.judge(u, records=records)
+        if found is not None:
+            self._rank(self.last_u, found.value, None, found)
+        return found
 
     def take(self, x) -> bool:
         """Make ``x`` the best point (evaluated now if it is not the last), where the merit
@@ -200,7 +246,7 @@ class Evaluator:
         if self.checkpoint is None or self.best_u is None:
             return
         u, fun = self._described("best")[:2]
-        self.checkpoint.write(self.export(u), fun=float(fun), met=bool(self.best_met),
+        self.checkpoint.write(self.export(u), Standing(bool(self.best_met), float(fun)),
                               final=self.final, nit=nit, stage=self.stage,
                               stage_dt=float(self.problem.dt))
 
@@ -209,17 +255,18 @@ class Evaluator:
             return self.merit.describe(self.best_u, self.best_f, self.best_info)
         return self.merit.describe(self.last_u, self.last[0], self.last_info)
 
-    def record(self, history, start, bar=None, **extra):
+    def record(self, history, clock, bar=None, **extra):
         """Append one iteration (at the :attr:`report` point) to ``history``, ``extra`` its
-        optional keys; the checkpoint gets the best controls on the final grid (``u``), their
-        objective at this stage's time step (``fun``), the iterations so far (``nit``), the
-        ``stage`` and its ``stage_dt``."""
+        optional keys, its time read from ``clock`` (the call's :class:`~.deadline.Deadline`);
+        the checkpoint gets the best controls on the final grid (``u``), their objective at
+        this stage's time step (``fun``), the iterations so far (``nit``), the ``stage`` and
+        its ``stage_dt``."""
         u, objective, keyframe, more = self._described(self.report)
         growth = {} if self.health.last is None else {"gradient_growth": self.health.last}
         history.append(history_record(
             self.problem, u, objective=objective, keyframe_error=keyframe,
             iteration=len(history) + 1, stage=self.stage,
-            seconds=time.perf_counter() - start, nfev=self.nfev, **growth, **extra, **more))
+            seconds=clock.elapsed(), nfev=self.nfev, **growth, **extra, **more))
         self.keep(nit=len(history))
         if bar is not None:
             bar.update(1)
@@ -240,6 +287,10 @@ class MetricView:
         f, g = self.ev(self.metric.smooth(z))
         return f, self.metric.smooth(g)
 
+    def offer(self, z, *, records: bool = False):
+        """The evaluator's :meth:`~Evaluator.offer` at ``u = S z``."""
+        return self.ev.offer(self.metric.smooth(z), records=records)
+
     @property
     def best_u(self):
         return self.metric.unsmooth(self.ev.best_u)
@@ -247,32 +298,3 @@ class MetricView:
     @property
     def interrupted(self):
         return self.ev.interrupted
-
-
-def watched(problem, seen: dict):
-    """A shallow copy of ``problem`` whose ``simulate`` also leaves its last controls and
-    trajectory (positions and velocities, no records) in ``seen``: the gradient routes
-    simulate through it, so the evaluator learns the trajectory of each point it asks for
-    without a simulation of its own."""
-    out = copy.copy(problem)
-    simulate = type(problem).simulate
-
-    def keeping(u=None, *, records: bool = True):
-        traj = simulate(out, u, records=records)
-        seen["u"] = None if u is None else np.array(u, dtype=float).ravel()
-        seen["trajectory"] = Trajectory(traj.x, traj.v, traj.dt)
-        return traj
-
-    out.simulate = keeping
-    return out
-
-
-def evaluate_final(problem, strategy, u):
-    """Objective and gradient of ``problem`` at the controls ``u`` a search ends on (after a
-    continuation stage stopped early, or the last augmented-Lagrangian round); if that is
-    interrupted too, the objective alone (gradient NaN)."""
-    try:
-        f, g = strategy(problem, u)
-        return float(f), g
-    except KeyboardInterrupt:
-        return float(problem.objective(u)), np.full(u.size, np.nan)

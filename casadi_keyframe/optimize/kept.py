@@ -1,13 +1,43 @@
-"""The best point a solve has seen on its final problem, judged by the goal first and then by
-the objective (:class:`Kept`): what it returns when its stages (coarser meshes, a homotopy,
-multiple shooting, a resumed run's start) end worse than an earlier point, so that no solve
-returns a point worse than its start."""
+"""Which of two points is better, and the best one kept.
+
+:class:`Standing` is the one ranking of points: the goal met first (every keyframe within
+its tolerance, the motion within its physical limits), then the lower objective.  The
+evaluator's best point, the kept point, the checkpoint on disk and the finish's steps are all
+ranked by it.  :class:`Kept` is the best point a solve has seen on its final problem: what it
+returns when its stages (coarser meshes, a homotopy, multiple shooting, rounds, the finish, a
+resumed run's start) end worse than an earlier point, so that no solve returns a point worse
+than its start; :func:`conclude` makes the :class:`~.result.Result` at it.
+"""
 from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
 
 from ..state import SimulationError
 from .goal import verdict
 from .outcome import CONVERGED, FAILED
-from .result import stage_record
+from .result import Result, assemble, stage_record
+
+
+@dataclass(frozen=True)
+class Standing:
+    """Where a point stands: whether it ``met`` the goal, then its ``objective`` (lower is
+    better)."""
+
+    met: bool
+    objective: float
+
+    def _key(self) -> tuple:
+        return (bool(self.met), -float(self.objective))
+
+    def beats(self, other: "Standing | None") -> bool:
+        """Strictly better than ``other`` (anything beats None)."""
+        return other is None or self._key() > other._key()
+
+    def at_least(self, other: "Standing | None") -> bool:
+        """At least as good as ``other`` (a tie counts)."""
+        return other is None or self._key() >= other._key()
 
 
 class Kept:
@@ -20,39 +50,40 @@ class Kept:
     def __init__(self, problem, goal, checkpoint, *, by_objective: bool = True):
         self.problem, self.goal, self.checkpoint = problem, goal, checkpoint
         self.by_objective = by_objective
-        self.u = self.trajectory = self.key = self.objective = None
+        self.u = self.trajectory = self.standing = self.objective = None
         self.where = ""
 
-    def judge(self, u, trajectory) -> tuple[bool, float]:
-        """``(met, objective)`` of controls ``u`` whose run is ``trajectory``."""
+    def judge(self, u, trajectory) -> Standing:
+        """The standing of controls ``u`` whose run is ``trajectory``, on the goal's targets."""
         fun = (self.goal.state_cost(trajectory, gradient=False)[0]
                + self.goal.control_cost(u)[0])
-        return verdict(self.goal, trajectory).met, float(fun)
+        return Standing(verdict(self.goal, trajectory).met, float(fun))
 
-    def rank(self, met: bool, fun: float) -> tuple:
-        return (met, -fun) if self.by_objective else (met,)
+    def _ranked(self, standing: Standing) -> Standing:
+        return standing if self.by_objective else Standing(standing.met, 0.0)
 
     def beats(self, u, trajectory) -> bool:
         """Whether the kept point is better than controls ``u`` whose run is ``trajectory``."""
-        return self.key is not None and self.key > self.rank(*self.judge(u, trajectory))
+        return self.standing is not None and self.standing.beats(
+            self._ranked(self.judge(u, trajectory)))
 
     def offer(self, u, where: str, *, trajectory=None, stage: int = 0, nit: int = 0) -> bool:
         """Keep controls ``u`` (``where`` says what they are: "its start", "stage 1's best";
-        ``trajectory`` their run, simulated if not given) if they are better than the kept
-        point; a point whose simulation fails is no candidate (``stage``, ``nit``: for the
-        checkpoint).  Whether it was kept."""
+        ``trajectory`` their run, simulated if not given) if they are at least as good as the
+        kept point; a point whose simulation fails is no candidate (``stage``, ``nit``: for
+        the checkpoint).  Whether it was kept."""
         try:
             if trajectory is None:
                 trajectory = self.problem.simulate(u, records=False)
         except SimulationError:
             return False
-        met, fun = self.judge(u, trajectory)
-        if self.key is not None and self.rank(met, fun) < self.key:
+        judged = self.judge(u, trajectory)
+        if not self._ranked(judged).at_least(self.standing):
             return False
-        self.u, self.trajectory, self.key, self.where = u, trajectory, self.rank(met, fun), where
-        self.objective = fun
+        self.u, self.trajectory, self.standing = u, trajectory, self._ranked(judged)
+        self.where, self.objective = where, judged.objective
         if self.checkpoint is not None:
-            self.checkpoint.write(u, fun=fun, met=met, final=True, stage=stage, nit=nit,
+            self.checkpoint.write(u, judged, final=True, stage=stage, nit=nit,
                                   stage_dt=float(self.problem.dt))
         return True
 
@@ -75,3 +106,33 @@ def kept_stage(problem, stages: list, fun: float, status: int, message: str) -> 
     stages.append(stage_record(problem, number, nit=0, nfev=0, njev=0, fun=fun,
                                status=status, message=message, seconds=0.0,
                                evaluation_seconds=0.0, failed_simulations=0))
+
+
+def conclude(problem, kept, route, *, status: int, message: str, stages: list, history: list,
+             method: str, started: float, known=None, gradient: bool = True) -> Result:
+    """The :class:`~.result.Result` at the point ``kept`` holds, ending with ``status`` and
+    ``message`` and a stage that says so: its objective and gradient by ``route``, or
+    ``known`` ``(controls, objective, gradient)`` where the point is those controls, or
+    (``gradient`` False, after a signal: no more work) its objective alone."""
+    u = kept.u
+    if known is not None and (u is known[0] or np.array_equal(u, known[0])):
+        fun, jac = known[1], known[2]
+    elif gradient:
+        fun, jac = evaluate_final(problem, route, u)
+    else:
+        fun, jac = problem.objective(u), np.full(u.size, np.nan)
+    kept_stage(problem, stages, fun, status, message)
+    return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
+                    method=method, route=route, stages=stages, history=history,
+                    started=started, trajectory=kept.trajectory)
+
+
+def evaluate_final(problem, route, u):
+    """Objective and gradient of ``problem`` at the controls ``u`` a search ends on (after a
+    continuation stage stopped early, or the last round); if that is interrupted too, the
+    objective alone (gradient NaN)."""
+    try:
+        f, g = route(problem, u)
+        return float(f), g
+    except KeyboardInterrupt:
+        return float(problem.objective(u)), np.full(u.size, np.nan)

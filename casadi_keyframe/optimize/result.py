@@ -13,14 +13,13 @@ convergence plot) fails at once, by name.
 from __future__ import annotations
 
 import math
-
-import time
 from dataclasses import dataclass
 from typing import TypedDict
 
 import numpy as np
 
 from ..state import Trajectory
+from .deadline import now
 from .outcome import CONVERGED, STATUS
 
 
@@ -147,7 +146,7 @@ class Result:
     fun: float
     """The objective at ``x``."""
     jac: np.ndarray
-    """Its gradient at ``x`` by the route ``gradient`` (NaN if an interrupt stopped it)."""
+    """Its gradient at ``x`` by the :attr:`route` (NaN if an interrupt stopped it)."""
     nit: int
     """Iterations, over all stages and rounds."""
     nfev: int
@@ -163,8 +162,8 @@ class Result:
     """How it ended in a sentence and, short of the goal, what it misses."""
     method: str
     """The search method that ran (a :data:`~.methods.METHODS` name or ``lower_effort``)."""
-    gradient: str
-    """The gradient route that ran."""
+    route: object
+    """The gradient route that ran (a :class:`~casadi_keyframe.adjoints.Route`)."""
     trajectory: Trajectory
     """The simulation at ``x``."""
     history: list[HistoryRecord]
@@ -189,6 +188,11 @@ class Result:
             _check_keys(f"stage {i}", stage, Stage)
 
     @property
+    def gradient(self) -> str:
+        """The name of the gradient route that ran."""
+        return self.route.name
+
+    @property
     def start(self) -> dict:
         """Objective and keyframe error at the starting controls (of the first stage)."""
         first = self.stages[0] if self.stages else {}
@@ -205,16 +209,14 @@ class Result:
                 "method": self.method, "gradient": self.gradient, "timings": self.timings,
                 "breakdown": self.breakdown, "stages": self.stages,
                 "gradient_norm": float(np.linalg.norm(self.jac)),
-                "gradient_health": _health(self.stages, self.gradient)}
+                "gradient_health": _health(self.stages, self.route)}
 
 
-def _health(stages, route: str) -> dict:
+def _health(stages, route) -> dict:
     """The gradients' health over ``stages``: the largest backward growth (None if no stage
-    watched one), the bound the route named ``route`` is held to (None: refused only when
-    not finite, or a strategy of the user's own) and the evaluations refused."""
-    from ..adjoints import GRADIENTS
-
-    bound = getattr(GRADIENTS.get(route), "bound", math.inf)
+    watched one), the bound ``route`` is held to (None: refused only when not finite) and
+    the evaluations refused."""
+    bound = route.bound
     growth = [s["gradient_growth"] for s in stages if "gradient_growth" in s]
     return {"largest_growth": max(growth) if growth else None,
             "bound": bound if math.isfinite(bound) else None,
@@ -264,19 +266,19 @@ def stage_record(problem, stage: int, *, nit: int, nfev: int, njev: int, fun: fl
 
 
 def assemble(problem, u, *, fun: float, jac, status: int, message: str, method: str,
-             gradient: str, stages: list, history: list, started: float,
+             route, stages: list, history: list, started: float,
              trajectory: Trajectory | None = None) -> Result:
     """The :class:`Result` of a call on ``problem`` that ended at the controls ``u``:
     ``nit``, ``nfev``, ``njev`` and :class:`Timings` totalled over ``stages``, ``success``
-    from ``status``, the wall time since ``started`` (``time.perf_counter()``), and the
+    from ``status``, the wall time since ``started`` (:func:`~.deadline.now`), and the
     ``trajectory`` at ``u`` (simulated unless given) with the problem's breakdown there."""
     traj = problem.simulate(u) if trajectory is None else trajectory
-    timings = {"wall_seconds": time.perf_counter() - started,
+    timings = {"wall_seconds": now() - started,
                "evaluation_seconds": sum(s["evaluation_seconds"] for s in stages),
                "failed_simulations": sum(s["failed_simulations"] for s in stages),
                "stage_seconds": [s["seconds"] for s in stages]}
     return Result(x=u, fun=float(fun), jac=jac, nit=sum(s["nit"] for s in stages),
                   nfev=sum(s["nfev"] for s in stages), njev=sum(s["njev"] for s in stages),
                   success=status == CONVERGED, status=status, message=message,
-                  method=method, gradient=gradient, trajectory=traj, history=history,
+                  method=method, route=route, trajectory=traj, history=history,
                   timings=timings, breakdown=problem.breakdown(u, traj), stages=stages)

@@ -1,80 +1,102 @@
 """One optimisation of a problem's controls: :func:`solve`.
 
-It checks what it is asked before any simulation, goes through the stages
-(:mod:`.stages`) coarse to fine, runs the method of :data:`~.methods.METHODS` on each
-through an :class:`~.evaluator.Evaluator`, and returns a :class:`~.result.Result` in scipy's
+It takes the request whole (:class:`~.settings.SolveSettings`), checks what depends on the
+problem before any simulation, goes through the stages (:mod:`.stages`) coarse to fine, or
+the rounds of hard keyframes (:mod:`.rounds`) each through those stages, runs the method of
+:data:`~.methods.METHODS` on each through an :class:`~.evaluator.Evaluator`, ends with the
+finish if asked (:mod:`.finish`), and returns a :class:`~.result.Result` in scipy's
 vocabulary (``status`` included, see :mod:`.outcome`).  Ctrl-C (or any
 :class:`~casadi_keyframe.interrupts.Interrupted`) stops the solve and returns the best
-controls seen so far with status 3; ``time_limit=`` stops it with status 1; with
-``checkpoint=`` the best is also on disk after every iteration, written atomically.
+controls seen so far with status 3; the time limit stops it with status 1 (one
+:class:`~.deadline.Deadline` for the whole call); with ``checkpoint=`` the best is also on
+disk after every iteration, written atomically.
 """
 from __future__ import annotations
 
-import math
-import numbers
-from dataclasses import replace
 import signal
-import time
+from dataclasses import replace
 
 import numpy as np
 
 from tqdm.auto import tqdm
 
-from ..adjoints import get_gradient
 from ..health import GradientError
 from ..interrupts import NAMES, handled
 from ..saved import as_checkpoint
 from ..state import SimulationError
-from .evaluator import Evaluator, MetricView, evaluate_final
-from .finish import check_finish, finish_options, run_finish
+from .deadline import Deadline, now
+from .evaluator import Evaluator, MetricView
+from .finish import check_finish, run_finish
 from .goal import GoalReached, check_stop
-from .kept import Kept, kept_outcome, kept_stage
-from .methods import check_options, get_method
+from .kept import Kept, conclude, evaluate_final, kept_outcome
+from .methods import SearchCall, get_method
 from .metrics import search_metric
 from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .shooting import run_shooting, shooting_options
 from .result import Result, assemble, stage_record
+from .rounds import Rounds, run_rounds
+from .settings import SolveSettings, as_settings
+from .shooting import run_shooting
 from .stages import carry, stage_name, stage_problems
 
 
+def solve(problem, settings: SolveSettings | str | None = None, *, u0=None,
+          quiet: bool = False, checkpoint=None, goal=None, resume: dict | None = None,
+          **keywords) -> Result:
+    """Optimise the problem's controls as ``settings`` (a
+    :class:`~.settings.SolveSettings`, or a method's name) ask, ``keywords`` (its fields, in
+    their loose forms: ``maxiter=100``, ``method="ipopt"``, ``finish="effort"``...) over
+    them; a :class:`~.result.Result` (scipy's vocabulary).
 
-def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int = 200,
-          tol: float = 1e-8, u0=None, quiet: bool = False, checkpoint=None,
-          options: dict | None = None, continuation=None, resolutions=None,
-          time_limit: float | None = None, stop: str | None = None, goal=None,
-          shooting=None, homotopy=None, finish=None) -> Result:
-    """Optimise the problem's controls; a :class:`~.result.Result` (scipy's vocabulary).
-
-    ``method``: a :data:`~.methods.METHODS` entry; ``gradient``: a route (name or object);
-    ``maxiter`` (per stage) and ``tol``: the method's limits; ``u0``: the start (default the
-    problem's guess, else passive); ``options``: the method library's own (unknown names
-    refused up front); ``time_limit``: seconds, wall clock, over all stages; ``checkpoint``:
-    a ``.npz`` path or Checkpoint that always holds the best point judged so far.  Stages,
-    coarse to fine: ``resolutions`` (coarser meshes), ``homotopy`` (levels of the model),
-    ``continuation`` (coarser time steps), each with ``shooting`` (multiple shooting, K
-    segments or its options) if given.  ``stop``: ``"goal"`` (the default where keyframes
-    declare tolerances) stops once the goal is met, ``"method"`` at the method's own test;
-    ``goal``: the problem that judges (default ``problem``).  ``finish``: a last stage with
-    the keyframes held as a constraint (:mod:`.finish`: ``"land"``, ``"effort"`` or its
-    options).  The result is never worse than the start, by the goal first and then the
-    objective.  Each argument and stage in full:
+    ``u0``: the start (default the problem's guess, else passive); ``quiet``: no progress
+    bar; ``checkpoint``: a ``.npz`` path or Checkpoint that always holds the best point
+    judged so far; ``goal``: the problem that judges (default ``problem``); ``resume``: a
+    checkpoint's metadata, to go on from (the rounds from their round and multipliers, the
+    problem's own mesh straight away).  The result is never worse than the start, by the
+    goal first and then the objective.  Each setting and stage in full:
     ``docs/explanations/solving.md``.
     """
-    options = check_settings(method, maxiter, tol, time_limit, options)
-    stop = check_stop(stop, goal or problem)
-    finishing = finish_options(finish)
-    if finishing is not None:
-        check_finish(problem, finishing)
-    multiple = shooting_options(shooting)
-    shooting_on = multiple is not None and multiple.segments > 1
-    problems = stage_problems(problem, continuation, resolutions, homotopy)
-    strategy = get_gradient(gradient)
-    search = _Search(method, maxiter, tol, options, quiet, as_checkpoint(checkpoint),
-                     time_limit)
-    search.stop = stop
+    settings = as_settings(settings, **keywords)
+    stop = check_stop(settings.stop, goal or problem)
+    if settings.finish is not None:
+        check_finish(problem, settings.finish)
+    checkpoint, deadline = as_checkpoint(checkpoint), Deadline.start(settings.time_limit)
+    if settings.rounds is not None:
+        inner = replace(settings, rounds=None)
+        return run_rounds(problem, settings.rounds,
+                          lambda aimed, u, at: run_stages(
+                              aimed, inner, _Search(inner, quiet, at, deadline, stop), u,
+                              goal=problem),
+                          u0=u0, resume=resume, checkpoint=checkpoint, deadline=deadline,
+                          stop=stop)
+    search = _Search(settings, quiet, checkpoint, deadline, stop)
+    result = run_stages(problem, settings, search, u0, goal=goal, resumed=bool(resume))
+    if settings.finish is None or result.status == INTERRUPTED or deadline.passed():
+        return result
+    return run_finish(problem, result, settings.finish, search.kept, deadline)
+
+
+def solve_augmented(problem, *, rounds: int = 4, weight_growth: float = 1.0,
+                    multipliers: bool = True, **options) -> Result:
+    """:func:`solve` with ``rounds`` rounds of hard keyframes (:class:`~.rounds.Rounds`:
+    each round's keyframes aim past their targets by the multipliers' shifts, their weights
+    times ``weight_growth ** round``; ``multipliers=False``: the penalty schedule alone);
+    ``options`` as :func:`solve` takes them, ``maxiter`` per round."""
+    return solve(problem, rounds=Rounds(rounds, weight_growth, multipliers), **options)
+
+
+def run_stages(problem, settings: SolveSettings, search, u0=None, *, goal=None,
+               resumed: bool = False) -> Result:
+    """The solve of ``problem`` through its stages (coarser meshes, homotopy levels, coarser
+    time steps, each with multiple shooting if asked; a ``resumed`` run goes straight to the
+    problem's own mesh) from ``u0``, judged by ``goal`` (default ``problem``); ``search``
+    (:class:`_Search`) is what they share, its kept point the best seen on ``problem``."""
+    problems = stage_problems(problem, settings.continuation,
+                              None if resumed else settings.resolutions, settings.homotopy,
+                              coarser_only=settings.coarser_only)
+    multiple, strategy, stop = settings.shooting, settings.gradient, search.stop
     start = problem.initial_controls() if u0 is None else problem.controls.check(u0)
-    kept = Kept(problem, goal or problem, search.checkpoint)
-    if len(problems) > 1 or shooting_on:  # stages that may end worse than the start
+    kept = search.kept = Kept(problem, goal or problem, search.checkpoint)
+    if len(problems) > 1 or multiple is not None:  # stages that may end worse than the start
         kept.offer(start, "its start")
     u = None if u0 is None else carry(problem, start, problems[0])
     stages = []
@@ -86,22 +108,18 @@ def solve(problem, method: str = "lbfgsb", *, gradient="adjoint", maxiter: int =
         begin, polish = p.initial_controls() if u is None else u, True
         origin = ("the start" if k == 0 else
                   f"stage {stages[-1]['stage']}'s best, carried here" if stages else "the start")
-        if shooting_on:
+        if multiple is not None:
             begin, ev, polish = _shoot(p, k, multiple, begin, search, stages, ev, problem)
             origin = "multiple shooting's result"
         if polish:
             ev.stage = len(stages)
             stages.append(search.run(ev.problem, ev, begin, (k, len(problems)), origin))
-        if final or stages[-1]["status"] == INTERRUPTED or search.time_up():
+        if final or stages[-1]["status"] == INTERRUPTED or search.deadline.passed():
             break
         kept.offer(carry(p, ev.best_u, problem), f"stage {stages[-1]['stage']}'s best",
                    stage=stages[-1]["stage"], nit=len(search.history))
         u = carry(p, ev.best_u, problems[k + 1])
-    result = _result(problem, p, ev, strategy, search, stages, kept)
-    if finishing is None or result.status == INTERRUPTED or search.time_up():
-        return result
-    left = None if search.deadline is None else search.deadline - time.perf_counter()
-    return run_finish(problem, result, finishing, kept, left)
+    return _result(problem, p, ev, strategy, search, stages, kept)
 
 
 def _shoot(p, k, opts, start, search, stages, ev, origin):
@@ -114,7 +132,7 @@ def _shoot(p, k, opts, start, search, stages, ev, origin):
     record, start, aimed = run_shooting(p, opts, start, search, len(stages), ev.goal,
                                         ev.export, origin)
     stages.append(record)
-    if opts.polish and record["status"] != INTERRUPTED and not search.time_up():
+    if opts.polish and record["status"] != INTERRUPTED and not search.deadline.passed():
         if aimed is not p:
             ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=len(stages),
                            export=ev.export, goal=ev.goal, stop=ev.stop, final=ev.final)
@@ -137,34 +155,13 @@ def evaluate_at(ev, u) -> None:
         ev.best_u, ev.best_f, ev.best_g = u, f, np.full(u.size, np.nan)
 
 
-def check_settings(method, maxiter, tol, time_limit, options) -> dict:
-    """Refuse a setting of :func:`solve` before any simulation runs (ValueError naming it
-    and what it takes); return the method's options, checked, as a new dict."""
-    get_method(method)
-    if isinstance(maxiter, bool) or not isinstance(maxiter, numbers.Integral) or maxiter < 1:
-        raise ValueError(f"maxiter must be a whole number >= 1 (iterations per stage), got "
-                         f"{maxiter!r}")
-    if not _positive(tol):
-        raise ValueError(f"tol must be a finite number > 0 (the method's convergence "
-                         f"tolerance), got {tol!r}")
-    if time_limit is not None and not _positive(time_limit):
-        raise ValueError(f"time_limit must be a finite positive number of seconds (None for "
-                         f"no limit), got {time_limit!r}")
-    return check_options(method, options)
-
-
-def _positive(value) -> bool:
-    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
-            and math.isfinite(value) and value > 0)
-
-
 def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
     """The Result at ``problem.dt`` from the evaluator ``ev`` of the last stage run (``p``),
     or the ``kept`` point where that ended worse."""
     status, message = stages[-1]["status"], stages[-1]["message"]
-    if p is problem and ev.problem is problem:
+    if p is problem and ev.problem is problem and ev.best_g is not None:
         u, fun, jac = ev.best_u, float(ev.best_f), ev.best_g
-    elif p is problem:  # a polish whose keyframes aimed past their targets
+    elif p is problem:  # a polish whose keyframes aimed elsewhere, or a point judged alone
         u = ev.best_u
         fun, jac = evaluate_final(problem, strategy, u)
     else:
@@ -172,51 +169,52 @@ def _result(problem, p, ev, strategy, search, stages, kept) -> Result:
         fun, jac = evaluate_final(problem, strategy, u)
         if status != INTERRUPTED:  # the time limit, maybe reached just as the stage ended
             status = LIMIT
-            message = f"time limit reached ({search.time_limit:g} s) before converging"
+            message = f"time limit reached ({search.deadline.limit:g} s) before converging"
         message = (f"{message}, in stage {stages[-1]['stage']} ({stage_name(p)}): its best "
                    f"controls, carried to the problem ({stage_name(problem)}), kept")
     trajectory = problem.simulate(u)
     if kept.beats(u, trajectory):
-        u, trajectory = kept.u, problem.simulate(kept.u)
-        fun, jac = evaluate_final(problem, strategy, u)
         status, message = kept_outcome(kept, status, message)
-        kept_stage(problem, stages, fun, status, message)
-    else:  # the checkpoint holds the result too (a coarse stage's, carried, once judged here)
-        kept.offer(u, "the result", trajectory=trajectory, stage=stages[-1]["stage"],
-                   nit=len(search.history))
+        return conclude(problem, kept, strategy, status=status, message=message,
+                        stages=stages, history=search.history, method=search.method,
+                        started=search.clock.started)
+    # the checkpoint holds the result too (a coarse stage's, carried, once judged here)
+    kept.offer(u, "the result", trajectory=trajectory, stage=stages[-1]["stage"],
+               nit=len(search.history))
     return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
-                    method=search.method,
-                    gradient=getattr(strategy, "name", type(strategy).__name__),
-                    stages=stages, history=search.history, started=search.start,
+                    method=search.method, route=strategy,
+                    stages=stages, history=search.history, started=search.clock.started,
                     trajectory=trajectory)
 
 
 class _Search:
-    """What the stages of one :func:`solve` share: the method and its settings, the
-    history, the checkpoint and the clock."""
+    """What the stages of one run share: the request (``settings``: method, options,
+    limits), the history, the checkpoint, the kept point, its own clock (the history's and
+    the result's times) and the call's one :class:`~.deadline.Deadline`."""
 
-    def __init__(self, method, maxiter, tol, options, quiet, checkpoint, time_limit):
-        self.method, self.maxiter, self.tol, self.options = method, maxiter, tol, options
-        self.quiet, self.checkpoint, self.time_limit = quiet, checkpoint, time_limit
-        self.stop = "method"
-        self.history, self.start = [], time.perf_counter()
-        self.deadline = None if time_limit is None else self.start + time_limit
+    def __init__(self, settings, quiet, checkpoint, deadline, stop):
+        self.method, self.maxiter = settings.method, settings.maxiter
+        self.tol, self.options = settings.tol, settings.options
+        self.quiet, self.checkpoint, self.deadline, self.stop = quiet, checkpoint, deadline, stop
+        self.history, self.clock, self.kept = [], Deadline.start(), None
 
-    def time_up(self) -> bool:
-        return self.deadline is not None and time.perf_counter() >= self.deadline
+    def call(self, maxiter, on_iteration) -> SearchCall:
+        """What a run of the method is given: ``maxiter``, the settings' tolerance and
+        options, the deadline, ``on_iteration``."""
+        return SearchCall(maxiter, self.tol, self.options, self.deadline, on_iteration)
 
     def run(self, problem, ev, u0, stage, origin: str = "the start") -> dict:
         """One method run from ``u0`` (``origin`` says what it is): the stage's
         :class:`~.result.Stage`, its objective on the stage's true targets."""
-        t, first = time.perf_counter(), len(self.history)
+        t, first = now(), len(self.history)
         status, message = self._search(problem, ev, u0, stage, origin)
-        if status == LIMIT and self.time_up():
-            message = f"time limit reached ({self.time_limit:g} s) before converging"
+        if status == LIMIT and self.deadline.passed():
+            message = f"time limit reached ({self.deadline.limit:g} s) before converging"
         status, message = judge(status, message, ev.verdict())
         ev.keep(nit=len(self.history))
         return stage_record(problem, ev.stage, nit=len(self.history) - first,
                             fun=ev.best_objective(), status=status, message=message,
-                            seconds=time.perf_counter() - t, start=ev.start, **ev.counts(),
+                            seconds=now() - t, start=ev.start, **ev.counts(),
                             **ev.health.stage_fields())
 
     def _search(self, problem, ev, u0, stage, origin):
@@ -246,8 +244,8 @@ class _Search:
                                                           metric.unsmooth(u0))
         before = len(self.history)
         try:
-            return run(problem, searched, start, self.maxiter, self.tol, self.options,
-                       lambda: ev.record(self.history, self.start, bar), self.deadline)
+            return run(problem, searched, start,
+                       self.call(self.maxiter, lambda: ev.record(self.history, self.clock, bar)))
         except GoalReached as reached:
             here = "" if count == 1 else f", {reached.iteration - before} in this stage"
             return CONVERGED, (f"converged: the goal is met at iteration {reached.iteration}"

@@ -7,17 +7,19 @@ from __future__ import annotations
 from .transfer import carry_to_mesh
 
 
-def stage_problems(problem, continuation, resolutions=None, homotopy=None) -> list:
+def stage_problems(problem, continuation, resolutions=None, homotopy=None,
+                   coarser_only: bool = False) -> list:
     """The problems a continuation solves in turn, coarse to fine; the last is ``problem``.
 
-    For every mesh of ``resolutions`` (see :func:`coarser_meshes`) and then ``problem``: the
+    For every mesh of ``resolutions`` (see :func:`coarser_meshes`; with ``coarser_only``
+    those coarser than ``problem`` only, the others left out) and then ``problem``: the
     mesh at each level of ``homotopy`` (see :func:`homotopy_levels`) and then as it is, each
     at the time stages of ``continuation``.  ``continuation`` None means one time stage.
     Otherwise its time steps must decrease strictly and end at ``problem.dt`` (appended if
     missing), each dividing the horizon into whole steps with every keyframe on its grid
     (else ValueError, from ``resampled``).
     """
-    meshes = coarser_meshes(problem, resolutions) + [problem]
+    meshes = coarser_meshes(problem, resolutions, coarser_only) + [problem]
     return [stage for mesh in meshes for level in homotopy_levels(mesh, homotopy)
             for stage in _time_stages(level, continuation)]
 
@@ -42,16 +44,20 @@ def homotopy_levels(problem, homotopy) -> list:
     return levels + [problem]
 
 
-def coarser_meshes(problem, resolutions) -> list:
+def coarser_meshes(problem, resolutions, coarser_only: bool = False) -> list:
     """The problems of ``resolutions`` (None or a list of problems or build-override dicts),
     checked to be the same kind of problem on ever finer meshes, all coarser than
-    ``problem``."""
+    ``problem`` (with ``coarser_only``: those that are not are left out, as a problem file's
+    default meshes are for a problem built that coarse itself)."""
     if resolutions is None:
         return []
     if isinstance(resolutions, (dict, str)) or not hasattr(resolutions, "__iter__"):
         raise ValueError(f"resolutions must be a list of coarser problems or of build "
                          f"overrides such as {{'rows': 12, 'cols': 12}}, got {resolutions!r}")
     meshes = [problem.at_resolution(**r) if isinstance(r, dict) else r for r in resolutions]
+    if coarser_only:
+        kept = [(r, m) for r, m in zip(resolutions, meshes) if m.model.n < problem.model.n]
+        resolutions, meshes = [r for r, _ in kept], [m for _, m in kept]
     sizes = []
     for r, mesh in zip(resolutions, meshes):
         if not isinstance(mesh, type(problem)):

@@ -20,7 +20,7 @@ from matplotlib.patches import Patch
 from matplotlib.ticker import MaxNLocator
 
 from ..views import BlendView, view_of
-from .cloth import CLOTH, Box, ClothPanel, body_geometry, legend, same_scale, save_grid, targets
+from .cloth import CLOTH, Box, ClothPanel, legend, same_scale, save_grid, targets
 from .flock import HIGHLIGHT
 from .frames import keyframes, mass_centers, select_frames, write_gif
 from .verdicts import say_checks, titled
@@ -73,7 +73,7 @@ def panel_box(problem, trajectory, panel: str, ks) -> Box:
     points = [s.x for s in frames]
     if panel == "blend":
         points += [m.points for m in targets(problem)]
-    bodies = [[body_geometry(b, s.t) for b in s.model.colliders] for s in frames]
+    bodies = [[b.shape(s.t) for b in s.model.colliders] for s in frames]
     return Box(points, bodies)
 
 

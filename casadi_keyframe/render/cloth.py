@@ -22,7 +22,8 @@ import numpy as np
 from matplotlib.patches import Patch
 from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-from ..geometry import body_geometry, capsule_grid, circle, plane_patch
+from ..geometry import circle
+from ..objectives.markers import Points, WholeShape
 from ..views import ClothView, view_of
 from .frames import (frame_title, grid_shape, keyframes, mass_centers, save_figure,
                      select_frames, snapshot_frames, write_gif)
@@ -79,32 +80,22 @@ def facing_away(polygons, eye) -> np.ndarray:
     return np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]) @ np.asarray(eye, float) < 0
 
 
-def grid_quads(grid) -> np.ndarray:
-    """``(m, 4, 3)`` quads of a ``(rows, cols, 3)`` surface grid."""
-    return np.stack([grid[:-1, :-1], grid[1:, :-1], grid[1:, 1:], grid[:-1, 1:]], axis=2
-                    ).reshape(-1, 4, 3)
-
-
 def _extent(points) -> tuple[np.ndarray, np.ndarray]:
     return np.min([p.min(0) for p in points], 0), np.max([p.max(0) for p in points], 0)
 
 
 class Box:
     """Fixed limits holding ``points`` (a list of ``(k, 3)`` arrays) and ``bodies`` (per
-    frame, a list of :func:`body_geometry`); planes are sized to the rest."""
+    frame, a list of body shapes, :class:`~..geometry.BodyShape`); shapes that lie beneath
+    (planes) are sized to the rest."""
 
     def __init__(self, points, bodies):
         pts = list(points)
-        for kind, a, b, *r in (g for frame in bodies for g in frame):
-            if kind == "round":
-                pts.append(np.array([a - r[0], a + r[0], b - r[0], b + r[0]]))
-            elif kind == "mesh":
-                pts.append(a)
+        shapes = [shape for frame in bodies for shape in frame]
+        pts += [shape.extent(None) for shape in shapes if not shape.beneath]
         lo, hi = _extent(pts)
         self.mid, self.half = (lo + hi) / 2, 0.6 * max((hi - lo).max(), 1e-3)
-        for kind, a, b, *_ in (g for frame in bodies for g in frame):
-            if kind == "plane":
-                pts.append(plane_patch(a, b, self.mid, self.half))
+        pts += [shape.polygons(self.mid, self.half)[0] for shape in shapes if shape.beneath]
         lo, hi = _extent(pts)
         span = max((hi - lo).max(), 1e-3)
         half = np.maximum(hi - lo, 0.3 * span) / 2 + 0.03 * span
@@ -119,7 +110,7 @@ class Box:
         ring = view_of(problem, ClothView).ring
         if ring:
             pts.append(circle(ring.center, ring.normal, ring.radius))
-        bodies = [[body_geometry(b, n * trajectory.dt) for b in problem.model.colliders]
+        bodies = [[b.shape(n * trajectory.dt) for b in problem.model.colliders]
                   for n in range(trajectory.steps + 1)]
         return cls(pts, bodies)
 
@@ -135,10 +126,11 @@ def same_scale(boxes: list) -> list:
 
 
 def targets(problem) -> list:
-    """The markers of the problem's keyframes that have a position in space (a region's
-    outline, 2-D, has none, nor a keyframe on velocities only)."""
-    return [m for m in problem.objective_terms.markers() if m.kind not in ("outline",
-                                                                          "velocity")]
+    """The markers of the problem's keyframes that a cloth picture draws (by their figure,
+    :data:`ClothPanel.FIGURES`: a region's outline, 2-D, is not drawn in 3-D, nor a
+    keyframe on velocities only)."""
+    return [m for m in problem.objective_terms.markers()
+            if m.kind.figure in ClothPanel.FIGURES]
 
 
 class ClothPanel:
@@ -179,7 +171,7 @@ class ClothPanel:
         for artist in self.dynamic:
             artist.remove()
         self.dynamic, self.model = [], model
-        self._bodies = [body_geometry(body, t) for body in model.colliders]
+        self._bodies = [body.shape(t) for body in model.colliders]
         self._cloth(np.asarray(x), color, vertex_rgb)
         self._colliders(t)
 
@@ -203,11 +195,11 @@ class ClothPanel:
         else:
             lit = 0.75 + 0.25 * shade(x[faces], "white")[:, :1]
             colors = [np.c_[lit * np.asarray(vertex_rgb)[faces].mean(1), np.ones(len(faces))]]
-        for kind, a, b, *r in self._bodies:
-            if kind in ("round", "mesh"):
-                quads = grid_quads(capsule_grid(a, b, r[0], 8)) if kind == "round" else a[b]
-                polys += list(quads)
-                colors.append(shade(quads, BODY_RGB))
+        for shape in self._bodies:
+            if not shape.beneath:
+                vertices, faces = shape.polygons(detail=8)
+                polys += list(vertices[faces])
+                colors.append(shade(vertices[faces], BODY_RGB))
         self.colors = np.vstack(colors)  # the cloth's faces first, then the bodies' quads
         self._add(Poly3DCollection(polys, facecolors=self.colors,
                                    edgecolors=(0, 0, 0, 0.08), lw=0.15, zorder=1))
@@ -216,18 +208,34 @@ class ClothPanel:
                                                 zorder=2))
 
     def _colliders(self, t: float):
-        """The planes, drawn beneath everything (the camera looks down on them)."""
-        for kind, a, b, *_ in self._bodies:
-            if kind == "plane":
-                patch = plane_patch(a, b, self.box.mid, self.box.half)
-                self._add(Poly3DCollection([patch], facecolors=(0.5, 0.5, 0.5, 0.12),
+        """The shapes that lie beneath (planes), drawn beneath everything (the camera looks
+        down on them)."""
+        for shape in self._bodies:
+            if shape.beneath:
+                vertices, faces = shape.polygons(self.box.mid, self.box.half)
+                self._add(Poly3DCollection(list(vertices[faces]),
+                                           facecolors=(0.5, 0.5, 0.5, 0.12),
                                            edgecolors=(0.4, 0.4, 0.4, 0.4), zorder=0))
 
     @staticmethod
     def is_shape(marker) -> bool:
         """Whether ``marker`` targets every particle's position, drawn as a wireframe (other
         targets are crosses)."""
-        return marker.kind == "shape"
+        return marker.kind.figure is WholeShape
+
+    def _wireframe(self, marker, alpha: float):
+        # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
+        lw = min(0.4, 120 / len(self.model.faces))
+        self._add(Poly3DCollection(marker.points[self.model.faces], facecolors="none",
+                                   lw=lw, zorder=2, edgecolors=matplotlib.colors.to_rgba(
+                                       TARGET, 0.6 * alpha)))
+
+    def _crosses(self, marker, alpha: float):
+        self.dynamic.append(self.ax.scatter(*marker.points.T, marker="x", s=40, c=TARGET,
+                                            zorder=3, alpha=alpha, depthshade=False))
+
+    # how each figure of a keyframe marker is drawn (objectives.markers.Figure); others are not drawn
+    FIGURES = {WholeShape: _wireframe, Points: _crosses}
 
     def show_targets(self, n: int, *, ahead: bool = True):
         """Add the targets of the terms at frame ``n``; with ``ahead``, at a frame between
@@ -242,16 +250,7 @@ class ClothPanel:
                     fontsize=8, transform=self.ax.transAxes, va="top", ha="right"))
         alpha = 1.0 if here and here[0].frame == n else 0.35
         for marker in here:
-            if self.is_shape(marker):
-                # thinner on fine meshes, else the wireframe hides the cloth (26 x 16 cape)
-                lw = min(0.4, 120 / len(self.model.faces))
-                self._add(Poly3DCollection(marker.points[self.model.faces], facecolors="none",
-                                           lw=lw, zorder=2, edgecolors=matplotlib.colors.to_rgba(
-                                               TARGET, 0.6 * alpha)))
-            else:
-                self.dynamic.append(self.ax.scatter(*marker.points.T, marker="x", s=40,
-                                                    c=TARGET, zorder=3, alpha=alpha,
-                                                    depthshade=False))
+            self.FIGURES[marker.kind.figure](self, marker, alpha)
 
 
 class TrajectoryPanel(ClothPanel):
@@ -278,10 +277,10 @@ class TrajectoryPanel(ClothPanel):
         shape = next((m for m in here if self.is_shape(m)), None)
         rgb = None if shape is None else distance_colors(1e3 * distances(shape, x), self.scale)
         self.show(self.model, x, n * self.trajectory.dt, vertex_rgb=rgb)
-        for m in here:
-            if m.kind == "particles":  # the targeted particles, coloured by their distance
+        for m in here:  # the particles a target names, coloured by their distance
+            if m.kind.particles and not self.is_shape(m):
                 self.dynamic.append(self.ax.scatter(
-                    *x[m.particles].T, s=22, zorder=3, depthshade=False, edgecolors="black",
+                    *m.targeted(x).T, s=22, zorder=3, depthshade=False, edgecolors="black",
                     linewidths=0.4, c=distance_colors(1e3 * distances(m, x), self.scale)))
         self.show_targets(n, ahead=ahead)
         self.dynamic += say_checks(self.ax, self.markers, self.trajectory, n, metres=True,
@@ -295,7 +294,7 @@ def keyframe_camera(problem, frames, *trajectories) -> tuple[float, float]:
     keyframes (:func:`.targets.target_camera`): a flat target is not seen edge-on, nor a
     cloth hanging far from it."""
     here = [m for m in targets(problem) if m.frame in set(frames)]
-    points = [m.points for m in here] + [t.x[m.frame] for m in here if m.kind == "shape"
+    points = [m.points for m in here] + [t.x[m.frame] for m in here if ClothPanel.is_shape(m)
                                          for t in trajectories]
     return target_camera(points, view_of(problem, ClothView).camera)
 
@@ -404,7 +403,7 @@ def side_by_side(problem, rows: dict, path, frames=None) -> Path:
 def coloured(problem, frames) -> bool:
     """Whether a panel at one of ``frames`` is coloured by distance (a keyframe there has
     particle targets): a picture without one has no colour bar."""
-    return any(m.frame in frames and m.kind in ("shape", "particles") for m in targets(problem))
+    return any(m.frame in frames and m.kind.particles for m in targets(problem))
 
 
 def save_grid(fig, path, title: str, panel: ClothPanel, extra=(), *, scale=None) -> None:

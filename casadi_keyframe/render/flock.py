@@ -18,6 +18,7 @@ import numpy as np
 from matplotlib.collections import LineCollection
 from matplotlib.patches import Polygon
 
+from ..objectives.markers import Outline, Points
 from ..views import FlockView, view_of
 from .frames import (frame_title, grid_shape, keyframes, mass_centers, save_figure,
                      select_frames, snapshot_frames, write_gif)
@@ -37,9 +38,12 @@ class FlockPanel:
         self.xy = np.asarray(traj.x)[:, :, :2]
         self.markers = markers = problem.objective_terms.markers()
         self.verdicts = []
-        self.coms = sorted((m for m in markers if m.kind == "center"), key=lambda m: m.frame)
-        self.regions = [m for m in markers if m.kind == "outline"]
-        self.states = [m for m in markers if m.kind in ("shape", "particles")]
+        # by the figure each is drawn as: regions outlined, particles' targets open circles,
+        # the other points (centres of mass) crosses on their path
+        self.regions = [m for m in markers if m.kind.figure is Outline]
+        self.states = [m for m in markers if m.kind.particles]
+        self.coms = sorted((m for m in markers if m.kind.figure is Points and not m.kind.particles),
+                           key=lambda m: m.frame)
         self.com = mass_centers(problem.model.masses, self.xy)
         self.hl = np.zeros(self.xy.shape[1], bool)
         self.hl[list(view_of(problem, FlockView).highlight)] = True

@@ -72,15 +72,11 @@ def target_camera(points_list, default) -> tuple[float, float]:
 
 
 def distances(marker, x) -> np.ndarray | None:
-    """Each targeted particle's distance to its target in metres (a "shape" marker: every
-    particle; "particles": those it names), or None for a marker that targets no particle
-    positions (a centre of mass)."""
-    x = np.asarray(x, float)
-    if marker.kind == "shape":
-        return np.linalg.norm(x - marker.points, axis=1)
-    if marker.kind == "particles":
-        return np.linalg.norm(x[marker.particles] - marker.points, axis=1)
-    return None
+    """Each targeted particle's distance to its target in metres (:meth:`..objectives.markers.
+    Marker.targeted`: a whole shape's every particle, else those it names), or None for a marker
+    that targets no particle positions (a centre of mass)."""
+    targeted = marker.targeted(np.asarray(x, float))
+    return None if targeted is None else np.linalg.norm(targeted - marker.points, axis=1)
 
 
 @dataclass(frozen=True)
@@ -103,7 +99,7 @@ def distance_scale(markers) -> DistanceScale:
     distance (targets for particles), or, where none has a tolerance, :data:`UNJUDGED_SPAN`
     of their targets' extent.  It depends on the problem alone, so every picture of one
     problem (any trajectory, any frame) shares it."""
-    coloured = [m for m in markers if m.kind in ("shape", "particles")]
+    coloured = [m for m in markers if m.kind.particles]
     tolerances = [t for m in coloured if (t := m.position_tolerance) is not None]
     if tolerances:
         tolerance = 1e3 * min(tolerances)

@@ -2,7 +2,7 @@
 misses in the units a user thinks in beside their tolerances, and HIT or MISSED in words on
 a green or red label (never colour alone).
 
-The verdict is the goal's own (:meth:`..views.Marker.check`, which calls the term's
+The verdict is the goal's own (:meth:`..objectives.markers.Marker.check`, which calls the term's
 ``shortfall`` as :func:`casadi_keyframe.optimize.goal.verdict` does): nothing here tests a
 tolerance.  Lengths of a cloth (metres) read in mm and its speeds in cm/s; a flock's are in
 its own length unit.
@@ -18,7 +18,7 @@ SMALL, LARGE = 6.5, 8.5  # their font size in small multiples and in an animatio
 
 
 def checks_at(markers, trajectory, frame: int | None = None) -> list:
-    """The :class:`..views.Check` of ``trajectory`` against each marker's keyframe at
+    """The :class:`..objectives.keyframe_goal.Check` of ``trajectory`` against each marker's keyframe at
     ``frame`` (None: at every frame); markers without a goal say nothing."""
     return [c for m in markers if frame is None or m.frame == frame
             if (c := m.check(trajectory)) is not None]

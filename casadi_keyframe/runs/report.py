@@ -6,9 +6,10 @@ from __future__ import annotations
 from fractions import Fraction
 from pathlib import Path
 
-from ..adjoints import DEFAULT, get_gradient
+from ..adjoints import DEFAULT
 from ..optimize.outcome import FAILED, LIMIT
 from ..optimize.report import format_effort, format_misses, format_physical, format_stage
+from ..optimize.settings import given_options
 from ..saved import CHECKPOINT, RESULT
 
 def format_value(value) -> str:
@@ -52,14 +53,15 @@ def hint(result, spec) -> None:
               f"    {command_line(spec, 'solve')} --out {spec.out} --resume {spec.out}")
     if result.status != FAILED:
         return
+    asked = spec.settings
     tries = [text for used, text in (
-        (spec.rounds, "--rounds N (the keyframes held hard)"),
-        (spec.shooting, "--segments K (multiple shooting)"),
-        (spec.method != "lbfgsb", "--method ipopt")) if not used]
+        (asked.rounds, "--rounds N (the keyframes held hard)"),
+        (asked.shooting, "--segments K (multiple shooting)"),
+        (asked.method != type(asked).method, "--method ipopt")) if not used]
     if "still missed" in result.message and tries:
         print(f"  hint: try {', or '.join(tries)}")
     if "gradient" in result.message:
-        route = get_gradient(spec.gradient)
+        route = spec.settings.gradient
         instead = "" if route.exact else f"; --gradient {DEFAULT.name} is exact at the same cost"
         print(f"  hint: '{command_line(spec, 'gradcheck')}' measures the gradient and how far "
               f"its linear model holds{instead}")
@@ -70,7 +72,9 @@ def command_line(spec, command: str) -> str:
     for ``solve``, its method and gradient route, so a resumed run goes on the same way)."""
     sets = "".join(f" --set {k}={set_value(v)}" for k, v in spec.overrides.items())
     if command == "solve":
-        sets += f" --method {spec.method} --gradient {spec.gradient}"
+        asked = spec.settings
+        sets += f" --method {asked.method} --gradient {asked.gradient.name}" + "".join(
+            f" --option {k}={set_value(v)}" for k, v in given_options(asked.options).items())
     return f"casadi-keyframe {command} {spec.problem_arg or spec.problem_file}{sets}"
 
 

@@ -28,24 +28,16 @@ from .report import command_line, hint, left_on_disk, report
 @dataclass
 class SolveRun:
     """What ``casadi-keyframe solve`` asks for: the built problem, where its file is and the
-    overrides it was built with, the output folder and the search's options."""
+    overrides it was built with, the output folder, the solve request (``settings``, a
+    :class:`~casadi_keyframe.optimize.SolveSettings`, passed whole to ``solve``) and what the
+    run writes."""
 
     problem: object
     out: Path
     problem_file: str
+    settings: object
     problem_arg: str = ""  # the problem as typed (a name or a path), for the hints
     overrides: dict = field(default_factory=dict)
-    method: str = "lbfgsb"
-    gradient: str = "adjoint"
-    maxiter: int = 200
-    continuation: list | None = None
-    resolutions: list = field(default_factory=list)  # build overrides of coarser meshes
-    rounds: dict = field(default_factory=dict)  # rounds, weight_growth for solve_augmented
-    shooting: dict | None = None  # multiple shooting's options (solve's shooting=)
-    homotopy: list | None = None  # build overrides of the homotopy's levels (solve's homotopy=)
-    time_limit: float | None = None
-    stop: str | None = None  # "goal", "method" or None (the goal where tolerances exist)
-    finish: object = None  # a last stage with the keyframes held (solve's finish=)
     resume: str | None = None
     quiet: bool = False
     animation: bool = True
@@ -55,55 +47,22 @@ class SolveRun:
     u0: object = None  # starting controls instead of the problem's (a sweep's perturbed start)
 
 
-def solve_run(module, problem_arg: str, overrides: dict, out=None, *, method=None,
-              gradient=None, maxiter=None, rounds=None, weight_growth=None,
-              resolutions=None, shooting=None, **options) -> SolveRun:
+def solve_run(module, problem_arg: str, overrides: dict, out=None, *, given=None,
+              **options) -> SolveRun:
     """The :class:`SolveRun` of a loaded problem file built with ``overrides`` (checked
-    first), writing to ``out`` (default ``results/PROBLEM``): the search options not given
-    (None) come from the file's ``SOLVE`` (:func:`.loading.solve_defaults`), so ``solve`` and
-    each point of a sweep solve a problem the same way; ``options`` are SolveRun's others.
-    The file's default ``resolutions`` keep only the meshes coarser than the problem built
-    (none when it is built coarse itself), and give way to rounds asked for; rounds and
-    resolutions both given are refused (ValueError).  ``shooting`` (options of multiple
-    shooting, ``{"segments": 0}`` for none) goes over the file's."""
-    from ..loading import build_problem, default_resolutions, resolve, solve_defaults
+    first), writing to ``out`` (default ``results/PROBLEM``): its solve settings made once,
+    before the problem is built, from the file's ``SOLVE`` and the values ``given`` (the
+    command line's, a sweep point's: :func:`~casadi_keyframe.optimize.settings.settings_from`),
+    so ``solve`` and each point of a sweep solve a problem the same way; ``options`` are
+    SolveRun's others."""
+    from ..loading import build_problem, resolve, solve_defaults
+    from ..optimize.settings import settings_from
 
+    settings = settings_from(solve_defaults(module, overrides), given)
     prob = build_problem(module, **overrides)
-    defaults = solve_defaults(module, overrides)
-    asked = dict(shooting or {})
-    shooting = {**defaults.get("shooting", {}), **asked} or None
-    if options.get("homotopy") is None and defaults.get("homotopy"):
-        options["homotopy"] = [dict(h) for h in defaults["homotopy"]]
-    if shooting and shooting.get("segments", 1) <= 1:
-        others = sorted(set(asked) - {"segments"})
-        if others:
-            raise ValueError(f"--shooting {', '.join(others)} (or --scheduler) set multiple "
-                             f"shooting's options, but this run has none: give --segments K "
-                             f"(K >= 2){'' if 'segments' in asked else f'; {prob.name} asks for none'}")
-        shooting = None
-    given = {k: v for k, v in (("rounds", rounds), ("weight_growth", weight_growth))
-             if v is not None}
-    if given and resolutions:
-        raise ValueError("coarse meshes (--resolution) and augmented-Lagrangian rounds "
-                         "(--rounds, --weight-growth) do not combine: choose one")
-    rounds = given or ({} if resolutions else
-                       {k: defaults[k] for k in ("rounds", "weight_growth") if k in defaults})
-    finish = options.get("finish", defaults.get("finish"))
-    options["finish"] = None if finish == "none" else finish
-    if options["finish"] is not None and rounds:
-        raise ValueError("--finish holds the keyframes after one search; augmented-Lagrangian "
-                         "rounds (--rounds, --weight-growth, or the file's) hold them their "
-                         "own way: choose one (--finish none)")
-    if resolutions is None:  # the file's, unless rounds are asked for
-        resolutions = [] if rounds else default_resolutions(module, prob)
-    return SolveRun(
-        prob, Path(out) if out else Path("results") / prob.name,
-        problem_file=str(resolve(module.__file__).resolve()), problem_arg=str(problem_arg),
-        overrides=overrides, method=method or defaults["method"],
-        gradient=gradient or defaults["gradient"],
-        maxiter=defaults["maxiter"] if maxiter is None else maxiter,
-        resolutions=[dict(r) for r in resolutions], rounds=rounds, shooting=shooting,
-        **options)
+    return SolveRun(prob, Path(out) if out else Path("results") / prob.name,
+                    problem_file=str(resolve(module.__file__).resolve()), settings=settings,
+                    problem_arg=str(problem_arg), overrides=overrides, **options)
 
 
 def run_solve(spec: SolveRun) -> int:
@@ -131,8 +90,8 @@ def _solve(spec: SolveRun, caught, done) -> int:
     print(f"{prob.name}: {prob.size} controls; start ({origin}): objective "
           f"{start['objective']:.6g}; {format_misses(start['misses'])}{physical}{effort}")
     meta = {"problem": prob.name, "problem_file": spec.problem_file,
-            "overrides": spec.overrides, "method": spec.method, "gradient": spec.gradient,
-            **input_record(prob)}
+            "overrides": spec.overrides, "method": spec.settings.method,
+            "gradient": spec.settings.gradient.name, **input_record(prob)}
     done.started = True
     result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed)
     signum = caught.signum if result.status == INTERRUPTED else None
@@ -160,21 +119,13 @@ def _solve(spec: SolveRun, caught, done) -> int:
 
 
 def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None):
-    """The search ``spec`` asks for from ``u0``; a resumed one goes straight to the problem's
-    own mesh (its controls were found there), and rounds go on from the round and the
-    multipliers its checkpoint carries."""
-    from ..optimize import solve
+    """The search ``spec`` asks for from ``u0``, its settings passed whole; a resumed one
+    goes on from its checkpoint's metadata (the problem's own mesh, the rounds' round and
+    multipliers)."""
+    from ..optimize.search import solve
 
-    options = dict(method=spec.method, gradient=spec.gradient, maxiter=spec.maxiter,
-                   quiet=spec.quiet, checkpoint=checkpoint, continuation=spec.continuation,
-                   time_limit=spec.time_limit, u0=u0, stop=spec.stop, shooting=spec.shooting,
-                   homotopy=spec.homotopy)
-    if spec.rounds:
-        from ..optimize.augmented_lagrangian import solve_augmented
-        return solve_augmented(spec.problem, **spec.rounds, **options,
-                               resume=resumed.get("meta") if resumed else None)
-    resolutions = None if resumed or not spec.resolutions else spec.resolutions
-    return solve(spec.problem, resolutions=resolutions, finish=spec.finish, **options)
+    return solve(spec.problem, spec.settings, u0=u0, quiet=spec.quiet, checkpoint=checkpoint,
+                 resume=resumed.get("meta") if resumed else None)
 
 
 def resume_controls(spec: SolveRun):

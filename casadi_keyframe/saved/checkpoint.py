@@ -12,12 +12,17 @@ from .files import as_json, writable_file, write_npz
 
 
 class Checkpoint:
-    """Where a search keeps its best controls: ``write(u, fun=, met=, final=, stage=, ...)``
-    replaces the file with ``u`` (on the final grid), those fields and ``meta`` (what
-    rebuilds the problem: ``problem``, ``problem_file``, ``overrides``; the method...), but
-    only with a point at least as good as the one it holds (:meth:`better`), so a checkpoint
-    never gets worse.  :meth:`with_meta` gives one with more metadata that shares that rule;
-    its ``generation`` (a later round of hard keyframes) ranks above earlier ones."""
+    """Where a search keeps its best controls: ``write(u, standing, final=, stage=, ...)``
+    replaces the file with ``u`` (on the final grid), its standing's objective (``fun``) and
+    whether it meets the goal (``goal_met``), those fields and ``meta`` (what rebuilds the
+    problem: ``problem``, ``problem_file``, ``overrides``; the method...), but only with a
+    point at least as good as the one it holds (:meth:`better`), so a checkpoint never gets
+    worse.  :meth:`with_meta` gives one with more metadata that shares that rule; its
+    ``generation`` (a later round of hard keyframes) ranks above earlier ones.
+
+    A standing is the solve's ranking of a point (``optimize.kept.Standing``: ``met``,
+    ``objective``, ``at_least(other)``): the checkpoint asks it, it does not rank points of
+    its own."""
 
     def __init__(self, path, **meta):
         self.path, self.meta = Path(path), meta
@@ -32,30 +37,30 @@ class Checkpoint:
 
     @staticmethod
     def better(new: tuple, old: tuple | None) -> bool:
-        """Whether a point keyed ``(final, generation, stage, met, fun)`` replaces ``old``: a
+        """Whether a point keyed ``(final, generation, stage, standing)`` replaces ``old``: a
         point of the final problem beats any of a coarser stage; a later generation beats an
-        earlier one that it meets the goal as well as; otherwise meeting the goal beats
-        missing it, then the lower objective; before the final problem a later stage wins
-        (its objective is at another time step or mesh)."""
+        earlier one that it meets the goal as well as; otherwise the standing at least as
+        good; before the final problem a later stage wins (its objective is at another time
+        step or mesh)."""
         if old is None:
             return True
-        final, generation, stage, met, fun = new
+        final, generation, stage, standing = new
         if final != old[0]:
             return final
         if generation != old[1]:
-            return generation > old[1] and met >= old[3]
+            return generation > old[1] and standing.met >= old[3].met
         if not final and stage != old[2]:
             return stage > old[2]
-        return (met, -fun) >= (old[3], -old[4])
+        return standing.at_least(old[3])
 
-    def write(self, u, *, fun: float, met: bool = False, final: bool = True,
-              stage: int = 0, **fields) -> bool:
+    def write(self, u, standing, *, final: bool = True, stage: int = 0, **fields) -> bool:
         """Write ``u`` if it is at least as good as the point held (see :meth:`better`);
         whether it was written."""
-        key = (bool(final), self.generation, int(stage), bool(met), float(fun))
+        key = (bool(final), self.generation, int(stage), standing)
         if not self.better(key, self._held.get("key")):
             return False
-        fields = {"fun": key[4], "goal_met": key[3], "stage": key[2], **fields}
+        fields = {"fun": float(standing.objective), "goal_met": bool(standing.met),
+                  "stage": key[2], **fields}
         meta = json.dumps({**self.meta, **fields}, default=as_json)
         write_npz(self.path, u=np.asarray(u, dtype=float), meta=np.array(meta), **fields)
         self._held["key"] = key

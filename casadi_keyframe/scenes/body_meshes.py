@@ -17,7 +17,7 @@ from ..export.pc2 import write_pc2
 from ..geometry import basis
 from ..loading import OverrideError
 from ..meshes import MeshError
-from ..models.colliders import MeshBody
+from ..models.contact.colliders import MeshBody
 from .skeleton import Character, Motion
 
 AROUND, RINGS = 32, 8  # vertices around a capsule, rings on each of its half-spheres

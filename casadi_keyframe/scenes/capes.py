@@ -19,7 +19,7 @@ import numpy as np
 
 from ..integrators import LinearizedBackwardEuler
 from ..models import DEFAULT_COLLISION, Attachment, ClothModel, ClothParams
-from ..models.colliders import Contact, Plane
+from ..models.contact.colliders import Contact, Plane
 from ..simulate import simulate
 from .animations import Animation, Walk, fall, walk
 from .skeleton import Character

@@ -8,7 +8,7 @@ straight down at ``speed`` m/s.  Bodies: the ground (a plane), a sphere and a ho
 capsule under the sheet's centre, still, rising into the sheet at 2 m/s ("rising sphere",
 "rising capsule") or swinging up into it about one end at 3 rad/s ("swinging capsule").
 :func:`mesh_drop` drops the sheet on an icosphere read from an OBJ file (a
-:class:`~..models.colliders.MeshBody`) and on the analytic sphere it approximates.
+:class:`~..models.contact.colliders.MeshBody`) and on the analytic sphere it approximates.
 
 :func:`slope_slide` and :func:`ground_throw` are friction's analytic checks.
 """

@@ -16,7 +16,7 @@ from ..loading import OverrideError
 from ..objectives import MeshKeyframe
 from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
 from ..models import ClothModel, ClothParams
-from ..models.colliders import MeshBody, Plane, Sphere
+from ..models.contact.colliders import MeshBody, Plane, Sphere
 from ..objectives import Smoothness, StrainLimit
 from ..views import ClothView
 from .cape_tracking import tracking_forces

@@ -8,7 +8,7 @@ from ..checks import frame_at
 from ..controls import StepForces
 from ..integrators import LinearizedBackwardEuler
 from ..models import DEFAULT_COLLISION, ClothModel, ClothParams
-from ..models.colliders import Plane
+from ..models.contact.colliders import Plane
 from ..objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from ..problem import ControlProblem
 

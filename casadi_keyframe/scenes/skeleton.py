@@ -19,7 +19,7 @@ from typing import Protocol
 import numpy as np
 
 from ..checks import check_fields
-from ..models.colliders import Capsule, Contact
+from ..models.contact.colliders import Capsule, Contact
 from .maths import rotation, slerp
 
 JOINTS = ("spine", "neck",

@@ -16,6 +16,7 @@ import os
 
 import numpy as np
 
+from ..adjoints import Adjoint, CasADiReverse, Swapped
 from ..integrators import BackwardEuler, LinearizedBackwardEuler
 from ..scenes.flock_path import flock_path_problem
 from ..scenes.sheets import contact_problem, hanging_sheet
@@ -48,8 +49,7 @@ def swapped_vs_exact(dt: float, horizon: float = 1 / 3, stretch: float = 500.0,
     rng = np.random.default_rng(seed)
     forces = amplitude * rng.standard_normal((prob.steps, prob.model.n, 3))
     u = (forces * prob.model.masses[:, None]).ravel()
-    rel, cos = relative_error_and_cosine(prob.objective_and_gradient(u, "swapped")[1],
-                                         prob.objective_and_gradient(u, "adjoint")[1])
+    rel, cos = relative_error_and_cosine(Swapped()(prob, u)[1], Adjoint()(prob, u)[1])
     return {"system": "cloth 5x5", "dt": dt, "steps": prob.steps, "stretch": stretch,
             "relative_error": rel, "cosine": cos}
 
@@ -59,8 +59,7 @@ def flock_control_case(steps: int = 30, dt: float = 0.1, seed: int = 0) -> dict:
     CasADi reverse mode; exact, so its error is round-off."""
     prob = flock_path_problem(agents=10, steps=steps, dt=dt, seed=seed)
     u = 0.5 * np.random.default_rng(seed).standard_normal(prob.size)
-    rel, cos = relative_error_and_cosine(prob.objective_and_gradient(u, "adjoint")[1],
-                                         prob.objective_and_gradient(u, "casadi")[1])
+    rel, cos = relative_error_and_cosine(Adjoint()(prob, u)[1], CasADiReverse()(prob, u)[1])
     return {"system": "flock 10", "dt": dt, "steps": steps, "stretch": float("nan"),
             "relative_error": rel, "cosine": cos}
 

@@ -73,14 +73,13 @@ def gradient_health(problem, u=None, route=DEFAULT.name, *, steps=STEPS,
     strategy = get_gradient(route).unguarded()
     with np.errstate(all="ignore"), warnings.catch_warnings():
         warnings.simplefilter("ignore", GradientRouteWarning)  # the report lists the limits
-        value, g = strategy(problem, u)
-    growth = strategy.growth
+        found = strategy.evaluate(problem, u)
+    value, g, growth = found.value, found.gradient, found.growth
     refused = _refusal(strategy, problem, g, growth)
     exact_g, exact_growth = g, growth
     if not strategy.exact:
-        reference = DEFAULT().unguarded()
-        exact_g = reference(problem, u)[1]
-        exact_growth = reference.growth
+        exact = DEFAULT().unguarded().evaluate(problem, u)
+        exact_g, exact_growth = exact.gradient, exact.growth
     report = HealthReport(problem.name, route if isinstance(route, str) else strategy.name,
                           problem.size, float(value), float(np.linalg.norm(g)), growth,
                           refused, np.nan, exact_growth=None if exact_g is g else exact_growth,

@@ -23,7 +23,7 @@ from ..controls import StepForces
 from ..health import GROWTH_BOUND, GradientRouteWarning, past_bound
 from ..integrators import LinearizedBackwardEuler
 from ..models import DEFAULT_COLLISION, Capsule, ClothModel, ClothParams, Plane, Sphere
-from ..models.colliders import Contact, signed_distances
+from ..models.contact.colliders import Contact, signed_distances
 from ..objectives import CenterOfMassKeyframe, Smoothness, StateKeyframe
 from ..problem import ControlProblem
 from ..simulate import simulate
@@ -125,8 +125,8 @@ def swap_validity_point(contact: str = "none", collision: str = DEFAULT_COLLISIO
     try:
         with np.errstate(all="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", GradientRouteWarning)  # the row says it
-            g_exact, g_swapped = exact(prob, u)[1], swapped(prob, u)[1]
-            rel, cos = relative_error_and_cosine(g_swapped, g_exact)
+            exact, swapped = exact.evaluate(prob, u), swapped.evaluate(prob, u)
+            rel, cos = relative_error_and_cosine(swapped.gradient, exact.gradient)
         row["touching"] = touching(prob, prob.simulate(u).x)
     except SimulationError as err:
         return {**row, **dict.fromkeys(FIGURES, np.nan), "reason": str(err)}
@@ -195,12 +195,12 @@ def optimizer_outcome(prob, maxiter: int) -> dict:
     from ..optimize import solve
 
     out = {"start_objective": prob.objective(prob.initial_controls())}
-    for route in ("adjoint", "swapped"):
+    for route in (Adjoint.name, Swapped.name):
         out[f"failed_{route}"] = ""
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", GradientRouteWarning)
-                result = solve(prob, "lbfgsb", gradient=route, maxiter=maxiter, quiet=True)
+                result = solve(prob, gradient=route, maxiter=maxiter, quiet=True)
             out[f"objective_{route}"] = result.fun
             out[f"refused_{route}"] = result.stages[0].get("gradient_refused", 0)
         except SimulationError as err:  # its gradient refused at the start (GradientError)

@@ -33,8 +33,6 @@ from .tasks import failed as is_failed
 POINTS, SUMMARY = "points", "sweep.json"
 FIGURES = ("objective", "keyframe_error", "control_cost", "iterations", "evaluations",
            "seconds", "solve_seconds")
-SEARCH_OPTIONS = ("method", "gradient", "maxiter", "rounds", "weight_growth", "time_limit",
-                  "continuation")
 RUNNER_OPTIONS = ("workers", "scheduler", "tries", "resume", "progress", "timeout")
 SWEEP_EXIT_CODES = """\
 exit codes:
@@ -83,9 +81,11 @@ def sweep(problem, grid: dict, *, out, starts: int = 1, overrides: dict | None =
     (``{"weight": [10, 100], "alpha": [1e-4, 1e-3]}``) on top of ``overrides``, from
     ``starts`` starts each (start 0 the problem's own, the others perturbed by ``perturb``
     m/s^2 rms, seeded by ``(seed, start)``), each point as ``casadi-keyframe solve`` would,
-    into ``out/points/NAME/``.  ``options`` are the search's (``method``, ``gradient``,
-    ``maxiter``, ``rounds``, ``weight_growth``, ``time_limit``, ``continuation``) and the
-    runner's (``workers``, ``scheduler``, ``tries``, ``resume``, ``progress``)."""
+    into ``out/points/NAME/``.  ``options`` are the solve's settings (any of
+    :data:`~casadi_keyframe.optimize.settings.REQUEST`: ``method``, ``options``,
+    ``gradient``, ``maxiter``, ``rounds``, ...; each point's request is made from them and
+    its file's ``SOLVE`` as ``casadi-keyframe solve`` makes it) and the runner's
+    (``workers``, ``scheduler``, ``tries``, ``resume``, ``progress``)."""
     runner = {k: options.pop(k) for k in RUNNER_OPTIONS if k in options}
     check_search_options(options)
     module = load_module(problem)
@@ -111,19 +111,15 @@ def sweep(problem, grid: dict, *, out, starts: int = 1, overrides: dict | None =
 
 
 def check_search_options(options: dict) -> None:
-    """Refuse an option the search does not take, an unknown method or gradient route, here
-    rather than in every point on the workers."""
-    from ..adjoints import ROUTES
-    from ..optimize import METHODS
+    """Refuse a setting the solve does not take or a value it refuses (an unknown method,
+    route or method option), here rather than in every point on the workers."""
+    from ..optimize.settings import REQUEST, settings_from
 
-    unknown = sorted(set(options) - set(SEARCH_OPTIONS))
+    unknown = sorted(set(options) - set(REQUEST))
     if unknown:
-        raise TypeError(f"sweep() got unknown option(s) {', '.join(unknown)}; the search "
-                        f"takes {', '.join(SEARCH_OPTIONS)}, the runner "
-                        f"{', '.join(RUNNER_OPTIONS)}")
-    for key, allowed in (("method", METHODS), ("gradient", ROUTES)):
-        if options.get(key) is not None and options[key] not in allowed:
-            raise ValueError(f"{key} {options[key]!r}: choose one of {', '.join(allowed)}")
+        raise TypeError(f"sweep() got unknown option(s) {', '.join(unknown)}; the solve "
+                        f"takes {', '.join(REQUEST)}, the runner {', '.join(RUNNER_OPTIONS)}")
+    settings_from(None, options)
 
 
 def check_grid(module, grid: dict, overrides: dict) -> dict:

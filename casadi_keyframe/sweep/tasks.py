@@ -81,9 +81,9 @@ def _solve(spec: dict, folder: Path) -> dict:
     from .grid import start_controls
 
     module = load_module(spec["problem_file"])
-    run = solve_run(module, spec["problem_arg"], spec["overrides"], folder, quiet=True,
-                    animation=False, pictures=spec.get("pictures", False),
-                    **spec["options"])
+    run = solve_run(module, spec["problem_arg"], spec["overrides"], folder,
+                    given=spec["options"], quiet=True, animation=False,
+                    pictures=spec.get("pictures", False))
     run.u0 = start_controls(run.problem, spec.get("start", 0), seed=spec.get("seed", 0),
                             scale=spec.get("perturb", 0.5))
     code = run_solve(run)

@@ -13,7 +13,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from ..ipopt import search
+from ..methods.ipopt import search
 
 
 class Defects:
@@ -30,7 +30,7 @@ class Defects:
     def values(self, z) -> np.ndarray:
         self.ev(z)
         info = self.ev.last_info
-        return (self.shooting.defect_vector(info["defects"]) if info is not None
+        return (self.shooting.defect_vector(info.defects) if info is not None
                 else np.full(self.size, 1e10))
 
     def jacobian(self, z):

@@ -1,11 +1,27 @@
 """Multiple shooting's merit as the optimizer's :class:`~.evaluator.Evaluator` evaluates
 it: :class:`ShootingMerit`, a function of the stacked variables z (controls and node
-states) with an ``info`` dict, and what an iteration's record and the goal check read from
-it."""
+states) returning a :class:`ShootingEvaluation`, and what an iteration's record and the goal
+check read from it."""
 from __future__ import annotations
 
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...adjoints import Evaluation
 from ..goal import verdict
-from .residuals import ShootingLinearization
+from .residuals import linearize_shooting
+
+
+@dataclass(frozen=True)
+class ShootingEvaluation(Evaluation):
+    """The merit at a point (``value``, ``gradient`` in z, ``trajectory`` the stitched
+    segments) and what it is made of: the problem's ``objective`` on the stitched run, its
+    ``keyframe_error`` part and the scaled ``defects`` (``(c_x, c_v)`` per node)."""
+
+    objective: float = np.nan
+    keyframe_error: float = np.nan
+    defects: tuple = ()
 
 
 class ShootingMerit:
@@ -20,21 +36,25 @@ class ShootingMerit:
     def __init__(self, problem, shooting, runner, mult):
         self.problem, self.shooting, self.runner, self.mult = problem, shooting, runner, mult
 
-    def __call__(self, z):
-        """``(merit, gradient, info)`` at ``z`` (see :meth:`~.form.Shooting.evaluate`)."""
-        return self.shooting.evaluate(z, self.runner, self.mult)
+    def __call__(self, z) -> ShootingEvaluation:
+        """The merit's evaluation at ``z`` (see :meth:`~.form.Shooting.evaluate`)."""
+        merit, gradient, info = self.shooting.evaluate(z, self.runner, self.mult)
+        return ShootingEvaluation(merit, gradient, info["trajectory"],
+                                  objective=info["objective"],
+                                  keyframe_error=info["keyframe_error"],
+                                  defects=tuple(info["defects"]))
 
     def linearize(self, z):
-        """Its residual form at z (:class:`~.residuals.ShootingLinearization`), for a
-        residual search."""
-        return ShootingLinearization(self, z)
+        """Its residual form at z (:func:`~.residuals.linearize_shooting`), for a residual
+        search."""
+        return linearize_shooting(self, z)
 
     def describe(self, z, f, info):
         """``(controls, objective, keyframe error, {"defect": ...})`` of an evaluated point:
         the problem's objective on its stitched trajectory, its largest scaled defect."""
         u = self.shooting.unpack(z)[0]
         keyframe, objective = true_objective(self.problem, u, info)
-        return u, objective, keyframe, {"defect": self.shooting.defect_size(info["defects"])}
+        return u, objective, keyframe, {"defect": self.shooting.defect_size(info.defects)}
 
     def meets(self, goal, info) -> bool:
         """Never judged met on its own: a stitched run is not the controls' run (the rounds
@@ -44,8 +64,8 @@ class ShootingMerit:
     def may_meet(self, goal, info) -> bool:
         """Whether the point may meet ``goal``: its defects within their tolerance and its
         stitched trajectory meeting it (then its controls' own run is judged)."""
-        return (self.shooting.defect_size(info["defects"]) <= 1.0
-                and verdict(goal, info["trajectory"]).met)
+        return (self.shooting.defect_size(info.defects) <= 1.0
+                and verdict(goal, info.trajectory).met)
 
     def run(self, z, info):
         """The run of z's controls from the start, one trajectory (no records)."""
@@ -54,6 +74,6 @@ class ShootingMerit:
 
 def true_objective(problem, u, info) -> tuple[float, float]:
     """``(keyframe error, objective)`` of ``problem`` (its true targets, not a round's aim)
-    on the stitched trajectory of an evaluation's ``info``, at controls ``u``."""
-    keyframe = problem.state_cost(info["trajectory"], gradient=False)[0]
+    on the stitched trajectory of an evaluation (``info``), at controls ``u``."""
+    keyframe = problem.state_cost(info.trajectory, gradient=False)[0]
     return keyframe, keyframe + problem.control_cost(u)[0]

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..options import TypedOptions
 from .nodes import INITS
 
 FORMULATIONS = ("lagrangian", "ipopt")
@@ -14,7 +15,7 @@ PLACES = ("equal", "growth")
 
 
 @dataclass(frozen=True)
-class ShootingOptions:
+class ShootingOptions(TypedOptions):
     """How multiple shooting runs (``solve(..., shooting=...)``), field by field."""
 
     segments: int
@@ -49,19 +50,9 @@ class ShootingOptions:
 def shooting_options(value) -> ShootingOptions | None:
     """``value`` (None, a whole number K, a dict of :class:`ShootingOptions` fields, or one)
     as checked options, or None for no multiple shooting; ValueError naming what is wrong."""
-    if value is None or isinstance(value, ShootingOptions):
-        opts = value
-    elif isinstance(value, dict):
-        unknown = sorted(set(value) - set(ShootingOptions.__dataclass_fields__))
-        if unknown:
-            raise ValueError(f"shooting: unknown option(s) {unknown}; it takes "
-                             f"{', '.join(ShootingOptions.__dataclass_fields__)}")
-        opts = ShootingOptions(**value)
-    elif isinstance(value, (int, np.integer)) and not isinstance(value, bool):
-        opts = ShootingOptions(int(value))
-    else:
-        raise ValueError(f"shooting must be a number of segments, a dict of options or "
-                         f"ShootingOptions, got {value!r}")
+    opts = ShootingOptions.read(value, "shooting", single=(int, np.integer),
+                                takes="a number of segments, a dict of options or "
+                                      "ShootingOptions")
     if opts is None:
         return None
     if opts.formulation not in FORMULATIONS:

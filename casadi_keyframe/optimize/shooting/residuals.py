@@ -3,7 +3,7 @@ residual search (the Gauss-Newton trust region, scipy's ``least_squares``) needs
 :class:`~.merit.ShootingMerit`.
 
 ``r`` stacks the problem's residuals on the stitched trajectory (keyframe misses, strain
-excess, control effort, as :class:`~..residuals.Linearization`) and each defect block's
+excess, control effort, as :func:`~..residual.linearization.linearize` does) and each defect block's
 ``sqrt(w_b) (c_b + lambda_b / w_b)`` (:class:`~..multipliers.Multipliers`: its part of the
 merit is half its square).  ``J p`` is one tangent pass per segment along its recorded run
 (the integrators' exact ``step_jvp``), ``J^T w`` one backward sweep per segment
@@ -15,80 +15,65 @@ from __future__ import annotations
 import numpy as np
 
 from ...simulate import tangent
-from ..residuals import ResidualMap, TermResiduals
+from ..residual.linearization import Linearization, TermResiduals
 from .segments import Shifted
 from .workers import Serial
 
 
-class ShootingLinearization(ResidualMap):
+def linearize_shooting(merit, z) -> Linearization:
     """The residual map of ``merit`` (a :class:`~.merit.ShootingMerit` with multipliers) at
-    ``z``: :attr:`residual`, :attr:`value`, :meth:`jvp`, :meth:`vjp`, :meth:`release`, as
-    :class:`~..residuals.Linearization` gives them for a problem."""
+    ``z``, as the one :class:`~..residual.linearization.Linearization`: one sweep per
+    segment, its records kept (on a runner of its own) for the products until released."""
+    if merit.mult is None:
+        raise ValueError("a residual search runs multiple shooting's augmented "
+                         "Lagrangian (formulation 'lagrangian'), not its IPOPT form")
+    s, mult = merit.shooting, merit.mult
+    p = s.problem
+    z = np.asarray(z, dtype=float)
+    u, nodes = s.unpack(z)
+    starts, ext = s.starts_and_forces(u, nodes)
+    runner = Serial(p, s.spans)
+    out = runner.forward({k: (st, e, None) for k, (st, e) in enumerate(zip(starts, ext))})
+    frames = [out[k][:2] for k in range(s.K)]
+    trajectory = s.stitch(frames)
+    terms = TermResiduals(p)
+    blocks = [(k, c) for k in range(s.K - 1) for c in ("x", "v")]
+    root = np.array([np.sqrt(mult.weights[b]) for b in blocks])
+    defects = [c for pair in s.defects(frames, nodes) for c in pair]
+    pieces = (terms.pieces(trajectory, u)
+              + [r * (c + mult.shift(b)) for r, c, b in zip(root, defects, blocks)])
+    ends = np.cumsum([q.size for q in pieces])
 
-    def __init__(self, merit, z):
-        if merit.mult is None:
-            raise ValueError("a residual search runs multiple shooting's augmented "
-                             "Lagrangian (formulation 'lagrangian'), not its IPOPT form")
-        self.shooting, self.mult = merit.shooting, merit.mult
-        s, p = self.shooting, self.shooting.problem
-        self.z = np.asarray(z, dtype=float)
-        self.u, nodes = s.unpack(self.z)
-        starts, ext = s.starts_and_forces(self.u, nodes)
-        self.runner = Serial(p, s.spans)
-        out = self.runner.forward({k: (st, e, None) for k, (st, e) in enumerate(zip(starts,
-                                                                                    ext))})
-        frames = [out[k][:2] for k in range(s.K)]
-        self.trajectory = s.stitch(frames)
-        self.terms = TermResiduals(p)
-        self._blocks = [(k, c) for k in range(s.K - 1) for c in ("x", "v")]
-        self._root = np.array([np.sqrt(self.mult.weights[b]) for b in self._blocks])
-        defects = [c for pair in s.defects(frames, nodes) for c in pair]
-        pieces = (self.terms.pieces(self.trajectory, self.u)
-                  + [root * (c + self.mult.shift(b))
-                     for root, c, b in zip(self._root, defects, self._blocks)])
-        self._ends = np.cumsum([q.size for q in pieces])
-        self.residual = np.concatenate(pieces)
-        self.products = 0
-
-    @property
-    def shape(self) -> tuple:
-        return (self.residual.size, self.z.size)
-
-    def jvp(self, dz) -> np.ndarray:
+    def jvp(dz):
         """``J dz``: one tangent pass per segment from its start's change."""
-        s, p = self.shooting, self.shooting.problem
         du, dnodes = s.unpack_change(np.asarray(dz, dtype=float).ravel())
         offset, forces = p.controls.velocity_offset(du), p.controls.external(du)
         forces = np.zeros_like(p.external) if forces is None else forces
-        starts = [(np.zeros_like(p.x0), np.zeros_like(p.v0) if offset is None else offset)]
-        starts += [(dx, dv) for dx, dv in dnodes]
-        frames = []
+        begins = [(np.zeros_like(p.x0), np.zeros_like(p.v0) if offset is None else offset)]
+        begins += [(dx, dv) for dx, dv in dnodes]
+        moved = []
         for k, (a, b) in enumerate(s.spans):
-            traj = self.runner.runner.kept[k]
-            frames.append(tangent(Shifted(p.integrator, a), p.model, traj, *starts[k],
-                                  forces[a:b]))
-        moved = s.stitch(frames)
-        parts = self.terms.jvp(self.trajectory, moved.x, moved.v, du)
+            moved.append(tangent(Shifted(p.integrator, a), p.model, runner.runner.kept[k],
+                                 *begins[k], forces[a:b]))
+        stitched = s.stitch(moved)
+        parts = terms.jvp(trajectory, stitched.x, stitched.v, du)
         sx, sv = s.sigma
-        for k, (dx, dv) in enumerate(frames[:-1]):
-            node_x, node_v = starts[k + 1]
-            parts += [self._root[2 * k] * (dx[-1] - node_x)[s.free] / sx,
-                      self._root[2 * k + 1] * (dv[-1] - node_v)[s.free] / sv]
-        self.products += 1
+        for k, (dx, dv) in enumerate(moved[:-1]):
+            node_x, node_v = begins[k + 1]
+            parts += [root[2 * k] * (dx[-1] - node_x)[s.free] / sx,
+                      root[2 * k + 1] * (dv[-1] - node_v)[s.free] / sv]
         return np.concatenate(parts)
 
-    def vjp(self, w) -> np.ndarray:
+    def vjp(w):
         """``J^T w``: the residual cotangent ``w`` pulled back to z, one sweep per segment."""
-        s = self.shooting
-        parts = np.split(np.asarray(w, dtype=float).ravel(), self._ends[:-1])
-        gx, gv = np.zeros_like(self.trajectory.x), np.zeros_like(self.trajectory.v)
-        self.terms.state_vjp(self.trajectory, parts, gx, gv)
-        scaled = [root * part for root, part in zip(self._root, parts[len(self.terms):])]
-        out = s.pull_back(self.runner, gx, gv, list(zip(scaled[::2], scaled[1::2])))
-        out[:s.m] = self.terms.control_vjp(parts, out[:s.m])
-        self.products += 1
-        return out
+        parts = np.split(np.asarray(w, dtype=float).ravel(), ends[:-1])
+        gx, gv = np.zeros_like(trajectory.x), np.zeros_like(trajectory.v)
+        terms.state_vjp(trajectory, parts, gx, gv)
+        scaled = [r * part for r, part in zip(root, parts[len(terms):])]
+        pulled = s.pull_back(runner, gx, gv, list(zip(scaled[::2], scaled[1::2])))
+        pulled[:s.m] = terms.control_vjp(parts, pulled[:s.m])
+        return pulled
 
-    def release(self) -> None:
-        """Hand the segments' kept factorisations back."""
-        self.runner.close()
+    return Linearization(np.concatenate(pieces), jvp, vjp, size=z.size,
+                         trajectory=trajectory, release=runner.close)
+

@@ -16,13 +16,12 @@ Its points go through the optimizer's own :class:`~.evaluator.Evaluator`, of the
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 
 from ...interrupts import handled
 from ...objectives import StateKeyframe
 from ...state import SimulationError
+from ..deadline import now
 from ..evaluator import Evaluator
 from ..goal import GoalReached
 from ..methods import get_method
@@ -46,7 +45,7 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
     ``search`` is the solve's shared state (method, limits, history, checkpoint, clock),
     ``goal`` the problem whose keyframes judge, ``export`` maps controls to the solve's
     final problem (``origin``) for the checkpoint."""
-    t = time.perf_counter()
+    t = now()
     reference = reference_run(problem, u0)
     spans = (growth_spans(step_growth(problem, u0), opts.segments) if opts.place == "growth"
              else None)
@@ -71,15 +70,15 @@ def run_shooting(problem, opts: ShootingOptions, u0, search, stage: int, goal, e
         status, message = INTERRUPTED, "interrupted; best result kept"
     finally:
         runner.close()
-    info = ev.best_info or {}
+    info = ev.best_info
     u = shooting.unpack(ev.best_u)[0] if ev.best_u is not None else u0
-    fun = true_objective(problem, u, info)[1] if info else np.nan
+    fun = true_objective(problem, u, info)[1] if info is not None else np.nan
     record = stage_record(
         problem, stage, nit=len(search.history) - first, fun=fun, status=status,
         message=f"multiple shooting, {opts.segments} segments{_placed(shooting, opts)}, "
                 f"{rounds} rounds: {message}",
-        seconds=time.perf_counter() - t, **ev.counts(), segments=opts.segments,
-        defect=shooting.defect_size(info.get("defects", [])))
+        seconds=now() - t, **ev.counts(), segments=opts.segments,
+        defect=shooting.defect_size(info.defects if info is not None else []))
     return record, u, shooting.problem
 
 
@@ -118,22 +117,21 @@ def _rounds(problem, opts, search, ev, z):
         ev.reset()
         maxiter, before = max(budget // (opts.rounds - r), 1), len(search.history)
         try:
-            inner, said = run(shooting, ev, z, maxiter, search.tol, search.options,
-                              lambda r=r: ev.record(search.history, search.start, round=r),
-                              search.deadline)
+            inner, said = run(shooting, ev, z, search.call(
+                maxiter, lambda r=r: ev.record(search.history, search.clock, round=r)))
         except GoalReached:
             return CONVERGED, f"the goal is met in round {r}", r + 1
         budget -= len(search.history) - before
         z = ev.best_u
-        c = ev.best_info["defects"]
-        if inner == INTERRUPTED or search.time_up():
+        c = ev.best_info.defects
+        if inner == INTERRUPTED or search.deadline.passed():
             return (INTERRUPTED if inner == INTERRUPTED else LIMIT), said, r + 1
         if budget <= 0:
             return LIMIT, "iteration limit reached before the goal was met", r + 1
         mult.update({**{(k, "x"): cx for k, (cx, _) in enumerate(c)},
                      **{(k, "v"): cv for k, (_, cv) in enumerate(c)}})
         if hard is not None:
-            hard.update(ev.best_info["trajectory"])
+            hard.update(ev.best_info.trajectory)
             shooting.problem = hard.problem()
     return LIMIT, f"{opts.rounds} rounds ended before the goal was met", opts.rounds
 
@@ -141,14 +139,15 @@ def _rounds(problem, opts, search, ev, z):
 def _nlp(problem, opts, search, ev, z):
     """IPOPT on the constrained form: ``(status, message, 1)``; each iterate, and its last
     point, becomes the evaluator's best."""
+    from ..methods.ipopt import IpoptOptions
     from .ipopt_form import run_nlp
 
     def on_iteration(x):
         if ev.take(x):
-            ev.record(search.history, search.start, round=0)
+            ev.record(search.history, search.clock, round=0)
 
     try:
-        options = search.options if search.method == "ipopt" else {}
+        options = search.options.as_dict() if isinstance(search.options, IpoptOptions) else {}
         status, message, z = run_nlp(ev.merit.shooting, ev.merit.runner, ev, z, search.maxiter,
                                      search.tol, options, on_iteration, search.deadline)
     except GoalReached as reached:

@@ -10,13 +10,14 @@ and at t + dt and ``n`` the latter's outward normal.  A held particle ends the s
 (else :data:`CORRECTION`): an arriving particle ends on the layer's surface, one inside it
 is moved back a fraction per step.  A particle is held when it would end the step within
 the layer moving as it does, ``dt (n . v - c) <= tolerance``, on the body it would reach
-deepest.  On a body with friction (``Contact.friction``) the hold also holds or pushes its
-tangential velocity (:mod:`.friction`, :mod:`.held_set`); without, it stays free.  One the
+deepest.  On a body with a tangential law (friction, ``Contact.friction``) the hold also holds
+or pushes its tangential velocity (:mod:`.stick_slide`, :mod:`.tangential`,
+:mod:`.held_set`); without, it stays free.  One the
 hold pulled (negative impulse) is released and the step solved again (contact only pushes),
 unless the pull would move it less than the tolerance over the step; one still pulled when
 the step stops revising is released at the next.  A released particle stays released while
 it moves away.  The step solves ``S (A dv - b) = 0``, ``P (dv - z) = 0``
-(:mod:`~..integrators.held_solve`); its exact derivative adds those of the normals, targets
+(:mod:`~...integrators.held_solve`); its exact derivative adds those of the normals, targets
 and body velocities, which the kernels of :func:`hold_kernels` give.
 """
 from __future__ import annotations
@@ -26,11 +27,11 @@ import functools
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel
+from ...kernels import MappedKernel
 from .colliders import Body
-from .friction import Coulomb
 from .held_set import NOTHING_HELD, HeldSet
-from .interaction import FamilyBlocks, Interaction, StepSpan
+from .stick_slide import StickSlide, tangential_law
+from ..interaction import FamilyBlocks, Interaction, StepSpan
 
 TOLERANCE = 0.25  # of the thickness: a particle this close to the layer's surface touches it
 OVERSHOOT = 0.1  # of the thickness: a step that leaves a particle this far past it is redone
@@ -40,8 +41,8 @@ CORRECTION = 0.5  # of a particle's depth in the layer undone per step (beta)
 @functools.lru_cache(maxsize=None)
 def hold_kernels(body_type: type, friction: bool = False) -> dict[str, ca.Function]:
     """Per particle ``(x, v, *geometry at t, *geometry at t + dt, layer, dt)`` (with
-    ``friction`` also the flags ``a`` (normal held) and ``s`` (stick)): ``hold -> (phi_0, n,
-    c[, v_body])``; ``vjp(..., lam, q, nu) -> (gx, gv)``, the gradients of
+    ``friction``, a tangential law, also the flags ``a`` (normal held) and ``s`` (stick)):
+    ``hold -> (phi_0, n, c[, v_body])``; ``vjp(..., lam, q, nu) -> (gx, gv)``, the gradients of
     ``-(a - s) lam . n (n . q) + nu . z``; ``jvp(..., q, nbar, dx, dv) -> d``, the derivative
     of ``-(a - s) n (n . q) + s z + (a - s) nbar (nbar . z)`` with ``nbar`` held; without
     friction ``a = 1``, ``s = 0`` (module docstring, :mod:`.held_set` for z)."""
@@ -79,7 +80,8 @@ def hold_kernels(body_type: type, friction: bool = False) -> dict[str, ca.Functi
 
 class HeldBody:
     """One body the hold holds particles on, ``layer`` (m) from its surface, with its
-    kernels (:func:`hold_kernels`) mapped over particles; ``penalty``: whether the penalty
+    kernels (:func:`hold_kernels`) mapped over particles and its tangential ``law``
+    (:func:`~.stick_slide.tangential_law`, None: none); ``penalty``: whether the penalty
     springs also act on it (their push is part of the normal force friction is bounded by)."""
 
     def __init__(self, body: Body, layer: float, jit: bool | None, penalty: bool = False):
@@ -89,9 +91,9 @@ class HeldBody:
         self.body, self.layer, self.penalty = body, float(layer), penalty
         self.tolerance = TOLERANCE * float(body.contact.thickness)
         self.overshoot = OVERSHOOT * float(body.contact.thickness)
-        self.friction = float(body.contact.friction)
+        self.law = tangential_law(body.contact)
         self.sizes = tuple(body.GEOMETRY.values()) * 2
-        self.kernels = hold_kernels(type(body), self.friction > 0)
+        self.kernels = hold_kernels(type(body), self.law is not None)
         self.mapped = {k: MappedKernel(f, jit=jit) for k, f in self.kernels.items()}
 
     def parameters(self, t: float, dt: float) -> np.ndarray:
@@ -102,12 +104,14 @@ class HeldBody:
         """Each point's geometry at t and t + dt as one row ``(n, g)``."""
         return np.hstack([*self.body.local_geometry(x, t), *self.body.local_geometry(x, t + dt)])
 
-    def _columns(self, rows, dt, flags=None):
+    def columns(self, rows, dt, flags=None):
+        """The kernels' columns after x and v for the particles of geometry ``rows``: the
+        geometry, layer and dt, and with a law the flags (default: normal held, sticking)."""
         at = np.cumsum((0,) + self.sizes)
         count = len(rows)
         columns = [rows[:, a:b] for a, b in zip(at[:-1], at[1:])]
         columns += [np.full((count, 1), self.layer), np.full((count, 1), dt)]
-        if self.friction > 0:
+        if self.law is not None:
             columns += [np.ones((count, 1)), np.zeros((count, 1))] if flags is None else flags
         return columns
 
@@ -115,12 +119,12 @@ class HeldBody:
         """``(phi_0 (n,), normals (n, 3), targets (n,), velocities (n, 3) or None, rows)`` of
         every particle, step from t."""
         rows = self.rows(x, t, dt)
-        out = self.mapped["hold"](x, v, *self._columns(rows, dt))
-        velocity = out[3] if self.friction > 0 else None
+        out = self.mapped["hold"](x, v, *self.columns(rows, dt))
+        velocity = out[3] if self.law is not None else None
         return out[0].ravel(), out[1], out[2].ravel(), velocity, rows
 
     def _flags(self, held, pick):
-        if self.friction <= 0:
+        if self.law is None:
             return None
         return [held.normal[pick, None].astype(float), held.stick[pick, None].astype(float)]
 
@@ -129,14 +133,14 @@ class HeldBody:
         particles ``pick`` (indices into ``held``) on this body."""
         particles = held.particles[pick]
         return self.mapped["vjp"](x[particles], v[particles],
-                                  *self._columns(held.geometry[pick], dt, self._flags(held, pick)),
+                                  *self.columns(held.geometry[pick], dt, self._flags(held, pick)),
                                   lam, q, nu)
 
     def jvp(self, x, v, dt, held, pick, q, dx, dv):
         """The derivative of the hold's terms (:func:`hold_kernels`) along ``(dx, dv)``."""
         particles = held.particles[pick]
         return self.mapped["jvp"](x[particles], v[particles],
-                                  *self._columns(held.geometry[pick], dt, self._flags(held, pick)),
+                                  *self.columns(held.geometry[pick], dt, self._flags(held, pick)),
                                   q, held.normals[pick], dx[particles], dv[particles])[0]
 
     def symbolic_columns(self, G, n: int) -> list:
@@ -153,7 +157,7 @@ class HeldBody:
         """The hold kernel's outputs for every particle in CasADi from the ``3 x n`` X, V and
         the geometry columns ``parts`` (:meth:`symbolic_columns`)."""
         n = X.shape[1]
-        extra = [] if self.friction <= 0 else flags
+        extra = [] if self.law is None else flags
         return self.kernels["hold"].map(n)(X, V, *parts, ca.repmat(ca.DM(self.layer), 1, n),
                                            ca.repmat(dt, 1, n), *extra)
 
@@ -165,7 +169,8 @@ class BodyHold(Interaction):
     itself (under penalty springs: ``collision="guarded"``, :mod:`.collisions`); ``layers``
     gives one per body instead; ``penalty``: which bodies the penalty springs act on too;
     ``masses`` (kg): the particles', which say how hard a pull is (:meth:`revise`) and
-    friction's normal impulse."""
+    friction's normal impulse.  On bodies with a tangential law its stick and slide
+    decisions are ``stick_slide``'s (:class:`~.stick_slide.StickSlide`, None: no such body)."""
 
     name = "body hold"
     role = "contact"
@@ -183,14 +188,15 @@ class BodyHold(Interaction):
             raise ValueError("a hold needs the particles' masses (the pulls it lets go, "
                              "friction's normal impulse): pass masses=")
         self.masses = np.asarray(masses, float)
-        self.coulomb = None
-        if any(b.friction > 0 for b in self.bodies):
-            self.coulomb = Coulomb(self.bodies, masses, gravity, CORRECTION, jit)
+        self.stick_slide = None
+        if any(b.law is not None for b in self.bodies):
+            self.stick_slide = StickSlide(self.bodies, masses, gravity, CORRECTION, jit)
 
     def decide(self, step: StepSpan, carried) -> HeldSet | None:
         """Each free particle that would reach a body's layer, on the body it would reach
         deepest, unless the last step's ``carried`` (:meth:`carry`) releases it; on bodies
-        with friction also those in the contact layer, sticking or sliding (:mod:`.friction`)."""
+        with a tangential law also those in the contact layer, sticking or sliding
+        (:mod:`.stick_slide`)."""
         x, v, n = step.x, step.v, step.x.shape[0]
         best = np.full(n, np.inf)  # dt (n . v - c): how far past the layer it would end
         body, normals, targets = np.full(n, -1), np.zeros((n, 3)), np.zeros(n)
@@ -211,8 +217,8 @@ class BodyHold(Interaction):
             leaving = carried[1] & (np.einsum("ka,ka->k", normals, v) > targets)
             released = touching & (pulled | leaving)
         held = touching & ~released
-        if self.coulomb is not None:
-            return self.coulomb.decide(step, held, body, seen, released)
+        if self.stick_slide is not None:
+            return self.stick_slide.decide(step, held, body, seen, released)
         held = np.flatnonzero(held)
         if not held.size:
             return None
@@ -239,8 +245,8 @@ class BodyHold(Interaction):
         contact only pushes, so they are released and the step solved again), plus the free
         particles the step ended deeper than a body's layer less its overshoot
         (:data:`OVERSHOOT`) without holding them, each held as at the step's start on the
-        body it ended deepest in; with friction, the stick and slide decisions the step's
-        end refutes (:mod:`.friction`); None if nothing changes."""
+        body it ended deepest in; with a tangential law, the stick and slide decisions the
+        step's end refutes (:mod:`.stick_slide`); None if nothing changes."""
         held, n = NOTHING_HELD if found is None else found, end.x.shape[0]
         pulled = self._pulled_off(held, end.dt)
         if pulled.any():
@@ -253,8 +259,8 @@ class BodyHold(Interaction):
             deeper = unheld & (depth > worst)
             worst[deeper], body[deeper] = depth[deeper], b
         late = np.flatnonzero(body >= 0)
-        if self.coulomb is not None:
-            revised = self.coulomb.revise(found, end, late, body)
+        if self.stick_slide is not None:
+            revised = self.stick_slide.revise(found, end, late, body)
             return found if revised is None and pulled.any() else revised
         if not late.size:
             return found if pulled.any() else None
@@ -296,8 +302,8 @@ class BodyHold(Interaction):
 
     def decision_parameters(self, found, t, dt):
         """Which particles are held on each body (0/1, body after body), then each body's
-        geometry at t and t + dt (a mesh's: one column per particle), then with friction the
-        flags and impulses of :meth:`.friction.Coulomb.parameters`."""
+        geometry at t and t + dt (a mesh's: one column per particle), then with a tangential law
+        the flags and directions of :meth:`.stick_slide.StickSlide.parameters`."""
         masks = np.zeros((len(self.bodies), self.n))
         if found is not None:
             masks[found.body, found.particles] = 1.0
@@ -311,7 +317,7 @@ class BodyHold(Interaction):
                 geometry.append(rows.ravel())  # ca.reshape(., g, n) is column-major
             else:
                 geometry.append(layer.parameters(t, dt))
-        extra = [] if self.coulomb is None else [self.coulomb.parameters(found)]
+        extra = [] if self.stick_slide is None else [self.stick_slide.parameters(found)]
         return np.concatenate([masks.ravel(), *geometry, *extra])
 
     def _by_body(self, held):
@@ -326,8 +332,8 @@ class BodyHold(Interaction):
         for layer, pick, particles in self._by_body(held):
             gx[particles], gv[particles] = layer.vjp(x, v, dt, held, pick, lam[particles],
                                                      q[pick], nu[particles])
-        if self.coulomb is not None:  # the sliding impulses join b: S lam is their multiplier
-            fx, fv = self.coulomb.vjp(x, v, dt, held, held.unheld_part(lam))
+        if self.stick_slide is not None:  # the sliding impulses join b: S lam multiplies them
+            fx, fv = self.stick_slide.vjp(x, v, dt, held, held.unheld_part(lam))
             gx, gv = gx + fx, gv + fv
         return gx, gv
 
@@ -336,17 +342,18 @@ class BodyHold(Interaction):
         out = np.zeros((self.n, 3))
         for layer, pick, particles in self._by_body(held):
             out[particles] = layer.jvp(x, v, dt, held, pick, q[pick], dx, dv)
-        if self.coulomb is not None:
-            out += held.unheld_part(self.coulomb.jvp(x, v, dt, held, dx, dv))
+        if self.stick_slide is not None:
+            out += held.unheld_part(self.stick_slide.jvp(x, v, dt, held, dx, dv))
         return out
 
     def symbolic_held(self, X, V, D, dt):
         """``(normals 3 x n, targets 1 x n)`` of the held particles (zero elsewhere), from
-        :meth:`decision_parameters` D; with friction also ``(velocities 3 x n, normal 1 x n,
+        :meth:`decision_parameters` D; with a tangential law also ``(velocities 3 x n, normal 1 x n,
         stick 1 x n, sliding impulses 3 x n)``."""
         n, masks = self.n, D[:len(self.bodies) * self.n]
         at = masks.shape[0]
-        flags = None if self.coulomb is None else self.coulomb.symbolic(D, self.decision_size())
+        tangential = self.stick_slide
+        flags = None if tangential is None else tangential.symbolic(D, self.decision_size())
         normals, targets, velocity = ca.SX.zeros(3, n), ca.SX.zeros(1, n), ca.SX.zeros(3, n)
         pushed = ca.SX.zeros(3, n)
         for b, layer in enumerate(self.bodies):
@@ -364,9 +371,9 @@ class BodyHold(Interaction):
             targets += held * out[2]
             if flags is not None:
                 velocity += ca.repmat(held, 3, 1) * out[3]
-                if layer.friction > 0:
+                if layer.law is not None:
                     columns = parts + [ca.repmat(ca.DM(layer.layer), 1, n), ca.repmat(dt, 1, n)]
-                    pushed += ca.repmat(held, 3, 1) * self.coulomb.symbolic_impulses(
+                    pushed += ca.repmat(held, 3, 1) * tangential.symbolic_impulses(
                         b, X, V, columns, dt, flags)
         if flags is None:
             return normals, targets

@@ -12,26 +12,24 @@ objective (:class:`~.kept.Kept`).
 from __future__ import annotations
 
 import signal
-import time
 from dataclasses import dataclass
 
-import numpy as np
-
-from ..adjoints import Adjoint
-from ..controls import StepForces
-from ..interrupts import handled
-from .constrained import land, lower_effort
-from .goal import verdict
-from .kept import kept_outcome, kept_stage
-from .outcome import CONVERGED, INTERRUPTED, LIMIT, judge
-from .result import assemble
-from .window_step import KeyframeConstraint, control_hessian, factor_window
+from ...controls import StepForces
+from ...interrupts import handled
+from ..deadline import Deadline
+from ..options import TypedOptions
+from ..goal import verdict
+from ..kept import conclude, kept_outcome
+from ..outcome import CONVERGED, INTERRUPTED, LIMIT, judge
+from ..result import assemble
+from .constraint import KeyframeConstraint, control_hessian, factor_window
+from .searches import land, lower_effort
 
 KINDS = ("land", "effort")
 
 
 @dataclass(frozen=True)
-class Finish:
+class Finish(TypedOptions):
     """``kind`` ("land" or "effort"), on the controls of the last ``window`` steps before
     the last keyframe, at most ``maxiter`` kept steps each for the landing and the effort."""
 
@@ -41,23 +39,11 @@ class Finish:
 
 
 def finish_options(finish) -> Finish | None:
-    """``finish`` read (None; a kind, maybe with options: ``"effort,window=20,maxiter=3"``;
-    a dict of :class:`Finish`'s fields; a Finish) and checked, naming what is wrong
-    (ValueError)."""
-    if finish is None or isinstance(finish, Finish):
-        opts = finish
-    elif isinstance(finish, str):
-        kind, *items = [item.strip() for item in finish.split(",")]
-        opts = finish_options({"kind": kind, **dict(_item(item) for item in items)})
-    elif isinstance(finish, dict):
-        unknown = sorted(set(finish) - {"kind", "window", "maxiter"})
-        if unknown:
-            raise ValueError(f"finish: unknown option(s) {unknown}; it takes kind, window "
-                             "and maxiter")
-        opts = Finish(**finish)
-    else:
-        raise ValueError(f"finish must be one of {KINDS}, a dict of kind, window and "
-                         f"maxiter, or None; got {finish!r}")
+    """``finish`` (None; a dict of :class:`Finish`'s fields; a Finish) checked, naming what
+    is wrong (ValueError); its text form (``"effort,window=20,maxiter=3"``) is read by the
+    request (:func:`~..settings.read_kind`)."""
+    opts = Finish.read(finish, "finish",
+                       takes=f"one of {KINDS}, a dict of kind, window and maxiter, or None")
     if opts is None:
         return None
     if opts.kind not in KINDS:
@@ -69,17 +55,6 @@ def finish_options(finish) -> Finish | None:
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"finish: {name} must be a whole number >= 1, got {value!r}")
     return opts
-
-
-def _item(text: str) -> tuple:
-    name, sep, value = text.partition("=")
-    try:
-        if not sep:
-            raise ValueError
-        return name.strip(), int(value)
-    except ValueError:
-        raise ValueError(f"finish: expected KIND,window=N,maxiter=N, got the item "
-                         f"{text!r}") from None
 
 
 def check_finish(problem, opts: Finish) -> None:
@@ -99,11 +74,12 @@ def check_finish(problem, opts: Finish) -> None:
     factor_window(problem, control_hessian(problem), slice(first * block, last * block))
 
 
-def run_finish(problem, result, opts: Finish, kept, time_limit=None):
-    """The finish from ``result`` (a search's on ``problem``): the Result with its stages
-    and history after the search's; where it ends no better or is interrupted, the best
-    point ``kept`` holds (the search's result or a kept step), with a stage saying so."""
-    started = time.perf_counter()
+def run_finish(problem, result, opts: Finish, kept, deadline: Deadline | None = None):
+    """The finish from ``result`` (a search's on ``problem``), until the solve's
+    ``deadline``: the Result with its stages and history after the search's; where it ends
+    no better or is interrupted, the best point ``kept`` holds (the search's result or a kept
+    step), with a stage saying so."""
+    deadline = deadline or Deadline.start()
     stages, history = list(result.stages), list(result.history)
     runs = []
 
@@ -115,24 +91,22 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
         u, met = result.x, _landed(problem, result.trajectory, opts.window)
         if not met:
             runs.append(land(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
-                             time_limit=_left(started, time_limit), on_keep=checkpoint))
+                             deadline=deadline, on_keep=checkpoint, gradient=result.route))
             u, met = runs[-1].x, runs[-1].status == CONVERGED
-        if opts.kind == "effort" and met and not _out_of_time(started, time_limit):
+        if opts.kind == "effort" and met and not deadline.passed():
             runs.append(lower_effort(problem, u0=u, window=opts.window, maxiter=opts.maxiter,
-                                     time_limit=_left(started, time_limit),
-                                     keep_objective=True, on_keep=checkpoint))
+                                     deadline=deadline, keep_objective=True,
+                                     on_keep=checkpoint, gradient=result.route))
     except KeyboardInterrupt as err:
         handled()
         for run in runs:  # those that ended before the signal
             _append(stages, history, run)
-        return _interrupted(problem, result, stages, history, kept, err,
-                            started - result.timings["wall_seconds"])
+        return _interrupted(problem, result, stages, history, kept, err, deadline.started)
     for run in runs:
         _append(stages, history, run)
     if not runs:
         return result
-    last = runs[-1]
-    began = started - result.timings["wall_seconds"]
+    last, began = runs[-1], deadline.started
     if not kept.offer(last.x, f"the finish ({last.method})", trajectory=last.trajectory,
                       stage=stages[-1]["stage"], nit=len(history)):
         status, message = kept_outcome(kept, result.status,
@@ -147,7 +121,7 @@ def run_finish(problem, result, opts: Finish, kept, time_limit=None):
     stages[-1] = {**stages[-1], "status": status, "message": message,
                   "success": status == CONVERGED}
     return assemble(problem, last.x, fun=last.fun, jac=last.jac, status=status,
-                    message=message, method=result.method, gradient=result.gradient,
+                    message=message, method=result.method, route=result.route,
                     stages=stages, history=history, started=began, trajectory=last.trajectory)
 
 
@@ -161,19 +135,10 @@ def _interrupted(problem, result, stages, history, kept, err, began):
 
 def _kept(problem, result, stages, history, kept, status, message, began, gradient=True):
     """The Result at ``kept``'s point (the search's result, or a finish's step that beat
-    it) with a stage that says so; its gradient evaluated unless ``gradient`` is False
-    (after a signal: no more work) or it is the search's own point."""
-    u = kept.u
-    if u is result.x or np.array_equal(u, result.x):
-        fun, jac = result.fun, result.jac
-    elif gradient:
-        fun, jac = Adjoint()(problem, u)
-    else:
-        fun, jac = problem.objective(u), np.full(u.size, np.nan)
-    kept_stage(problem, stages, fun, status, message)
-    return assemble(problem, u, fun=fun, jac=jac, status=status, message=message,
-                    method=result.method, gradient=result.gradient, stages=stages,
-                    history=history, started=began, trajectory=kept.trajectory)
+    it) with a stage that says so (:func:`~.kept.conclude`)."""
+    return conclude(problem, kept, result.route, status=status, message=message,
+                    stages=stages, history=history, method=result.method, started=began,
+                    known=(result.x, result.fun, result.jac), gradient=gradient)
 
 
 def _landed(problem, trajectory, window: int) -> bool:
@@ -191,12 +156,3 @@ def _append(stages, history, run) -> None:
     done = history[-1]["iteration"] if history else 0
     history.extend({**h, "stage": number, "iteration": done + h["iteration"]}
                    for h in run.history)
-
-
-def _left(started, time_limit):
-    return None if time_limit is None else max(time_limit - (time.perf_counter() - started),
-                                               1e-3)
-
-
-def _out_of_time(started, time_limit) -> bool:
-    return time_limit is not None and time.perf_counter() - started >= time_limit

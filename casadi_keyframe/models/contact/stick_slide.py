@@ -1,96 +1,69 @@
-r"""Coulomb friction through the step's hold: stick holds, slide pushes.
+r"""The hold's stick and slide decisions on bodies with a tangential law (:mod:`.tangential`).
 
-A particle in contact with a body of friction ``mu`` (held on it, or inside the penalty
-springs' layer) either **sticks**: the hold prescribes its tangential velocity, the body's
-surface velocity there (rotation included), through the same filter that holds its normal;
-or **slides**: it gets the impulse
-
-    F = -mu N t,   N = m max(a (c - n . v) + (1 - a) n . (v_body - v), 0) + dt m max(-n . g, 0),
-    t = unit(T (v - v_body) + SLIP d)
-
-where ``N`` is the normal impulse that stops the particle's approach over the step
-(``a = 1``: held, to the hold's target ``c``) and carries its weight, ``T = I - n n^T``, and
-``d`` (a step's decision) the direction it starts sliding in where its slip is nil.  F is a
-function of the step's start state, so the solve stays symmetric and the law's derivative
-is exact (:func:`friction_kernels`).  A contact starts a step sliding if it slips (faster
-than :data:`SLIP` against the body's surface), else sticking.  After a solve a sticking particle
-whose tangential impulse ``r_t`` leaves the cone (``|r_t| > mu N``) slides (``d = -r_t /
-|r_t|``), and a sliding one whose slip turned against ``t`` by the step's end sticks; the
-step is solved again.  The gradient is that of the modes the step chose: exact within them
-(as DiffCloth's), one-sided at a stick/slide switch, where the simulated map is continuous
-only up to the difference between ``r_t``'s direction and ``t``.
+A particle in contact with such a body (held on it, or inside the penalty springs' layer)
+sticks or slides (:class:`~.held_set.HeldSet`'s ``stick``).  A contact starts a step sliding
+if it slips (faster than :data:`~.tangential.SLIP` against the body's surface), else
+sticking.  After a solve a sticking particle whose tangential impulse ``r_t`` leaves the
+law's stick region (:meth:`~.tangential.TangentialLaw.leaves`) slides, starting along ``d =
+-r_t / |r_t|``, and a sliding one whose slip turned against its impulse by the step's end
+sticks; the step is solved again.  The sliding impulses and their derivatives are the laws'
+kernels (:func:`~.tangential.tangential_kernels`), body by body.
 """
 from __future__ import annotations
 
-import functools
 from dataclasses import replace
 
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel
+from ...kernels import MappedKernel
+from .friction import Coulomb
 from .held_set import HeldSet
+from .tangential import SLIP, TangentialLaw, tangential_kernels
 
-SLIP = 1e-4  # m/s: the slip below which a slide leans on its decided direction d
+
+def tangential_law(contact) -> TangentialLaw | None:
+    """The law of a :class:`~.colliders.Contact`'s ``friction`` (a number is Coulomb's mu),
+    None if it does not act."""
+    law = contact.friction
+    law = law if isinstance(law, TangentialLaw) else Coulomb(float(law))
+    return law if law.acts else None
 
 
 def _tangent(normals, a):
     return a - normals * np.einsum("ka,ka->k", normals, a)[:, None]
 
 
-@functools.lru_cache(maxsize=None)
-def friction_kernels(body_type: type, correction: float) -> dict[str, ca.Function]:
-    """Per particle ``(x, v, *geometry at t, *geometry at t + dt, layer, dt, a, m, g, d,
-    mu)``: ``impulse -> (F, N)`` (module docstring), ``vjp(..., lam) -> (gx, gv)`` the
-    gradients of ``lam . F``, ``jvp(..., dx, dv) -> dF``."""
-    x, v = ca.SX.sym("x", 3), ca.SX.sym("v", 3)
-    start = {key: ca.SX.sym(f"{key}_0", size) for key, size in body_type.GEOMETRY.items()}
-    end = {key: ca.SX.sym(f"{key}_1", size) for key, size in body_type.GEOMETRY.items()}
-    h, dt, a, m, mu = (ca.SX.sym(s) for s in ("h", "dt", "a", "m", "mu"))
-    g, d = ca.SX.sym("g", 3), ca.SX.sym("d", 3)
-    phi, _, _ = body_type.surface(x, **start)
-    phi_end, n, v_body = body_type.surface(x, **end)
-    c = (phi - phi_end) / dt + ca.if_else(phi >= h, 1.0, correction) * (h - phi) / dt
-    approach = a * (c - ca.dot(n, v)) + (1 - a) * ca.dot(n, v_body - v)
-    N = m * ca.fmax(approach, 0) + dt * m * ca.fmax(-ca.dot(n, g), 0)
-    slip = v - v_body
-    s = slip - n * ca.dot(n, slip) + SLIP * d
-    F = -mu * N * s / ca.sqrt(ca.dot(s, s) + 1e-30)
-    args = [x, v, *start.values(), *end.values(), h, dt, a, m, g, d, mu]
-    lam, dx, dv = ca.SX.sym("lam", 3), ca.SX.sym("dx", 3), ca.SX.sym("dv", 3)
-    name = f"{body_type.kind}_friction"
-    return {"impulse": ca.Function(name, args, [F, N]),
-            "vjp": ca.Function(f"{name}_vjp", args + [lam],
-                               [ca.gradient(ca.dot(lam, F), x), ca.gradient(ca.dot(lam, F), v)]),
-            "jvp": ca.Function(f"{name}_jvp", args + [dx, dv],
-                               [ca.jtimes(F, ca.vertcat(x, v), ca.vertcat(dx, dv))])}
-
-
-class Coulomb:
+class StickSlide:
     """The stick and slide decisions of a hold over ``bodies`` (its
-    :class:`~.hold.HeldBody` list) for particles of ``masses`` under ``gravity``."""
+    :class:`~.hold.HeldBody` list, each with its ``law`` or None) for particles of
+    ``masses`` under ``gravity``."""
 
     def __init__(self, bodies, masses, gravity, correction: float, jit: bool | None):
         self.bodies, self.n = bodies, len(masses)
         self.masses, self.gravity = np.asarray(masses, float), np.asarray(gravity, float)
-        self.mu = np.array([b.friction for b in bodies])
-        self.kernels = [friction_kernels(type(b.body), correction) for b in bodies]
-        self.mapped = [{k: MappedKernel(f, jit=jit) for k, f in kernels.items()}
+        self.laws = [b.law for b in bodies]
+        self.acts = np.array([law is not None for law in self.laws])
+        self.kernels = [None if law is None else
+                        tangential_kernels(type(law), type(b.body), correction)
+                        for law, b in zip(self.laws, bodies)]
+        self.mapped = [None if kernels is None else
+                       {k: MappedKernel(f, jit=jit) for k, f in kernels.items()}
                        for kernels in self.kernels]
 
     def _inputs(self, b, x, v, dt, held, pick, direction=None):
         particles = held.particles[pick]
         k = particles.size
         layer = self.bodies[b]
-        return [x[particles], v[particles], *layer._columns(held.geometry[pick], dt, []),
+        coefficients = [np.full((k, c.size), c) for c in self.laws[b].coefficients()]
+        return [x[particles], v[particles], *layer.columns(held.geometry[pick], dt, []),
                 held.normal[pick, None].astype(float), self.masses[particles, None],
                 np.broadcast_to(self.gravity, (k, 3)),
-                held.direction[pick] if direction is None else direction,
-                np.full((k, 1), self.mu[b])]
+                held.direction[pick] if direction is None else direction, *coefficients]
 
     def _each(self, held):
         for b in range(len(self.bodies)):
-            pick = np.flatnonzero((held.body == b) & ~held.stick & (self.mu[b] > 0))
+            pick = np.flatnonzero((held.body == b) & ~held.stick & self.acts[b])
             if pick.size:
                 yield b, pick
 
@@ -100,7 +73,7 @@ class Coulomb:
         F, N = np.zeros((held.count, 3)), np.zeros(held.count)
         for b in range(len(self.bodies)):
             pick = np.flatnonzero(held.body == b)
-            if pick.size and self.mu[b] > 0:
+            if pick.size and self.acts[b]:
                 d = None if direction is None else direction[pick]
                 out = self.mapped[b]["impulse"](*self._inputs(b, x, v, dt, held, pick, d))
                 F[pick], N[pick] = out[0], out[1].ravel()
@@ -117,12 +90,12 @@ class Coulomb:
 
     def decide(self, step, held, body, seen, released) -> HeldSet | None:
         """The contacts of a step: ``held`` (normal held, on ``body``), plus the free
-        particles in the penalty layer of a body with friction; ``seen``: per body the
+        particles in the penalty layer of a body with a law; ``seen``: per body the
         hold's candidates ``(phi, normals, targets, velocities, rows)``."""
         body = body.copy()
         depth = np.full(self.n, np.inf)
         for b, layer in enumerate(self.bodies):
-            if layer.friction > 0 and layer.penalty:
+            if self.acts[b] and layer.penalty:
                 gap = seen[b][0] - layer.body.contact.thickness
                 inside = (gap < 0) & step.free & ~held & ~released & (gap < depth)
                 depth[inside], body[inside] = gap[inside], b
@@ -130,14 +103,14 @@ class Coulomb:
         if not particles.size:
             return None
         fields = self._fields(seen, body, particles)
-        mu = self.mu[body[particles]]
+        acts = self.acts[body[particles]]
         slip = _tangent(fields["normals"], step.v[particles] - fields["velocity"])
         speed = np.linalg.norm(slip, axis=1)
-        slide = (speed > SLIP) & (mu > 0)
+        slide = (speed > SLIP) & acts
         direction = slip / np.maximum(speed, 1e-300)[:, None]
         members = HeldSet(particles, body[particles], fields["normals"], fields["targets"],
                           released=released, geometry=fields["rows"], normal=held[particles],
-                          stick=(mu > 0) & ~slide, velocity=fields["velocity"])
+                          stick=acts & ~slide, velocity=fields["velocity"])
         return self._with(members, step.x, step.v, step.dt, members.stick, direction)
 
     def _fields(self, seen, body, particles):
@@ -160,7 +133,7 @@ class Coulomb:
 
     def revise(self, found, end, late, body) -> HeldSet | None:
         """``found`` with the ``late`` particles held (on ``body``, sticking where the body
-        has friction) and the Coulomb checks of the solve it follows; None if none changes."""
+        has a law) and the checks of the solve it follows; None if none changes."""
         changed = False
         if found is not None and found.residual is not None:
             found, changed = self._checked(found, end)
@@ -169,6 +142,16 @@ class Coulomb:
             changed = True
         return found if changed else None
 
+    def _leaving(self, held, r_t, N):
+        """``(k,)``: the sticking members whose tangential impulse ``r_t`` leaves their law's
+        stick region under the normal impulses ``N``."""
+        out = np.zeros(held.count, bool)
+        for b, law in enumerate(self.laws):
+            pick = np.flatnonzero(held.body == b)
+            if pick.size and law is not None:
+                out[pick] = law.leaves(r_t[pick], N[pick])
+        return held.stick & out
+
     def _checked(self, held, end):
         x, v, dt = end.x, end.v, end.dt
         r_t = _tangent(held.normals, held.residual)
@@ -176,9 +159,9 @@ class Coulomb:
         onset = -r_t / np.maximum(size, 1e-300)[:, None]
         _, N = self.impulses(held, x, v, dt, np.where(held.stick[:, None], onset,
                                                       held.direction))
-        leaves = held.stick & (size > self.mu[held.body] * N * (1 + 1e-9) + 1e-15)
+        leaves = self._leaving(held, r_t, N)
         slip = _tangent(held.normals, (end.x1 - x)[held.particles] / dt - held.velocity)
-        sliding = ~held.stick & (self.mu[held.body] > 0)
+        sliding = ~held.stick & self.acts[held.body]
         turned = sliding & (np.einsum("ka,ka->k", held.friction, slip) > 0)
         if not (leaves.any() or turned.any()):
             return held, False
@@ -189,10 +172,9 @@ class Coulomb:
         """``held`` with the normals of ``late`` held (members already or new ones)."""
         seen = [layer.candidates(end.x, end.v, end.t, end.dt) for layer in self.bodies]
         new = self._fields(seen, body, late)
-        mu = self.mu[body[late]]
         parts = {"particles": late, "body": body[late], "normals": new["normals"],
                  "targets": new["targets"], "geometry": new["rows"],
-                 "normal": np.ones(late.size, bool), "stick": mu > 0,
+                 "normal": np.ones(late.size, bool), "stick": self.acts[body[late]],
                  "velocity": new["velocity"], "direction": np.zeros((late.size, 3))}
         released = np.zeros(self.n, bool)
         if held is not None:
@@ -230,7 +212,7 @@ class Coulomb:
         if found is not None:
             flags[0, found.particles] = found.normal
             flags[1, found.particles] = found.stick
-            flags[2, found.particles] = ~found.stick & (self.mu[found.body] > 0)
+            flags[2, found.particles] = ~found.stick & self.acts[found.body]
             direction[found.particles] = found.direction
         return np.concatenate([flags.ravel(), direction.ravel()])
 
@@ -246,7 +228,8 @@ class Coulomb:
         """The sliding impulses on body b, ``3 x n``, from the hold's geometry ``columns``."""
         n = X.shape[1]
         normal, _, slide, direction = flags
+        coefficients = [ca.repmat(ca.DM(c), 1, n) for c in self.laws[b].coefficients()]
         F, _ = self.kernels[b]["impulse"].map(n)(
             X, V, *columns, normal, ca.DM(self.masses).T, ca.repmat(ca.DM(self.gravity), 1, n),
-            direction, ca.repmat(ca.DM(self.mu[b]), 1, n))
+            direction, *coefficients)
         return ca.repmat(slide, 3, 1) * F

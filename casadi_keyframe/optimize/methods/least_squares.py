@@ -1,7 +1,7 @@
 """scipy's trust-region reflective ``least_squares`` on the objective's residuals, matrix-free.
 
 Its ``fun`` is the residual vector r (one simulation that keeps its records,
-:class:`~.residuals.Linearization`) and its ``jac`` a ``LinearOperator`` of the exact
+:class:`~..residual.linearization.Linearization`) and its ``jac`` a ``LinearOperator`` of the exact
 products on that run; ``tr_solver="lsmr"``: each step solves the damped Gauss-Newton
 problem by LSMR, then the trust region is searched in the plane of that step and the
 gradient, so a rejected step costs one simulation.  Bounds are scipy's own (reflective).
@@ -14,21 +14,30 @@ over this module's defaults (``max_nfev = 10 * maxiter``, ``ftol = tol``, ``xtol
 """
 from __future__ import annotations
 
-import time
-
 import numpy as np
 from scipy.optimize import least_squares
 from scipy.sparse.linalg import LinearOperator
 
-from ..interrupts import check
-from .outcome import CONVERGED, FAILED, LIMIT
-from .residuals import SearchSpace
+from ...interrupts import check
+from ..outcome import CONVERGED, FAILED, LIMIT
+from ..residual.space import SearchSpace
+from .base import LibraryOptions
 
 OPTIONS = ("max_nfev", "ftol", "xtol", "gtol", "x_scale", "lsmr_maxiter")
 
 
 def option_names() -> tuple[str, ...]:
     return OPTIONS
+
+
+class LeastSquaresOptions(LibraryOptions):
+    """``least_squares``' options (:data:`OPTIONS`: scipy's, and ``lsmr_maxiter``)."""
+
+    label = "scipy's least_squares"
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return option_names()
 
 
 class _Stop(Exception):
@@ -83,17 +92,18 @@ class _Residuals:
                 f"{self.products} Jacobian products]")
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+def run(problem, ev, u0, call):
     """Search from ``u0`` with scipy's ``least_squares`` (method "trf", LSMR), evaluating
-    each accepted point with ``ev`` and calling ``on_iteration()`` after it; stop at
-    ``deadline`` (``time.perf_counter()``, or None).  Returns ``(status, message)``."""
+    each accepted point with ``ev``, as ``call`` (a :class:`~.base.SearchCall`) asks.
+    Returns ``(status, message)``."""
+    maxiter, on_iteration, deadline = call.maxiter, call.on_iteration, call.deadline
     space = SearchSpace(problem, ev, "least-squares")
-    opts = {"max_nfev": 10 * maxiter, "ftol": tol, "xtol": 1e-10, "gtol": 1e-10,
-            "x_scale": 1.0, "lsmr_maxiter": 50, **options}
+    opts = {"max_nfev": 10 * maxiter, "ftol": call.tol, "xtol": 1e-10, "gtol": 1e-10,
+            "x_scale": 1.0, "lsmr_maxiter": 50, **call.options.as_dict()}
 
     def between():
         check()
-        if deadline is not None and time.perf_counter() >= deadline:
+        if deadline.passed():
             raise _Stop
 
     residuals, count = _Residuals(space, between), [0]

@@ -22,9 +22,9 @@ import casadi as ca
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ..kernels import interaction_kernels
+from ...kernels import interaction_kernels
 from .colliders import Body, Contact
-from .interaction import PairInteraction, ParticleInteraction
+from ..interaction import PairInteraction, ParticleInteraction
 
 
 def penalty_law(phi, normal, rel_v, gains, x):
@@ -34,7 +34,7 @@ def penalty_law(phi, normal, rel_v, gains, x):
 
     K leaves out ``ramp(p) d(normal)/dx``, the surface's curvature: for a sphere or capsule
     it pushes particles apart sideways, and with it the step matrix loses positive
-    definiteness (as for compressed springs, see :func:`.springs.spring_law`).
+    definiteness (as for compressed springs, see :func:`..springs.spring_law`).
     """
     k, c, h, s = (gains[i] for i in range(4))
     p = h - phi

@@ -19,14 +19,14 @@ import functools
 import io
 import re
 import signal
-import time
 
 import casadi as ca
 import numpy as np
 
-from ..interrupts import Interrupted, catching
-from .goal import GoalReached
-from .outcome import ipopt_outcome
+from ...interrupts import Interrupted, catching
+from ..goal import GoalReached
+from ..outcome import ipopt_outcome
+from .base import LibraryOptions
 
 
 def _made_with(ipopt_options: dict) -> tuple[str | None, str]:
@@ -79,6 +79,22 @@ def check_options(options: dict) -> list[str]:
         said = printed.strip() or error.strip().splitlines()[-1]
         raise ValueError(f"IPOPT refuses option {key!r} = {value!r}:\n{said}")
     return unknown
+
+
+class IpoptOptions(LibraryOptions):
+    """IPOPT's options, by its own names: IPOPT itself says which it knows
+    (:func:`check_options`); its documentation gives the names to suggest
+    (:func:`option_names`)."""
+
+    label = "IPOPT"
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return option_names()
+
+    @classmethod
+    def unknown(cls, options) -> list[str]:
+        return check_options(options)
 
 
 class _Function(ca.Callback):
@@ -185,23 +201,24 @@ class IterationHook(ca.Callback):
 
 
 def ipopt_options(maxiter, tol, options, deadline) -> dict:
-    """IPOPT's options for a search: limited-memory Hessian, silent, ``deadline`` (a
-    ``perf_counter`` time or None) as ``max_wall_time``, the user's ``options`` last."""
+    """IPOPT's options for a search: limited-memory Hessian, silent, the time the
+    :class:`~.deadline.Deadline` leaves as ``max_wall_time``, the user's ``options`` last."""
     ipopt = {"hessian_approximation": "limited-memory", "max_iter": maxiter, "tol": tol,
              "print_level": 0, "sb": "yes", "limited_memory_max_history": 20}
-    if deadline is not None:
-        ipopt["max_wall_time"] = max(deadline - time.perf_counter(), 1e-3)
+    if deadline.limit is not None:
+        ipopt["max_wall_time"] = deadline.left()
     ipopt.update(options)
     return ipopt
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
+def run(problem, ev, u0, call):
     """Search from ``u0`` with the evaluator ``ev`` (f and gradient asked for separately,
-    memoised), calling ``on_iteration()`` after each iteration; ``deadline`` becomes IPOPT's
-    ``max_wall_time``.  Returns ``(status, message)`` (:mod:`.outcome`); an interrupt raises
+    memoised), as ``call`` (a :class:`~.base.SearchCall`) asks; the deadline becomes IPOPT's
+    ``max_wall_time``.  Returns ``(status, message)`` (:mod:`..outcome`); an interrupt raises
     :class:`~casadi_keyframe.interrupts.Interrupted`."""
-    status, message, _ = search(ev, u0, problem.bounds(), maxiter, tol, options,
-                                lambda x: on_iteration(), deadline)
+    status, message, _ = search(ev, u0, problem.bounds(), call.maxiter, call.tol,
+                                call.options.as_dict(), lambda x: call.on_iteration(),
+                                call.deadline)
     return status, message
 
 

@@ -1,7 +1,7 @@
 r"""The held set: what the step's hold (:mod:`.hold`) decided for one step.
 
 Each particle in it is held on one body.  Without friction its velocity along the body's
-normal ``n`` is prescribed (``P = n n^T``).  With friction (:mod:`.friction`) each particle
+normal ``n`` is prescribed (``P = n n^T``).  With friction (:mod:`.tangential`) each particle
 also has a mode: ``normal`` (its normal velocity held, as without friction) and ``stick``
 (its tangential velocity held to the body's surface velocity, ``T = I - n n^T``), so
 ``P = stick I + (normal - stick) n n^T``, and ``friction``, the Coulomb impulse a sliding

@@ -1,24 +1,23 @@
-"""The keyframes as a constraint on the controls of a window of late steps, and the
-quadratic step that holds them, matrix-free.
+"""The keyframes as a constraint on the controls of a window of late steps, and the control
+cost's Hessian there.
 
 :class:`KeyframeConstraint` is the keyframes' weighted residual ``r`` over their free
-particles with its Jacobian ``J`` applied both ways: ``J du`` by one tangent pass from the
+particles, linearized at a run as the residual family's one
+:class:`~..residual.linearization.Linearization`: ``J du`` by one tangent pass from the
 window's first frame (the integrator's exact ``step_jvp``), ``J^T w`` by one adjoint sweep
-stopped there (``step_vjp``), both on the recorded run's factorisations.
-:class:`WindowStep` solves, at a run,
+stopped there (``step_vjp``), both on the recorded run's factorisations.  The step that
+holds them solves, at a run,
 
     minimise  0.5 (u + d)^T Q (u + d) + 0.5 damping d^T Q d   subject to   r + J d = 0
 
 over the window's controls ``d`` (Q the control terms' Hessian, constant for quadratic
 terms).  Its solution is ``d = projected / (1 + damping) + land``: ``land`` the least
 change that puts the linearized keyframes on their targets (infinite damping; here in the
-metric of Q's diagonal),
-``projected`` the control cost's Newton step with the linearized keyframes left where they
-are (conjugate gradients on ``(J Q^-1 J^T) y = J Q^-1 g``, an iteration one sweep each
-way over the window), so every damping is tried without solving again.  :mod:`.constrained`
-takes them apart: ``land`` (by LSMR, the least squares solution where the window cannot
-land the keyframes exactly) to land, ``projected`` scaled to lower the effort.  The
-products are exact; a step solves its linear model to the solvers' tolerance.
+metric of Q's diagonal, :class:`~..residual.descents.Landing`), ``projected`` the control
+cost's Newton step with the linearized keyframes left where they are
+(:class:`~..residual.descents.Projected`), so every damping is tried without solving again.
+:mod:`.searches` takes them apart: ``land`` to land, ``projected`` damped to lower the
+effort.  The products are exact; a step solves its linear model to the solvers' tolerance.
 """
 from __future__ import annotations
 
@@ -27,8 +26,9 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
-from ..objectives import StateKeyframe
-from ..simulate import backward, tangent
+from ...objectives import StateKeyframe
+from ...simulate import backward, tangent
+from ..residual.linearization import Linearization
 
 FALLBACK = (1e-3, 0.05)  # m, m/s: a row's tolerance if neither caller nor keyframe gives one
 CG_RTOL = 1e-3  # the conjugate gradients' residual, relative to its right side or to the
@@ -38,9 +38,8 @@ CG_RTOL = 1e-3  # the conjugate gradients' residual, relative to its right side 
 class KeyframeConstraint:
     """The keyframes of ``problem`` at frames after ``first`` as a residual over their free
     particles, ``r = sqrt(weight) (state - target)`` stacked (its other goals refused; terms
-    without a tolerance, such as a strain penalty, are not held), with its Jacobian applied
-    to a change of the controls (:meth:`jvp`) and its transpose to a cotangent
-    (:meth:`vjp`), and each row's tolerance: ``tolerances`` (position, velocity) where
+    without a tolerance, such as a strain penalty, are not held), linearized at a run
+    (:meth:`linearize`), and each row's tolerance: ``tolerances`` (position, velocity) where
     given, else its keyframe's own, else :data:`FALLBACK`."""
 
     def __init__(self, problem, first: int = 0, tolerances=(None, None)):
@@ -81,27 +80,33 @@ class KeyframeConstraint:
         return np.concatenate([(s * (_frames(traj, kind)[frame][idx] - target)).ravel()
                                for frame, kind, idx, target, s, _ in self.rows])
 
-    def jvp(self, traj, du) -> np.ndarray:
-        """``J du``: the residual's change along the controls' change ``du`` (zero before
-        ``first``), by one tangent pass from frame ``first``."""
+    def linearize(self, traj) -> Linearization:
+        """The residual at the recorded run ``traj`` with its products in the controls
+        (``start``: the window's first frame, before which a change moves nothing): ``J du``
+        by one tangent pass from there, ``J^T mu`` (the derivative of ``mu . r``) by one
+        adjoint sweep stopped there."""
         p = self.problem
-        zero = np.zeros_like(p.x0)
-        dx, dv = tangent(p.integrator, p.model, traj, zero, zero, p.controls.external(du),
-                         start=self.first)
-        return np.concatenate([(s * (dx if kind == "x" else dv)[frame][idx]).ravel()
-                               for frame, kind, idx, _, s, _ in self.rows])
 
-    def vjp(self, traj, mu) -> np.ndarray:
-        """``J^T mu``: the derivative of ``mu . r`` in the controls (zero before ``first``)."""
-        p = self.problem
-        gx, gv = np.zeros_like(traj.x), np.zeros_like(traj.v)
-        at = 0
-        for frame, kind, idx, _, s, _ in self.rows:
-            k = idx.size * p.model.dim
-            (gx if kind == "x" else gv)[frame][idx] += s * mu[at:at + k].reshape(idx.size, -1)
-            at += k
-        g_ext, g_start = backward(p.integrator, p.model, traj, gx, gv, stop=self.first)
-        return p.controls.pullback(g_ext, g_start.v)
+        def jvp(du):
+            zero = np.zeros_like(p.x0)
+            dx, dv = tangent(p.integrator, p.model, traj, zero, zero, p.controls.external(du),
+                             start=self.first)
+            return np.concatenate([(s * (dx if kind == "x" else dv)[frame][idx]).ravel()
+                                   for frame, kind, idx, _, s, _ in self.rows])
+
+        def vjp(mu):
+            gx, gv = np.zeros_like(traj.x), np.zeros_like(traj.v)
+            at = 0
+            for frame, kind, idx, _, s, _ in self.rows:
+                k = idx.size * p.model.dim
+                (gx if kind == "x" else gv)[frame][idx] += (s * mu[at:at + k]
+                                                            .reshape(idx.size, -1))
+                at += k
+            g_ext, g_start = backward(p.integrator, p.model, traj, gx, gv, stop=self.first)
+            return p.controls.pullback(g_ext, g_start.v)
+
+        return Linearization(self.residual(traj), jvp, vjp, size=p.size, trajectory=traj,
+                             start=self.first)
 
     def misses(self, traj) -> list:
         """Per keyframe row: ``(kind, rms miss over its free particles)``."""
@@ -147,56 +152,3 @@ def factor_window(problem, Q, cols):
         raise ValueError(f"{problem.name}: the control terms' Hessian is singular on the "
                          "window; holding keyframes needs Smoothness with alpha > 0") from None
     return Q_window
-
-
-class WindowStep:
-    """The module docstring's step at the recorded run ``traj``: :meth:`land` and
-    :meth:`projected`, the two parts of the window's change ``d``; ``products`` counts the
-    sweeps (one tangent or adjoint pass over the window each), at most ``iterations``
-    iterations per solve (LSMR's or the conjugate gradients')."""
-
-    def __init__(self, constraint, traj, Q_window, cols, Q_diagonal, iterations: int = 60):
-        self.constraint, self.traj, self.Q_window, self.cols = constraint, traj, Q_window, cols
-        self.Q_diagonal = Q_diagonal
-        self.iterations, self.products = iterations, 0
-        self.r = constraint.residual(traj)
-        self.size = constraint.problem.size
-
-    def _J(self, d_window) -> np.ndarray:
-        du = np.zeros(self.size)
-        du[self.cols] = d_window
-        self.products += 1
-        return self.constraint.jvp(self.traj, du)
-
-    def _JT(self, y) -> np.ndarray:
-        self.products += 1
-        return self.constraint.vjp(self.traj, y)[self.cols]
-
-    def _QiJT(self, y) -> np.ndarray:
-        return self.Q_window.solve(self._JT(y))
-
-    def _solve(self, b) -> np.ndarray:
-        """``y`` with ``(J Q^-1 J^T) y = b`` by conjugate gradients from zero."""
-        m = self.r.size
-        A = spla.LinearOperator((m, m), matvec=lambda y: self._J(self._QiJT(y)), dtype=float)
-        y, _ = spla.cg(A, b, rtol=CG_RTOL, atol=CG_RTOL * self.constraint.scale,
-                       maxiter=self.iterations)
-        return y
-
-    def land(self) -> np.ndarray:
-        """The change that lands the linearized keyframes, or comes closest: the least
-        squares solution of ``J d = -r`` of least norm in Q's diagonal metric, by LSMR
-        (a miss the window cannot steer is left, not chased with ever larger forces)."""
-        scale = 1.0 / np.sqrt(self.Q_diagonal)
-        m, k = self.r.size, self.cols.size
-        J = spla.LinearOperator((m, k), dtype=float, matvec=lambda z: self._J(scale * z),
-                                rmatvec=lambda w: scale * self._JT(w))
-        z = spla.lsmr(J, -self.r, atol=CG_RTOL, btol=CG_RTOL, maxiter=self.iterations)[0]
-        return scale * z
-
-    def projected(self, g_window) -> np.ndarray:
-        """The control cost's Newton step in Q's metric (gradient ``g_window`` on the
-        window) projected onto the changes that leave the linearized keyframes where they
-        are: the damped step is ``projected / (1 + damping) + land``."""
-        gi = self.Q_window.solve(g_window)
-        return -gi + self._QiJT(self._solve(self._J(gi)))

@@ -21,7 +21,9 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
-from ..kernels import MappedKernel
+from ...geometry import BodyShape, Patch, Round, TriangleMesh
+from ...kernels import MappedKernel
+from .tangential import TangentialLaw
 
 STEP = 1e-5  # s: the central differences' half step
 
@@ -31,16 +33,19 @@ class Contact:
     """How a body (or the cloth itself) is touched: ``stiffness`` N/m, ``damping`` N s/m,
     ``thickness`` m (the gap kept to the surface), ``width`` m (the penetration over which
     the penalty stiffness ramps up, see :func:`~.penalty.penalty_law`) and ``friction``, the
-    Coulomb coefficient mu (0: frictionless; see :mod:`.friction`)."""
+    Coulomb coefficient mu (0: frictionless; see :mod:`.friction`) or a tangential law (a
+    :class:`~.tangential.TangentialLaw`, e.g. ``Coulomb(mu)``)."""
 
     stiffness: float = 2000.0
     damping: float = 1.0
     thickness: float = 0.01
     width: float = 0.005
-    friction: float = 0.0
+    friction: float | TangentialLaw = 0.0
 
     def __post_init__(self):
-        for name in ("stiffness", "damping", "thickness", "width", "friction"):
+        numbers = ("stiffness", "damping", "thickness", "width")
+        numbers += () if isinstance(self.friction, TangentialLaw) else ("friction",)
+        for name in numbers:
             value = getattr(self, name)
             if not (np.isfinite(value) and value >= 0):
                 raise ValueError(f"Contact.{name} must be non-negative and finite, got {value}")
@@ -108,6 +113,18 @@ class Body:
     def parameters(self, t: float) -> np.ndarray:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
         return np.concatenate([np.ravel(g) for g in self.geometry(t)])
+
+    def signed_distances(self, x: np.ndarray, t: float) -> np.ndarray:
+        """Every point's signed distance to the surface at time t (:func:`signed_distances`)."""
+        return signed_distances(self, x, t)
+
+    def shape(self, t: float) -> BodyShape:
+        """How the body looks at time t, for pictures and exports (a typed shape of
+        :mod:`casadi_keyframe.geometry`)."""
+        raise NotImplementedError
+
+    def _floats(self, t: float) -> list[np.ndarray]:
+        return [np.asarray(g, dtype=float) for g in self.geometry(t)]
 
     def local_geometry(self, x: np.ndarray, t: float) -> list[np.ndarray]:
         """The geometry at time t as one row per point of ``x`` ``(n, 3)``: the same row
@@ -180,6 +197,10 @@ class Plane(Body):
         p, vp = self.moving(self.point, t)
         return [p, self.turned(self.normal, t), vp, self.spin(t)]
 
+    def shape(self, t):
+        point, normal, *_ = self._floats(t)
+        return Patch(point, normal)
+
 
 def _sphere_surface(x, center, radius, velocity, omega):
     d = x - center
@@ -204,6 +225,10 @@ class Sphere(Body):
     def geometry(self, t):
         c, vc = self.moving(self.center, t)
         return [c, np.array([self.radius]), vc, self.spin(t)]
+
+    def shape(self, t):
+        center, radius, *_ = self._floats(t)
+        return Round(center, center, float(radius[0]))
 
 
 def _capsule_surface(x, a, b, radius, va, vb, omega):
@@ -238,6 +263,10 @@ class Capsule(Body):
         roll = ab * (self.spin(t) @ ab) / length2
         return [a, b, np.array([self.radius]), va, vb, np.cross(ab, vb - va) / length2 + roll]
 
+    def shape(self, t):
+        a, b, radius, *_ = self._floats(t)
+        return Round(a, b, float(radius[0]))
+
     def endpoints(self, t: float):
         return self.placed(self.a, t), self.placed(self.b, t)
 
@@ -257,7 +286,7 @@ class MeshBody(Body):
     frames, held before the first and after the last), in the body's own coordinates, which
     ``motion`` places.  A mesh of several pieces is their union.
 
-    Each point's geometry is its closest feature (:mod:`~..meshes.distance`, libigl):
+    Each point's geometry is its closest feature (:mod:`~...meshes.distance`, libigl):
     ``point`` its closest point, ``flat`` 1 on a face (``normal`` the face's), 0 on an edge
     (``edge`` its direction) or a vertex, ``side`` the sign, and the surface's velocity
     there, ``velocity`` and its ``spread`` over the feature (3 x 3).  Within the feature the
@@ -276,7 +305,7 @@ class MeshBody(Body):
     def __init__(self, vertices, faces, frames=None, *, fps: float | None = None, times=None,
                  contact=None, motion=None, source=None):
         super().__init__(contact, motion)
-        from ..meshes.distance import pieces, require_igl
+        from ...meshes.distance import pieces, require_igl
         require_igl()
         self.vertices, self.faces = _checked_mesh(vertices, faces)
         self.frames, self.times = _checked_frames(frames, fps, times, len(self.vertices))
@@ -289,8 +318,8 @@ class MeshBody(Body):
                   motion=None) -> "MeshBody":
         """The body in a mesh file: OBJ, PLY, USD (still or time-sampled), or a PC2 cache
         with its rest OBJ (``rest``, default ``NAME_rest.obj``) at ``fps`` frames per second
-        (:func:`~..meshes.read_animated`)."""
-        from ..meshes import read_animated
+        (:func:`~...meshes.read_animated`)."""
+        from ...meshes import read_animated
         found = read_animated(path, rest=rest, fps=fps)
         return cls(found.mesh.vertices, found.mesh.faces, found.frames, times=found.times,
                    contact=contact, motion=motion, source=path)
@@ -324,7 +353,7 @@ class MeshBody(Body):
         return self.frames[k] + (s - k) * (self.frames[k + 1] - self.frames[k])
 
     def _shape(self, t: float):
-        from ..meshes.distance import MeshShape
+        from ...meshes.distance import MeshShape
         key = None if self.frames is None else float(t)
         if key not in self._shapes:
             _forget(self._shapes, self.KEPT)
@@ -344,6 +373,9 @@ class MeshBody(Body):
 
     def geometry(self, t):
         return [self.world_vertices(t), self.faces]
+
+    def shape(self, t):
+        return TriangleMesh(*self.geometry(t))
 
     def parameters(self, t):
         return np.zeros(0)  # per point: local_geometry

@@ -10,12 +10,12 @@ from __future__ import annotations
 
 import functools
 import re
-import time
 
 import numpy as np
 from scipy.optimize import minimize, show_options
 
-from .outcome import FAILED, LIMIT, lbfgsb_outcome
+from ..outcome import FAILED, LIMIT, lbfgsb_outcome
+from .base import LibraryOptions
 
 
 @functools.cache
@@ -33,23 +33,33 @@ def option_names() -> tuple[str, ...]:
     return names
 
 
+class LbfgsbOptions(LibraryOptions):
+    """L-BFGS-B's options, by scipy's names (:func:`option_names`)."""
+
+    label = "scipy's L-BFGS-B"
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        return option_names()
+
+
 class _TimeUp(Exception):
     """Raised from L-BFGS-B's callback past the deadline (scipy lets it through)."""
 
 
-def run(problem, ev, u0, maxiter, tol, options, on_iteration, deadline):
-    """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), calling
-    ``on_iteration()`` after each iteration; stop at ``deadline`` (``time.perf_counter()``,
-    or None).  Returns ``(status, message)`` (:mod:`.outcome`)."""
-    opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": tol, "gtol": 1e-10,
+def run(problem, ev, u0, call):
+    """Search from ``u0`` with the evaluator ``ev`` (f and gradient together), as ``call``
+    (a :class:`~.base.SearchCall`) asks.  Returns ``(status, message)`` (:mod:`..outcome`)."""
+    maxiter, on_iteration, deadline = call.maxiter, call.on_iteration, call.deadline
+    opts = {"maxiter": maxiter, "maxfun": 10 * maxiter, "ftol": call.tol, "gtol": 1e-10,
             "maxcor": 20}
-    opts.update(options)
+    opts.update(call.options.as_dict())
     lb, ub = problem.bounds()
     bounds = list(zip(lb, ub)) if np.isfinite(lb).any() or np.isfinite(ub).any() else None
 
     def callback(intermediate_result):
         on_iteration()
-        if deadline is not None and time.perf_counter() >= deadline:
+        if deadline.passed():
             raise _TimeUp
 
     try:

@@ -296,7 +296,9 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
     * ``jvp(x, v, *params, w, q, dt, dx, dv) -> dg``: the same function along ``(dx, dv)``;
     * ``step(x, v, *params, w, q, dt) -> g``: that function itself, the interaction's part
       of a linearized step's right side (the transcription's inverse step is written with
-      it, :mod:`casadi_keyframe.optimize.positions`).
+      it, :mod:`casadi_keyframe.optimize.positions`);
+    * ``step_jac(x, v, *params, w, q, dt) -> vec dg/d(x, v, w, q)``, row-major: its Jacobian,
+      the blocks the transcription's sparse Jacobian is gathered from.
     """
     K = (ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x) if stiffness is None
          else stiffness)
@@ -317,4 +319,6 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
         "jvp": ca.Function(f"{name}_jvp", args + [w, q, dt, dx, dv],
                            [ca.jtimes(g, ca.vertcat(x, v), ca.vertcat(dx, dv))]),
         "step": ca.Function(f"{name}_step", args + [w, q, dt], [g]),
+        "step_jac": ca.Function(f"{name}_step_jac", args + [w, q, dt], [ca.reshape(
+            ca.jacobian(g, ca.vertcat(x, v, w, q)).T, -1, 1)]),
     }

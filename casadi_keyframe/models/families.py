@@ -282,6 +282,17 @@ class FamilyModel(BlockJacobians, StepHold):
             out += family.symbolic_forces(X, V, part, mine)
         return out
 
+    def step_jacobians(self, x, v, w, q, times, dt) -> list:
+        """Each family's :meth:`~.interaction.Interaction.step_jacobian` at many steps at
+        once (x, v, w, q ``(steps, n, 3)``): ``[(particles, blocks), ...]``, the families
+        that add nothing left out."""
+        out = []
+        for family in self.families:
+            found = family.step_jacobian(x, v, w, q, times, dt)
+            if found is not None:
+                out.append(found)
+        return out
+
     def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
         """``dt f + dt^2 K W + dt D Q`` (``3 x n``, the right side of a linearized step less
         its control) summed over the families, each written per interaction; S the

@@ -182,6 +182,16 @@ class Interaction:
         raise NotImplementedError(f"{type(self).__name__} has no symbolic step: the "
                                   "transcription cannot write its inverse step")
 
+    def step_jacobian(self, x, v, w, q, times, dt):
+        """The Jacobian of :meth:`symbolic_step`'s function at many steps at once:
+        ``(particles, blocks)``, ``particles`` ``(P, k)`` the interactions' particles (the
+        same at every step) and ``blocks`` ``(steps, P, 4, 3k, 3k)``, the derivatives of
+        each interaction's ``3k`` outputs in x, v, w and q of its particles; x, v, w, q are
+        ``(steps, n, 3)``, ``times`` the steps' start times.  None: the family adds
+        nothing (the hold, which acts through the solve)."""
+        raise NotImplementedError(f"{type(self).__name__} has no step Jacobian: the "
+                                  "transcription cannot write its inverse step")
+
 
 class PairInteraction(Interaction):
     """A law of two particles, ``(d = x_j - x_i, dv = v_j - v_i, *params) -> f_i``, lifted
@@ -265,6 +275,22 @@ class PairInteraction(Interaction):
         i, j, blocks = self._symbolic("jac", X, V, decisions)
         return FamilyBlocks(i, j, tuple(blocks))
 
+    def step_jacobian(self, x, v, w, q, times, dt):
+        if not self.fixed_pairs:
+            raise NotImplementedError(f"{self.name} acts over pairs found per state: the "
+                                      "transcription has no fixed pattern for it")
+        i, j = self.all_pairs()
+        steps, P = x.shape[0], i.size
+        inputs = [(a[:, j] - a[:, i]).reshape(-1, 3) for a in (x, v)]
+        params = [np.tile(p, (steps, 1)) for p in self.pair_parameters(i, j)]
+        deltas = [(a[:, j] - a[:, i]).reshape(-1, 3) for a in (w, q)]
+        (jac,) = _kernel(self, "step_jac")(*inputs, *params, *deltas, np.full((steps * P, 1), dt))
+        A = jac.reshape(steps, P, 3, 4, 3).transpose(0, 1, 3, 2, 4)  # (steps, P, 4, 3, 3)
+        blocks = np.empty((steps, P, 4, 6, 6))
+        blocks[..., :3, :3] = blocks[..., 3:, 3:] = -A  # g on i, -g on j; g of x_j - x_i
+        blocks[..., :3, 3:] = blocks[..., 3:, :3] = A
+        return np.stack([i, j], axis=1), blocks
+
     def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
         i, j = self.all_pairs()
         params = self.symbolic_pair_parameters(i, j, decisions)
@@ -325,6 +351,15 @@ class ParticleInteraction(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S, decisions)))
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        steps, n = x.shape[:2]
+        jac = np.empty((steps, n, 36))
+        for k in range(steps):
+            (jac[k],) = _kernel(self, "step_jac")(x[k], v[k], *self.columns_at(x[k], times[k], None),
+                                        w[k], q[k], np.full((n, 1), dt))
+        blocks = jac.reshape(steps, n, 3, 4, 3).transpose(0, 1, 3, 2, 4)
+        return np.arange(n)[:, None], blocks
 
     def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
         n = X.shape[1]
@@ -396,6 +431,16 @@ class StencilInteraction(Interaction):
         return FamilyBlocks(stencil=self.stencils,
                             stencil_blocks=tuple(self._symbolic("jac", X, V)))
 
+    def step_jacobian(self, x, v, w, q, times, dt):
+        steps = x.shape[0]
+        P, k = self.stencils.shape
+        stacked = [a[:, self.stencils].reshape(steps * P, 3 * k) for a in (x, v, w, q)]
+        params = [np.tile(p, (steps, 1)) for p in self.stencil_parameters()]
+        (jac,) = _kernel(self, "step_jac")(*stacked[:2], *params, *stacked[2:],
+                                 np.full((steps * P, 1), dt))
+        blocks = jac.reshape(steps, P, 3 * k, 4, 3 * k).transpose(0, 1, 3, 2, 4)
+        return self.stencils, blocks
+
     def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
         P, k = self.stencils.shape
         columns = self.stencils.ravel().tolist()
@@ -404,3 +449,13 @@ class StencilInteraction(Interaction):
         g = self.kernels["step"].map(P)(*stacked[:2], *params, *stacked[2:], dt)
         return ca.mtimes(ca.reshape(g, 3, self.stencils.size),
                          stencil_incidence(self.stencils, self.n))
+
+
+def _kernel(family, name: str) -> MappedKernel:
+    """The family's mapped kernel ``name`` (the transcription's ``step_jac``), made (and
+    compiled) at its first use."""
+    made = family.__dict__.setdefault("_transcription_kernels", {})
+    if name not in made:
+        made[name] = MappedKernel(family.kernels[name],
+                                  jit=getattr(family.mapped.get("force"), "jit", None))
+    return made[name]

@@ -400,3 +400,6 @@ class BodyHold(Interaction):
 
     def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
         return ca.SX.zeros(3, X.shape[1])
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        return None

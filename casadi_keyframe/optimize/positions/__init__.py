@@ -4,6 +4,11 @@ the inverse of the problem's own step, least control cost as the objective and t
 constraints.
 
 * :mod:`.transcription`: the problem in positions, its forces and their sparse Jacobian;
+* :mod:`.goal`: the keyframes' tolerances as constraints on the positions;
+* :mod:`.sqp`: the search, a sequential quadratic programme on the effort's Gauss-Newton
+  matrix, and :mod:`.restore`: its correction for the stiff springs;
+* :mod:`.replay`: controls that move the simulation along planned positions;
+* :mod:`.method`: the search as the method ``"transcription"`` of ``METHODS``.
 """
 from .transcription import Transcription, TranscriptionError, check_transcribable
 

@@ -1,19 +1,25 @@
 r"""Least effort under the goal, in positions: a sequential quadratic programme with the
-effort's Gauss-Newton Hessian.
+effort's Gauss-Newton matrix, in a trust region.
 
 At an iterate z, with the controls ``u(z)`` (:class:`~.transcription.Transcription`), their
 Jacobian ``J`` and the control terms' constant Hessian ``Q``, each step solves
 
     minimise  g^T p + 1/2 p^T (J^T Q J + sum_k lambda_k C_k + mu D) p
-    subject to c_k + a_k^T p <= 0   (every goal constraint, :mod:`.goal`)
+    subject to c_k + a_k^T p <= c_k - theta max(c_k, 0)   (the goal, :mod:`.goal`)
 
-(``g = J^T grad u``: the effort's gradient; ``C_k`` the constraints' constant Hessians;
-``D`` the diagonal of the Gauss-Newton matrix): one sparse Cholesky factorisation, one
-solve per constraint and a tiny active-set problem for the multipliers.  A step is kept when
-the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a share of what the model
-predicts; ``mu`` (Levenberg-Marquardt) shrinks after a good step and grows after a poor one.
-It ends when the constraints hold and a step changes the effort by less than ``tol``
-(relative), or at ``maxiter``, the deadline or a signal.
+(``g = J^T Q u``: the effort's gradient; ``C_k`` the constraints' constant Hessians and
+``lambda_k`` their last multipliers; ``D`` the unknowns' masses over dt^2, squared and
+weighed as the control cost weighs a force, so ``mu`` is a pure number): one sparse Cholesky
+factorisation, one solve per constraint and a tiny active-set problem for the multipliers.
+``mu`` and ``theta`` (the share of a violated constraint one step removes) make a trust
+region: the linear model of the forces holds only for small moves where the cloth buckles
+or turns, and a step that asks the whole goal at once follows the model into motions the
+nonlinear step does not have.  The trial is corrected for the stiff springs
+(:mod:`.restore`) and kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls
+by a share of what the model predicts; then ``mu`` halves and ``theta`` doubles, else
+``mu`` grows fourfold and ``theta`` halves.  It ends when the constraints hold and a kept
+step changes the effort by less than ``tol`` (relative), at ``maxiter``, when asked to stop,
+or when no step is kept at the largest damping.
 """
 from __future__ import annotations
 
@@ -31,7 +37,7 @@ from scipy.sparse.linalg import splu
 from .restore import LengthRestoration
 
 ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
-MU_START, MU_MIN, MU_MAX = 1e-2, 1e-10, 1e12  # damping, in the mass metric
+MU_START, MU_MIN, MU_MAX = 1e-2, 1e-10, 1e12  # damping, in the metric D
 THETA_START, THETA_MIN = 0.25, 1e-3  # the share of the constraints' violation a step removes
 
 
@@ -52,7 +58,9 @@ class Point:
 
 @dataclass
 class Progress:
-    """What each iteration reports (the method turns it into history records)."""
+    """What an iteration reports: the kept point's effort, violation and misses (m), the
+    damping and share it ends with, the trial step's length, whether it was kept and the
+    ratio of the merit's actual to predicted decrease."""
 
     iteration: int
     effort: float
@@ -61,12 +69,15 @@ class Progress:
     mu: float
     step: float
     kept: bool
-    theta: float = 1.0
-    ratio: float = 1.0
+    theta: float
+    ratio: float
 
 
 @dataclass
 class Outcome:
+    """How the search ended: its point, why (``converged``, ``maxiter``, ``stalled``,
+    ``stopped``), its iterations and their reports."""
+
     z: np.ndarray
     reason: str  # "converged", "maxiter", "stalled", "stopped"
     iterations: int
@@ -120,8 +131,13 @@ class PositionSQP:
         self.evaluations = 0
         self.sigma = 0.0  # the merit's penalty weight, never lowered
         self.restore = LengthRestoration(tr)
+        self.mu_used = None
+        # the damping's metric: the control cost's curvature of a unit move of one frame of
+        # one particle (its mass over dt^2, squared, weighed as the cost weighs a force),
+        # so mu is a pure number
         masses = np.repeat(tr.problem.model.masses, 3)[tr.free_flat]
-        self.metric = np.tile(masses, tr.N) / tr.dt ** 2  # kinetic-energy-like, per unknown
+        weight = float(np.mean(Q.diagonal()))
+        self.metric = np.tile(weight * (masses / tr.dt ** 2) ** 2, tr.N)
 
     def point(self, z, jacobian: bool = True) -> Point:
         """The iterate at ``z`` (with the control Jacobian when asked)."""
@@ -145,6 +161,7 @@ class PositionSQP:
                 reason = "stopped"
                 break
             step, lam_new, predicted, sigma = self._step(x, lam, mu, theta)
+            mu = self.mu_used
             merit = lambda p: p.effort + sigma * p.violation()  # noqa: E731
             trial = self.point(self.restore(x.z, x.z + step), jacobian=False)
             actual = merit(x) - merit(trial)
@@ -154,7 +171,7 @@ class PositionSQP:
             if kept:
                 x, lam = self.point(trial.z), lam_new
                 if ratio > 0.5:
-                    mu, theta = max(mu / 3.0, MU_MIN), min(2.0 * theta, 1.0)
+                    mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, 1.0)
             else:
                 mu, theta = min(4.0 * mu + MU_MIN, MU_MAX), max(theta / 2.0, THETA_MIN)
             report = Progress(it, x.effort, x.violation(),
@@ -180,8 +197,13 @@ class PositionSQP:
         for l, C in zip(lam, self.C):
             if l > 0:
                 H = H + l * C
-        B = H + sp.diags(mu * self.metric)
-        solve = self.factor(B.tocsc())
+        while True:  # a matrix that does not factor (round-off): more damping
+            try:
+                solve = self.factor((H + sp.diags(mu * self.metric)).tocsc())
+                break
+            except ArithmeticError:
+                mu = max(4.0 * mu, 1e-8)
+        self.mu_used = mu
         A = np.stack([k.gradient(x.z) for k in self.constraints], axis=1)
         p0 = -solve(x.gradient)
         W = solve(A)

@@ -89,13 +89,9 @@ class Transcription:
         self.x_before = problem.x0 - self.dt * problem.v0  # so that v_0 = (x_0 - this) / dt
         self.scene = np.stack([model.scene_parameters(k * self.dt) for k in range(self.N)],
                               axis=1) if model.scene_parameters(0.0).size else np.zeros((0, self.N))
-        step, jacobian = _step_functions(model, self.dt)
-        self._step = Buffered(step.map(self.N))
-        self._jacobian = Buffered(jacobian.map(self.N))
-        self._pattern(jacobian)
-        idx = problem.controls.idx
-        comps = (idx[:, None] * 3 + np.arange(3)).ravel()
-        self.control_rows = (np.arange(self.N)[:, None] * 3 * self.n + comps).ravel()
+        self._step = Buffered(_step_function(model, self.dt).map(self.N))
+        self.times = np.arange(self.N) * self.dt
+        self._jacobian = None  # its pattern, made at the first call
 
     # -- positions --------------------------------------------------------------------------
     def frames(self, z) -> np.ndarray:
@@ -136,39 +132,100 @@ class Transcription:
         return e[:, self.problem.controls.idx].ravel()
 
     def control_jacobian(self, z) -> sp.csr_matrix:
-        """``du/dz`` (rows: the controls, columns: the unknowns), sparse, exact."""
+        """``du/dz`` (rows: the controls, columns: the unknowns), sparse, exact: each
+        family's per-interaction blocks (:meth:`~casadi_keyframe.models.families.FamilyModel.step_jacobians`)
+        and the masses', gathered into a fixed pattern."""
         x = self.frames(z)
-        (values,) = self._jacobian(*self._stacked(x), self.scene)
-        data = values[self._take]
-        return sp.csr_matrix((data, self._indices, self._indptr), shape=self._shape)
+        v = self.velocities(x)
+        w, q = v[1:], v[1:] - v[:-1]
+        parts = self.problem.model.step_jacobians(x[:-1], v[:-1], w, q, self.times, self.dt)
+        values = [self._mass_values()] + [_frame_blocks(blocks, self.dt).ravel()
+                                          for _, blocks in parts]
+        if self._jacobian is None:
+            self._jacobian = ControlJacobianPattern(self, [p for p, _ in parts])
+        return self._jacobian.matrix(values)
 
-    def _pattern(self, jacobian) -> None:
-        """The control Jacobian's fixed pattern: where each mapped step Jacobian's
-        nonzeros go (free columns of frames 1..N only; rows of controlled components)."""
-        rows, cols = jacobian.sparsity_out(0).get_triplet()
-        rows, cols = np.asarray(rows), np.asarray(cols)
-        per_step = rows.size
-        block, comp = cols // (3 * self.n), cols % (3 * self.n)
-        # columns: vec(3 x n) of frames n-1 (block 0), n (1), n+1 (2); vec order is C (n, 3)
-        position = -np.ones(3 * self.n, np.intp)
-        position[self.free_flat] = np.arange(self.nf)
-        controlled = -np.ones(3 * self.n, np.intp)
-        idx = self.problem.controls.idx
+    def _mass_values(self) -> np.ndarray:
+        """The masses' part of each step's three frame blocks, ``M / dt^2 (1, -2, 1)``, per
+        step, particle, frame and component (the diagonal)."""
+        m = np.repeat(self.problem.model.masses, 3) / self.dt ** 2
+        return np.broadcast_to(np.array([1.0, -2.0, 1.0])[None, :, None] * m[None, None, :],
+                               (self.N, 3, 3 * self.n)).ravel()
+
+
+class ControlJacobianPattern:
+    """Where every entry of the control Jacobian's per-step blocks goes: the fixed sparse
+    pattern of ``du/dz`` and, for each part (the masses' diagonal, then each family's
+    blocks), the index of its entries in the matrix's data (-1: a row of an uncontrolled
+    component or a column of the start or a prescribed component, dropped)."""
+
+    def __init__(self, tr, particle_lists):
+        n, N = tr.n, tr.N
+        self.column = -np.ones(3 * n, np.int64)
+        self.column[tr.free_flat] = np.arange(tr.nf)
+        self.row = -np.ones(3 * n, np.int64)
+        idx = tr.problem.controls.idx
         comps = (idx[:, None] * 3 + np.arange(3)).ravel()
-        controlled[comps] = np.arange(comps.size)
-        R, C, T = [], [], []
-        for step in range(self.N):
-            frame = step - 1 + block  # the frame each nonzero's column belongs to
-            keep = (frame >= 1) & (position[comp] >= 0) & (controlled[rows] >= 0)
-            R.append(step * comps.size + controlled[rows[keep]])
-            C.append((frame[keep] - 1) * self.nf + position[comp[keep]])
-            T.append(step * per_step + np.flatnonzero(keep))
-        R, C, T = (np.concatenate(a) for a in (R, C, T))
-        order = np.lexsort((C, R))
-        R, C, self._take = R[order], C[order], T[order]
-        self._shape = (self.N * comps.size, self.size)
-        self._indices = C
-        self._indptr = np.searchsorted(R, np.arange(self._shape[0] + 1))
+        self.row[comps] = np.arange(comps.size)
+        self.width = comps.size
+        self.shape = (N * comps.size, tr.size)
+        self.nf, self.N = tr.nf, N
+        entries = [self._diagonal(n)]
+        for particles in particle_lists:
+            k = particles.shape[1]
+            comp = (particles[:, :, None] * 3 + np.arange(3)).reshape(-1, 3 * k)  # (P, 3k)
+            entries.append(self._entries(comp[:, :, None], comp[:, None, :]))
+        keys = np.concatenate([e[e >= 0] for e in entries])
+        self.keys, inverse = np.unique(keys, return_inverse=True)
+        self.targets, at = [], 0
+        for e in entries:
+            t = -np.ones(e.size, np.int64)
+            valid = e.ravel() >= 0
+            t[valid] = inverse[at:at + valid.sum()]
+            at += valid.sum()
+            self.targets.append(t)
+        rows, cols = np.divmod(self.keys, self.shape[1])
+        self.indices = cols
+        self.indptr = np.searchsorted(rows, np.arange(self.shape[0] + 1))
+
+    def _entries(self, rows, cols):
+        """The flat keys ``row * columns + column`` of every (step, stencil, frame, row,
+        column) entry of a family's blocks (-1 where dropped); ``rows`` ``(P, 3k, 1)`` and
+        ``cols`` ``(P, 1, 3k)`` are component indices within a frame."""
+        steps = np.arange(self.N)[:, None, None, None, None]
+        frame = steps - 1 + np.arange(3)[None, None, :, None, None]  # n-1, n, n+1
+        r = self.row[rows][None, :, None]
+        c = self.column[cols][None, :, None]
+        return self._keys(steps, frame, r, c)
+
+    def _diagonal(self, n):
+        """The keys of the masses' diagonal: (step, frame, component)."""
+        steps = np.arange(self.N)[:, None, None]
+        frame = steps - 1 + np.arange(3)[None, :, None]
+        comp = np.arange(3 * n)[None, None, :]
+        return self._keys(steps, frame, self.row[comp], self.column[comp])
+
+    def _keys(self, steps, frame, r, c):
+        row = np.where(r >= 0, steps * self.width + r, -1)
+        col = np.where((c >= 0) & (frame >= 1), (frame - 1) * self.nf + c, -1)
+        return np.where((row >= 0) & (col >= 0), row * self.shape[1] + col, -1).reshape(-1)
+
+    def matrix(self, values) -> sp.csr_matrix:
+        data = np.zeros(self.keys.size)
+        for t, v in zip(self.targets, values):
+            keep = t >= 0
+            data += np.bincount(t[keep], v[keep], minlength=self.keys.size)
+        return sp.csr_matrix((data, self.indices, self.indptr), shape=self.shape)
+
+
+def _frame_blocks(blocks, dt):
+    """A family's ``(steps, P, 4, 3k, 3k)`` derivatives of ``G = dt f + dt^2 K w + dt D q``
+    in x, v, w, q as the inverse step's ``-G / dt`` blocks in the frames n-1, n, n+1
+    (``(steps, P, 3, 3k, 3k)``), with ``v_n = (x_n - x_{n-1}) / dt``, ``w = v_{n+1}``,
+    ``q = v_{n+1} - v_n``."""
+    gx, gv, gw, gq = (blocks[:, :, k] for k in range(4))
+    ahead, behind = (gw + gq) / dt ** 2, (gv - gq) / dt ** 2
+    return np.stack([behind, -gx / dt + ahead - behind, -ahead], axis=2)
 
 
 class Buffered:
@@ -196,9 +253,9 @@ class Buffered:
         return [r.copy() for r in self.out]
 
 
-def _step_functions(model, dt: float):
-    """``(step, jacobian)``: the inverse step ``(X_{n-1}, X_n, X_{n+1}, S) -> e_n`` (each
-    ``3 x n``; S the scene at t_n) and its sparse Jacobian in ``vec`` of the three frames."""
+def _step_function(model, dt: float) -> ca.Function:
+    """The inverse step ``(X_{n-1}, X_n, X_{n+1}, S) -> e_n`` (each ``3 x n``; S the scene
+    at t_n)."""
     n = model.n
     frames = [ca.MX.sym(name, 3, n) for name in ("before", "now", "next")]
     scene = ca.MX.sym("scene", model.scene_parameters(0.0).size)
@@ -208,8 +265,4 @@ def _step_functions(model, dt: float):
     g = ca.Function("step_rhs", [X, V, W, Q, S], [model.symbolic_step(X, V, W, Q, S, dt)])
     mass = ca.DM(np.repeat(model.masses[None, :], 3, axis=0))
     e = mass * (v1 - v) / dt - g(frames[1], v, v1, v1 - v, scene) / dt
-    step = ca.Function("inverse_step", [*frames, scene], [e])
-    flat = ca.vertcat(*(ca.vec(f) for f in frames))
-    jac = ca.jacobian(ca.vec(e), flat)
-    jacobian = ca.Function("inverse_step_jacobian", [*frames, scene], [jac])
-    return step, jacobian
+    return ca.Function("inverse_step", [*frames, scene], [e])

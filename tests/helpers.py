@@ -1,5 +1,6 @@
 """What several test files share: a small flock with every objective term, a gradient
-route that acts like Ctrl-C, and the exact routes' agreement with CasADi.  Imported as ``from helpers import ...`` (pytest puts this folder
+route that acts like Ctrl-C, the exact routes' agreement with CasADi, and a slope against
+the forward pass's stable central differences.  Imported as ``from helpers import ...`` (pytest puts this folder
 on the path)."""
 import numpy as np
 import pytest
@@ -54,3 +55,16 @@ def assert_exact_routes(prob, u):
     d = np.random.default_rng(1).standard_normal(prob.size)
     assert prob.directional_derivative(u, d) == pytest.approx(g_ref @ d, rel=1e-8)
     return g, d
+
+
+def assert_forward_derivative(prob, u, slope, d, tolerance=1e-6):
+    """``slope`` (a route's ``g . d``) is the derivative of the forward pass along ``d``: the
+    central difference of ``simulate``, stable over three decades of h, meets it within
+    ``tolerance``; returns the :class:`StableDifference`."""
+    from casadi_keyframe.studies.forward_differences import stable_difference
+    size = np.linalg.norm(d)
+    fd = stable_difference(prob, u, d / size)
+    slope = slope / size
+    assert fd.stable, f"central differences not stable over three decades: {fd.describe()}"
+    assert fd.error(slope) <= tolerance, (fd.error(slope), fd.describe())
+    return fd

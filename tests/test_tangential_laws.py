@@ -23,9 +23,11 @@ G = 9.81
 @dataclass(frozen=True)
 class Anisotropic(TangentialLaw):
     """Coulomb friction with coefficient ``mu`` along ``axis`` (a unit direction in the
-    body's tangent plane) and ``across`` it: ``F = -N (mu s_a + across s_c) / |s|``, the
-    slip split along and across the axis; a sticking contact slides when its tangential
-    impulse leaves the ellipse ``(r_a / mu)^2 + (r_c / across)^2 <= N^2``."""
+    body's tangent plane) and ``across`` it, by maximal dissipation over an ellipse: ``F =
+    -N (mu^2 s_a + across^2 s_c) / sqrt(mu^2 |s_a|^2 + across^2 |s_c|^2)``, the slip split
+    along and across the axis (minus the slip gradient of the convex ``N sqrt(mu^2 |s_a|^2 +
+    across^2 |s_c|^2)``); a sticking contact slides when its tangential impulse leaves the
+    ellipse ``(r_a / mu)^2 + (r_c / across)^2 <= N^2``."""
 
     mu: float
     across: float
@@ -37,7 +39,8 @@ class Anisotropic(TangentialLaw):
     @staticmethod
     def impulse(N, slip, normal, mu, across, axis):
         along = axis * ca.dot(axis, slip)
-        return -N * (mu * along + across * (slip - along)) / ca.sqrt(ca.dot(slip, slip) + 1e-30)
+        weighted = mu ** 2 * along + across ** 2 * (slip - along)
+        return -N * weighted / ca.sqrt(ca.dot(weighted, slip) + 1e-30)
 
     def leaves(self, tangential, N):
         axis = np.asarray(self.axis, float)
@@ -107,7 +110,9 @@ def test_gradients_through_an_anisotropic_slide_are_the_symbolic_steps():
 
 def test_the_seams_kernels_are_the_derivatives_of_the_laws_impulse():
     """The kernels a law gets (impulse, vjp, jvp) against central differences of its own
-    impulse, stable over three decades of h, for a sliding particle over a turning plane."""
+    linearized impulse ``F - B q``, stable over three decades of h, for a sliding particle
+    over a turning plane; ``B`` is the slip derivative of F, projected on the tangent plane,
+    symmetric and positive semi-definite."""
     law = Anisotropic(0.3, 0.7, (0.6, 0.8, 0.0))
     kernels = tangential_kernels(Anisotropic, Plane, 0.5)
     rng = np.random.default_rng(3)
@@ -117,16 +122,29 @@ def test_the_seams_kernels_are_the_derivatives_of_the_laws_impulse():
                                     np.zeros(3)))
     geometry = [*plane.geometry(0.1), *plane.geometry(0.1 + 1 / 60)]
     x, v = np.array([0.2, 0.1, 0.004]), np.array([0.8, -0.3, -0.2])
-    rest = [*geometry, 0.01, 1 / 60, 1.0, 0.02, [0, 0, -G], [1.0, 0, 0], *law.coefficients()]
+    rest = [*geometry, 0.01, 1 / 60, 1.0, 0.02, [0, 0, -G], *law.coefficients()]
+    q = 0.1 * rng.standard_normal(3)
 
-    def impulse(x, v):
-        return np.array(kernels["impulse"](x, v, *rest)[0]).ravel()
+    def pushed(x, v):
+        F, B, _ = (np.array(a) for a in kernels["impulse"](x, v, *rest))
+        return F.ravel() - B.reshape(3, 3) @ q
 
     dx, dv, lam = rng.standard_normal(3), rng.standard_normal(3), rng.standard_normal(3)
-    jvp = np.array(kernels["jvp"](x, v, *rest, dx, dv)).ravel()
-    central = [(impulse(x + e * dx, v + e * dv) - impulse(x - e * dx, v - e * dv)) / (2 * e)
+    jvp = np.array(kernels["jvp"](x, v, *rest, q, dx, dv)).ravel()
+    central = [(pushed(x + e * dx, v + e * dv) - pushed(x - e * dx, v - e * dv)) / (2 * e)
                for e in (1e-4, 1e-5, 1e-6)]
     for quotient in central:
         np.testing.assert_allclose(quotient, jvp, rtol=1e-6, atol=1e-9 * np.abs(jvp).max())
-    gx, gv = (np.array(a).ravel() for a in kernels["vjp"](x, v, *rest, lam))
+    gx, gv = (np.array(a).ravel() for a in kernels["vjp"](x, v, *rest, lam, q))
     assert gx @ dx + gv @ dv == pytest.approx(lam @ jvp, rel=1e-12)
+    F, B, _ = (np.array(a) for a in kernels["impulse"](x, v, *rest))
+    B = B.reshape(3, 3)
+    np.testing.assert_allclose(B, B.T, atol=1e-15)
+    assert np.linalg.eigvalsh(B).min() > -1e-12
+    e = 1e-6  # B is minus F's slip derivative on the tangent plane (z: the plane turns about
+    J = np.zeros((3, 3))  # it), symmetrized; N does not change along the plane
+    for k in range(2):
+        step = np.eye(3)[k]
+        J[:, k] = (np.array(kernels["impulse"](x, v + e * step, *rest)[0])
+                   - np.array(kernels["impulse"](x, v - e * step, *rest)[0])).ravel() / (2 * e)
+    np.testing.assert_allclose(-B, (J + J.T) / 2, rtol=1e-6, atol=1e-9 * np.abs(B).max())

@@ -35,7 +35,8 @@ class Swapped(Adjoint):
 
     def limits(self, model) -> list[str]:
         """Penalty springs on curved bodies (sphere, capsule), whose curvature and damping
-        terms make its backward pass grow without bound, and self-contact."""
+        terms make its backward pass grow without bound, self-contact, and friction, whose
+        sliding impulses' derivatives it leaves out."""
         families = getattr(model, "families", ())
         curved = sorted({f.body.kind for f in families
                          if isinstance(f, BodyPenalty) and f.body.kind != "plane"})
@@ -45,6 +46,9 @@ class Swapped(Adjoint):
                        "overflow")
         if any(isinstance(f, SelfPenalty) for f in families):
             out.append("self-contact makes it inaccurate")
+        if any(getattr(f, "stick_slide", None) is not None for f in families):
+            out.append("with friction it is not the forward pass's derivative (it leaves out "
+                       "the sliding impulses' derivatives)")
         return out
 
     def unreliable(self, limits: list[str]) -> str:

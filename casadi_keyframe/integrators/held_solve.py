@@ -16,8 +16,10 @@ particles is the hold's impulse.
 Backward (the cotangent ``w`` of dv): ``mu = A_hat^-1 S w`` and ``lam = mu + P (w - A mu)``
 solve ``(S A + P)^T lam = w``; ``mu`` takes the place of the unheld step's multiplier, and
 ``lam`` with ``q = (dv - z) - r`` weighs the normals' and targets' derivatives.  With
-friction ``P`` also holds sticking particles' tangents, and the sliding ones' lagged
-impulses join b (:mod:`~casadi_keyframe.models.contact.tangential`); ``r`` is then the hold's own.  Tangent:
+friction ``P`` also holds sticking particles' tangents, and a sliding particle's impulse,
+linearized in dv as ``F - B dv`` (:mod:`~casadi_keyframe.models.contact.tangential`), puts
+F into b and B into A (:func:`sliding_step`): A stands for ``A + B`` above and below, and
+``r`` is the hold's own impulse.  Tangent:
 with ``g`` the derivative of the residual's right side, ``d(dv) = P g + A_hat^-1 S (g - A P g)``.
 """
 from __future__ import annotations
@@ -25,21 +27,39 @@ from __future__ import annotations
 import numpy as np
 
 
+def sliding_step(product, held):
+    """The product ``y -> (A + B) y`` (flat) of a step whose ``held`` set slides particles
+    (B: their friction's blocks), from A's ``product``; A's own without slides."""
+    if held is None or not held.frictional or not held.blocks.any():
+        return product
+    return lambda y: product(y) + held.sliding_product(y).ravel()
+
+
 def projected_matrix(pattern, values, product, held, masses):
-    """``(values, product)`` of ``A_hat = S A S + M P``: its CSC data in ``pattern`` (A's
-    data ``values`` projected) and its product with a flat vector (from A's ``product``)."""
+    """``(values, product)`` of ``A_hat = S A S + M P`` (A with the slides' blocks): its CSC
+    data in ``pattern`` (A's data ``values`` projected) and its product with a flat vector
+    (from ``product``, the step's with the slides: :func:`sliding_step`)."""
     n = masses.size
     projector = held.projector(n)
     touched = np.zeros(n, bool)
     touched[held.particles] = True
-    data = pattern.projected(values, projector, touched, masses)
+    extra = None
+    if held.frictional and held.blocks.any():
+        extra = np.zeros((n, 3, 3))
+        extra[held.particles] = held.blocks
+    data = pattern.projected(values, projector, touched, masses, extra)
+    return data, projected_product(product, held, masses)
+
+
+def projected_product(product, held, masses):
+    """``y -> A_hat y`` (flat) of ``A_hat = S A S + M P``, from A's ``product``."""
     mass = np.repeat(masses, 3)
 
     def hat(y):
         s = held.unheld_part(y).ravel()
         return held.unheld_part(product(s)).ravel() + mass * held.held_part(y).ravel()
 
-    return data, hat
+    return hat
 
 
 def held_rhs(held, b, product, z_prescribed, v, free):
@@ -48,7 +68,7 @@ def held_rhs(held, b, product, z_prescribed, v, free):
     and attached ones), all flat."""
     z = np.where(free, held.prescribed(v).ravel(), z_prescribed)
     pushed = held.pushed(v.shape[0])
-    if pushed is not None:  # sliding particles' friction (lagged: a constant of the step)
+    if pushed is not None:  # sliding particles' friction at no velocity change
         b = b + pushed.ravel()
     return held.unheld_part(b - product(z)).ravel(), z
 

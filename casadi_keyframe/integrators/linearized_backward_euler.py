@@ -26,7 +26,9 @@ from ..models.base import BlockJacobians, ForceJacobians, StepHold
 from ..models.blocks import GrowingPattern, SparseJacobian
 from ..state import SimulationError, State
 from .base import Integrator, Workspace, free_components, mass_diagonal
-from .held_solve import adjoint_multiplier, held_q, held_rhs, projected_matrix
+from .held_solve import (adjoint_multiplier, held_q, held_rhs, projected_matrix,
+                         projected_product, sliding_step)
+from .released import RANK, ReleasedFactor, released_directions
 
 MAX_REVISIONS = 20  # a step solved again at most this often when its end shows it chose wrong
 # (a sheet landing at an angle lets go of a row of arriving particles per revision)
@@ -60,12 +62,14 @@ class LinearizedStep:
 class StepSystem:
     """A step's matrix as the linear solver sees it (``matrix``: A, or with a held set the
     projected ``S A S + M P``), the product ``product(y) = A y`` of the step matrix itself
-    (flat), and its stiffness ``K`` and, when asked, ``df_dx``, each with a ``matvec``."""
+    (flat), and its stiffness ``K`` and, when asked, ``df_dx``, each with a ``matvec``;
+    ``plain``: with a held set, A's free block unprojected (CSC)."""
 
     matrix: System
     product: object
     K: object
     df_dx: object = None
+    plain: object = None
 
 
 class StepWorkspace(Workspace):
@@ -80,6 +84,7 @@ class StepWorkspace(Workspace):
         self.kept_bytes = 0
         self.carried = None  # what the last step carried
         self.planned = None  # what the next step decides, when an inverse step chose it
+        self.family_blocks = {}  # each family's last blocks, for a revision of another's
 
 
 class LinearizedBackwardEuler(Integrator):
@@ -153,17 +158,23 @@ class LinearizedBackwardEuler(Integrator):
         if work.pattern is None:
             A, *jacobians = step_matrices(model, x, v, dt, t, with_df_dx, interactions)
             return StepSystem(work.plan.system(A), A.dot, *map(SparseJacobian, jacobians))
-        K, D, *df_dx = model.jacobian_blocks(x, v, t, with_df_dx, interactions)
+        K, D, *df_dx = model.jacobian_blocks(x, v, t, with_df_dx, interactions,
+                                             reuse=work.family_blocks)
         A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
         pattern = work.pattern
         data = pattern.values(A)
         product = lambda y: A.matvec(y).ravel()  # noqa: E731 (A is symmetric)
-        solved = product
+        solved, plain = product, None
+        shape = (pattern.pattern.size,) * 2
         if held is not None:
+            product = sliding_step(product, held)
+            plain = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
+                                  shape=shape)
             data, solved = projected_matrix(pattern.pattern, data, product, held, model.masses)
         block = sp.csc_matrix((data, pattern.pattern.indices, pattern.pattern.indptr),
-                              shape=(pattern.pattern.size,) * 2)
-        return StepSystem(System(block, solved, solved, pattern.pattern), product, K, *df_dx)
+                              shape=shape)
+        return StepSystem(System(block, solved, solved, pattern.pattern), product, K,
+                          *(df_dx or [None]), plain=plain)
 
     @staticmethod
     def _held(model, decisions):
@@ -187,11 +198,15 @@ class LinearizedBackwardEuler(Integrator):
             found = model.step_decisions(x, v, t, dt, work.carried)
         f = (model.forces(x, v, t, found) + external).ravel()
         z = (model.prescribed_velocity(x, t, dt) - v).ravel()
+        base = None  # (factor, decisions): what a revision that only releases borders
         for revision in range(MAX_REVISIONS + 1):
             held = self._held(model, found)
-            system = self.step_system(model, x, v, t, dt, work, interactions=found, held=held)
-            b = dt * (f + dt * system.K.matvec(v).ravel())
-            factor, keep = self._step_factor_kept(work, system, n)
+            if base is None:
+                system = self.step_system(model, x, v, t, dt, work, interactions=found,
+                                          held=held)
+                b = dt * (f + dt * system.K.matvec(v).ravel())
+                factor, keep = self._step_factor_kept(work, system, n)
+                base = (factor, found)
             try:
                 if held is None:
                     dv, info = factor.solve(b, z, x0=work.warm)
@@ -211,14 +226,34 @@ class LinearizedBackwardEuler(Integrator):
             if revision == MAX_REVISIONS:
                 break
             found = revised  # the step chose wrong: solve it again with the revision
-            if keep:
-                factor.release()
+            bordered = self._bordered(model, work, system, base, found)
+            if bordered is None:  # a new matrix: factorise it
+                if keep:
+                    base[0].release()
+                base = None
+            factor = bordered
         work.kept_bytes += factor.nbytes if keep else 0
         work.carried = model.carried_decisions(found)
         v1 = v + dv.reshape(v.shape)
         model.check_state(x1, v1, n + 1)
         return State(x1, v1), LinearizedStep(found, info, factor if keep else None,
                                              self._held(model, found), revision + 1)
+
+    def _bordered(self, model, work, system, base, found):
+        """The prepared matrix of a revision that only lets particles go (nothing else in
+        ``found`` differs from the ``base`` factor's decisions), bordered on the released
+        directions (:mod:`.released`); None if more changed, or too much to pay."""
+        factor, decided = base
+        old, new = self._held(model, decided), self._held(model, found)
+        if (not work.plan.worth_keeping or system.plain is None or old is None
+                or any(a is not b for a, b in zip(decided, found)
+                       if a is not old and b is not new)):
+            return None
+        Q = released_directions(old, new, model.n)
+        if Q is None or not 0 < Q.shape[1] <= RANK:
+            return None
+        return ReleasedFactor(factor, old, Q, system.plain, work.plan.free,
+                              projected_product(system.product, new, model.masses))
 
     def _step_factor_kept(self, work, system, n):
         """The step matrix's factorisation and whether the pass keeps it for the derivative
@@ -314,7 +349,7 @@ class LinearizedBackwardEuler(Integrator):
             product = None
             if record.held is not None:  # the held solve needs A y
                 A = K.scaled_sum([D], [-dt * dt, -dt], diagonal=model.masses)
-                product = lambda y: A.matvec(y).ravel()  # noqa: E731
+                product = sliding_step(lambda y: A.matvec(y).ravel(), record.held)
             return record.factor, StepSystem(None, product, K)
         system = self.step_system(model, start.x, start.v, t, dt, work,
                                   interactions=record.decisions, held=record.held)
@@ -353,6 +388,8 @@ class LinearizedBackwardEuler(Integrator):
             work.planned = found
         A, K = step_matrices(model, x, v, dt, t, interactions=found)
         pushed = None if held is None else held.pushed(model.n)  # friction: no control's
+        if pushed is not None:
+            pushed = pushed - held.sliding_product(dv)
         return ((A @ dv / dt - dt * (K @ v.ravel())).reshape(v.shape)
                 - model.forces(x, v, t, found) - (0 if pushed is None else pushed / dt))
 
@@ -423,7 +460,8 @@ def _held_system(n, V, held, A, b, prescribed, mass, free):
     blocks = [ca.mtimes(normals[:, k], normals[:, k].T) for k in range(n)]
     along = normals * ca.repmat(targets - ca.sum1(normals * V), 3, 1)
     if friction:  # P = s I + (a - s) n n^T, z = a n (c - n . v) + s T (v_body - v)
-        velocity, normal, stick, pushed = friction
+        velocity, normal, stick, pushed, matrices = friction
+        A = A + ca.diagcat(*[ca.reshape(matrices[:, k], 3, 3).T for k in range(n)])
         blocks = [stick[k] * ca.SX.eye(3) + (normal[k] - stick[k]) * blocks[k]
                   for k in range(n)]
         slip = velocity - V

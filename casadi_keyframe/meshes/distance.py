@@ -5,7 +5,10 @@ libigl's AABB tree finds each point's closest point on the triangles.  The sign 
 the pseudonormal of the feature the closest point lies on (a face's normal, an edge's mean
 of its faces' normals, a vertex's angle-weighted normal; Baerentzen and Aanaes), which is
 libigl's pseudonormal test: exact inside and outside for a closed mesh; on an open mesh it
-says which side of the surface a point is on (behind an open mesh is inside).  A mesh of
+says which side of the surface a point is on (behind an open mesh is inside).  A point a
+caller needs only if it is near (within its reach) is spared the tree's query when it is
+farther (:meth:`MeshShape.lower_bounds`: the distance to the nearest piece's bounding box
+or sphere, whichever is farther): it gets a stand-in, a plane facing it at that distance.  A mesh of
 several pieces (a character's separate limbs) is their union: a point's signed distance is
 its least over the pieces.  The feature is the face's interior, one of its edges or one of
 its vertices, as IPC's point-triangle distance types; within it the distance is smooth.
@@ -72,10 +75,41 @@ class MeshShape:
             self.trees.append((tree, self.faces[piece], piece))
         self.face_normals, self.vertex_normals, self.edge_keys, self.edge_normals = \
             _pseudonormals(self.vertices, self.faces)
+        used = [np.unique(self.faces[piece]) for piece in pieces]
+        self.boxes = np.array([[self.vertices[u].min(0), self.vertices[u].max(0)]
+                               for u in used])  # (pieces, 2, 3)
+        self.centres = self.boxes.mean(1)
+        self.radii = np.array([np.linalg.norm(self.vertices[u] - c, axis=1).max()
+                               for u, c in zip(used, self.centres)])
 
-    def closest(self, points) -> Closest:
-        """Each point's closest feature (over every piece, the least signed distance)."""
+    def bounds(self, points):
+        """``(bound (k,), normal (k, 3))``: each point's lower bound of its distance to the
+        mesh (:meth:`lower_bounds`) and the direction of its nearest bounding box or sphere
+        (the one that gives the bound), from that bound to the point."""
+        p = np.asarray(points, float)[:, None, :]
+        box = p - np.clip(p, self.boxes[None, :, 0], self.boxes[None, :, 1])
+        ball = p - self.centres[None]
+        box_size, ball_size = np.linalg.norm(box, axis=2), np.linalg.norm(ball, axis=2)
+        bound = np.maximum(box_size, ball_size - self.radii[None])
+        nearest = bound.argmin(1)
+        k = np.arange(len(bound))
+        use_ball = (ball_size - self.radii[None] >= box_size)[k, nearest]
+        gap = np.where(use_ball[:, None], ball[k, nearest], box[k, nearest])
+        size = np.where(use_ball, ball_size[k, nearest], box_size[k, nearest])
+        return bound[k, nearest], gap / np.maximum(size, 1e-300)[:, None]
+
+    def lower_bounds(self, points) -> np.ndarray:
+        """``(k,)``: a lower bound of each point's distance to the mesh (over the pieces,
+        the least of the distances to each one's bounding box and sphere, the larger)."""
+        return self.bounds(points)[0]
+
+    def closest(self, points, near=None, bounds=None) -> Closest:
+        """Each point's closest feature (over every piece, the least signed distance); with
+        ``near`` ``(k,)`` bools, only those points' (the others get a stand-in: module
+        docstring; ``bounds``: :meth:`bounds` of the points, if known)."""
         p = np.ascontiguousarray(points, dtype=float)
+        if near is not None and not near.all():
+            return self._stand_ins(p, near, self.bounds(p) if bounds is None else bounds)
         best = None
         for tree, faces, piece in self.trees:
             _, face, point = tree.squared_distance(self.vertices, faces, p)
@@ -87,6 +121,21 @@ class MeshShape:
                 best = Closest(*(np.where(nearer.reshape((-1,) + (1,) * (a.ndim - 1)), a, b)
                                  for a, b in zip(vars(found).values(), vars(best).values())))
         return best
+
+    def _stand_ins(self, p, near, bounds) -> Closest:
+        """:meth:`closest` of the ``near`` points; the others get a stand-in: the plane
+        at their lower bound's distance (``bounds``: :meth:`bounds`), facing them."""
+        k = len(p)
+        bound, normal = bounds
+        zero = np.zeros((k, 3))
+        out = Closest(bound, p - bound[:, None] * normal, np.full(k, FACE), np.ones(k, bool),
+                      zero, normal, np.ones(k), np.zeros((k, 3), np.int64),
+                      np.tile([1.0, 0, 0], (k, 1)), np.zeros((k, 3, 3)))
+        if near.any():
+            found = self.closest(p[near])
+            for a, b in zip(vars(out).values(), vars(found).values()):
+                a[near] = b
+        return out
 
     def _features(self, p, face, point) -> Closest:
         corners = self.faces[face]

@@ -171,8 +171,9 @@ class BlockJacobians(ForceJacobians):
 
     @abc.abstractmethod
     def jacobian_blocks(self, x, v, t: float = 0.0, with_df_dx: bool = False,
-                        interactions=None) -> tuple:
-        """``(K, D[, J])`` as :class:`~.blocks.Blocks`."""
+                        interactions=None, reuse: dict | None = None) -> tuple:
+        """``(K, D[, J])`` as :class:`~.blocks.Blocks` (``reuse``: a dict the caller keeps
+        to have blocks computed before for the same state and decisions given again)."""
 
     @abc.abstractmethod
     def force_jacobian_blocks(self, x, v, t: float = 0.0, interactions=None):

@@ -152,11 +152,12 @@ class BlockPattern:
         return I, J, slots
 
     def projected(self, values: np.ndarray, projector: np.ndarray, touched: np.ndarray,
-                  masses: np.ndarray) -> np.ndarray:
+                  masses: np.ndarray, extra: np.ndarray | None = None) -> np.ndarray:
         """The CSC data of ``S A S + M P`` for the matrix A of ``values``, with ``P`` the
         ``(n, 3, 3)`` blocks of ``projector`` (nonzero on the ``touched`` particles only),
         ``S = I - P`` and M the diagonal of ``masses``: a constrained step's matrix, with the
-        pattern and the positive definiteness of A."""
+        pattern and the positive definiteness of A; ``extra`` ``(n, 3, 3)``: blocks added to
+        the touched particles' diagonal after the projection (sliding friction's)."""
         I, J, slots = self.block_slots
         pick = touched[I] | touched[J]
         if not pick.any():
@@ -167,6 +168,8 @@ class BlockPattern:
         B = B - PI @ B - B @ PJ + PI @ B @ PJ
         diagonal = I == J
         B[diagonal] += masses[I[diagonal], None, None] * PI[diagonal]
+        if extra is not None:
+            B[diagonal] += extra[I[diagonal]]
         out = values.copy()
         out[slots] = B.reshape(-1, 9)
         return out

@@ -105,10 +105,15 @@ class FamilyModel(BlockJacobians, StepHold):
         return out
 
     def jacobian_blocks(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
-                        with_df_dx: bool = False, interactions=None) -> tuple[Blocks, ...]:
+                        with_df_dx: bool = False, interactions=None,
+                        reuse: dict | None = None) -> tuple[Blocks, ...]:
         """``(K, D[, J])`` (see :meth:`jacobians`) as :class:`~.blocks.Blocks` over the
-        fixed pairs followed by the pairs found at x (self-contact), and the stencils."""
-        return self._blocks(x, v, t, interactions, ("jac", "df_dx") if with_df_dx else ("jac",))
+        fixed pairs followed by the pairs found at x (self-contact), and the stencils.
+        ``reuse``: a dict the caller keeps, in which each family's blocks are remembered
+        and given again for the same x, v and t (the same arrays) and the same decision (a
+        step solved again after a revision of another family's)."""
+        kinds = ("jac", "df_dx") if with_df_dx else ("jac",)
+        return self._blocks(x, v, t, interactions, kinds, reuse)
 
     def force_jacobian_blocks(self, x: np.ndarray, v: np.ndarray, t: float = 0.0,
                               interactions=None) -> Blocks:
@@ -116,14 +121,15 @@ class FamilyModel(BlockJacobians, StepHold):
         needs when the step matrix's factor is already at hand)."""
         return self._blocks(x, v, t, interactions, ("df_dx",))[0]
 
-    def _blocks(self, x, v, t, interactions, kinds) -> tuple[Blocks, ...]:
+    def _blocks(self, x, v, t, interactions, kinds, reuse=None) -> tuple[Blocks, ...]:
         """The blocks of kernels ``kinds`` ("jac": K and D, "df_dx": J) of every family."""
-        x, v = self._check_state(x, "x"), self._check_state(v, "v")
         width = sum(OUTPUTS[k] for k in kinds)
         fixed, found_pairs, stencils = [], [], []  # (i, j, blocks) of pair families
         particles = [np.zeros((self.n, 9)) for _ in range(width)]
-        for family, found in zip(self.families, self._found(x, interactions)):
-            part = family.blocks(x, v, t, kinds, found)
+        for k, (family, found) in enumerate(zip(self.families, self._found(x, interactions))):
+            part = _remembered(reuse, (k, kinds), (x, v, t, found),
+                               lambda: family.blocks(self._check_state(x, "x"),
+                                                     self._check_state(v, "v"), t, kinds, found))
             if part.pairs is not None:
                 group = fixed if family.fixed_pairs else found_pairs
                 group.append((part.i, part.j, part.pairs))
@@ -335,6 +341,20 @@ class FamilyModel(BlockJacobians, StepHold):
         if a.shape != (self.n, 3):
             raise ValueError(f"{name} must have shape ({self.n}, 3), got {a.shape}")
         return a
+
+
+def _remembered(memory: dict | None, key, inputs: tuple, compute):
+    """``compute()``, or what it gave for the same ``inputs`` (the same objects; t equal)
+    when ``memory`` (a dict) remembers it under ``key``."""
+    if memory is None:
+        return compute()
+    kept = memory.get(key)
+    if kept is not None and kept[0][2] == inputs[2] and all(
+            a is b for k, (a, b) in enumerate(zip(kept[0], inputs)) if k != 2):
+        return kept[1]
+    value = compute()
+    memory[key] = (inputs, value)
+    return value
 
 
 def _symbolic_csc(pattern: BlockPattern, blocks) -> ca.SX:

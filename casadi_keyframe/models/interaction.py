@@ -67,9 +67,12 @@ class StepSpan:
     _kept: dict = field(default_factory=dict, repr=False, compare=False)
 
     def distances(self, body) -> np.ndarray:
-        """Every particle's signed distance to ``body`` at the step's end (x1, t + dt)."""
+        """Every particle's signed distance to ``body`` at the step's end (x1, t + dt),
+        exact within the body's reach (:meth:`~.contact.colliders.Body.reach`) of the
+        velocities the step ended with, beyond it beyond."""
+        reach = body.reach((self.x1 - self.x) / self.dt, self.t + self.dt, self.dt)
         return self.kept(("distances", id(body)),
-                         lambda: body.signed_distances(self.x1, self.t + self.dt))
+                         lambda: body.signed_distances(self.x1, self.t + self.dt, reach))
 
     def kept(self, key, compute):
         """``compute()``, computed once for this span and ``key`` (what the families

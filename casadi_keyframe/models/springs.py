@@ -231,7 +231,7 @@ class ChoiKoSprings(PairInteraction):
         still stretched past their rest length (None if none)."""
         if carried is None:
             return None
-        kept = carried & (self.springs.stretch(step.x) > 1)
+        kept = carried & (self._stretch(step.x) > 1)
         return TautSprings(kept) if kept.any() else None
 
     def carry(self, found):
@@ -271,8 +271,8 @@ class ChoiKoSprings(PairInteraction):
         if not stopped:
             return None, None
         s = self.springs
-        end_stretch = end.kept((id(self), "x1"), lambda: s.stretch(end.x1))
-        start_stretch = end.kept((id(self), "x"), lambda: s.stretch(end.x))
+        end_stretch = end.kept((id(self), "x1"), lambda: self._stretch(end.x1))
+        start_stretch = end.kept((id(self), "x"), lambda: self._stretch(end.x))
         late = (end_stretch > 1 + TAUT_MARGIN) & (end_stretch > start_stretch + TAUT_MARGIN)
         if late.any():  # and the springs around them, which a taut one would stretch next
             near = np.zeros(self.n, bool)
@@ -281,6 +281,18 @@ class ChoiKoSprings(PairInteraction):
         if found is not None:
             late &= ~found.now
         return (late, end_stretch) if late.any() else (None, None)
+
+    def _stretch(self, x):
+        """:meth:`Springs.stretch` at x, remembered for the last few positions asked (a
+        step's start is asked at every revision and was the last step's end)."""
+        memory = self.__dict__.setdefault("_stretches", [])
+        for kept, value in memory:
+            if kept.shape == x.shape and np.array_equal(kept, x):
+                return value
+        value = self.springs.stretch(x)
+        memory.insert(0, (np.array(x), value))
+        del memory[3:]
+        return value
 
     def all_pairs(self):
         return self._ij

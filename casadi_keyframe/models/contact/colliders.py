@@ -114,9 +114,10 @@ class Body:
         """This body's geometry at time t as one flat vector (the symbolic S)."""
         return np.concatenate([np.ravel(g) for g in self.geometry(t)])
 
-    def signed_distances(self, x: np.ndarray, t: float) -> np.ndarray:
-        """Every point's signed distance to the surface at time t (:func:`signed_distances`)."""
-        return signed_distances(self, x, t)
+    def signed_distances(self, x: np.ndarray, t: float, reach=None) -> np.ndarray:
+        """Every point's signed distance to the surface at time t (:func:`signed_distances`;
+        ``reach``: as :meth:`local_geometry`'s)."""
+        return signed_distances(self, x, t, reach)
 
     def shape(self, t: float) -> BodyShape:
         """How the body looks at time t, for pictures and exports (a typed shape of
@@ -126,10 +127,25 @@ class Body:
     def _floats(self, t: float) -> list[np.ndarray]:
         return [np.asarray(g, dtype=float) for g in self.geometry(t)]
 
-    def local_geometry(self, x: np.ndarray, t: float) -> list[np.ndarray]:
+    def local_geometry(self, x: np.ndarray, t: float, reach=None) -> list[np.ndarray]:
         """The geometry at time t as one row per point of ``x`` ``(n, 3)``: the same row
-        for every point here (a mesh gives each point its closest feature)."""
+        for every point here (a mesh gives each point its closest feature).  ``reach`` (m,
+        one or one per point; None: everywhere): beyond it the caller needs no exact row,
+        only one whose distance is beyond it too (a mesh spares its query there)."""
         return [np.broadcast_to(g, (len(x), np.size(g))) for g in self.geometry(t)]
+
+    def reach(self, v: np.ndarray, t: float, dt: float):
+        """How far from the body (m, one per point of velocities ``v`` ``(n, 3)``) a point
+        may act on it within the step from t: two contact thicknesses, its own travel and
+        the body's; None where every row is cheap (a body whose geometry is one row)."""
+        if not self.local:
+            return None
+        return (2 * self.contact.thickness + 1e-3 + dt * np.linalg.norm(v, axis=1)
+                + self.travel(t, dt))
+
+    def travel(self, t: float, dt: float) -> float:
+        """How far (m) any point of the body moves from t to t + dt (a bound)."""
+        return 0.0
 
     def parts(self) -> tuple:
         """The bodies contact acts on one by one: this one (a mesh: each of its pieces)."""
@@ -366,6 +382,12 @@ class MeshBody(Body):
         R, p = self.motion(t)
         return np.asarray(R, float), np.asarray(p, float)
 
+    def travel(self, t, dt):
+        if not self.moves:
+            return 0.0
+        return float(np.linalg.norm(self.world_vertices(t + dt) - self.world_vertices(t),
+                                    axis=1).max())
+
     def world_vertices(self, t: float) -> np.ndarray:
         """The vertices in the world at time t."""
         R, p = self._placement(t)
@@ -380,17 +402,30 @@ class MeshBody(Body):
     def parameters(self, t):
         return np.zeros(0)  # per point: local_geometry
 
-    def local_geometry(self, x, t):
+    def local_geometry(self, x, t, reach=None):
+        """Each point's closest feature (class docstring), kept for the same points and
+        time (a still body's for any time: a step's queries at t and t + dt, and the next
+        step's at its start, are one), exact within ``reach`` (:meth:`Body.local_geometry`)
+        and wherever an earlier query asked."""
         x = np.ascontiguousarray(x, dtype=float)
-        key = (float(t), x.shape, x.tobytes())
+        key = (float(t) if self.moves else None, x.shape, x.tobytes())
         if key not in self._rows:
             _forget(self._rows, self.KEPT)
-            self._rows[key] = self._features(x, float(t))
-        return self._rows[key]
+            R, p = self._placement(t)
+            self._rows[key] = [None, np.zeros(len(x), bool), self._shape(t).bounds((x - p) @ R)]
+        entry = self._rows[key]
+        rows, exact, bounds = entry
+        missing = ~exact if reach is None else (bounds[0] <= reach) & ~exact
+        if rows is None or missing.any():
+            found = self._features(x, float(t), missing, bounds)
+            if rows is not None:  # what was exact stays as it was
+                found = [np.where(exact[:, None], a, b) for a, b in zip(rows, found)]
+            entry[:2] = found, missing | exact
+        return entry[0]
 
-    def _features(self, x, t):
+    def _features(self, x, t, near=None, bounds=None):
         R, p = self._placement(t)
-        found = self._shape(t).closest((x - p) @ R)
+        found = self._shape(t).closest((x - p) @ R, near, bounds)
         if self.moves:
             ahead, behind = self.world_vertices(t + STEP), self.world_vertices(t - STEP)
             corner = ((ahead - behind) / (2 * STEP))[found.corners]  # (k, 3, 3)
@@ -454,8 +489,9 @@ def _distance_kernel(body_type: type) -> MappedKernel:
     return MappedKernel(ca.Function(f"{body_type.kind}_distance", [x, *geo.values()], [phi]))
 
 
-def signed_distances(body: Body, x: np.ndarray, t: float) -> np.ndarray:
+def signed_distances(body: Body, x: np.ndarray, t: float, reach=None) -> np.ndarray:
     """Every point's signed distance to ``body``'s surface at time t (negative inside), for
-    ``x`` of shape ``(n, 3)``: the one measure of how deep a particle is in a body."""
+    ``x`` of shape ``(n, 3)``: the one measure of how deep a particle is in a body; with
+    ``reach``, exact within it and beyond it beyond (:meth:`Body.local_geometry`)."""
     x = np.asarray(x, float)
-    return _distance_kernel(type(body))(x, *body.local_geometry(x, t))[0].ravel()
+    return _distance_kernel(type(body))(x, *body.local_geometry(x, t, reach))[0].ravel()

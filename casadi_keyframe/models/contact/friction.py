@@ -3,17 +3,16 @@ pushes.
 
 A sliding contact gets the impulse
 
-    F = -mu N t,   t = unit(T (v - v_body) + SLIP d)
+    F = -mu N s / |s|,   s = T (v - v_body)
 
 with ``N`` the normal impulse of :func:`~.tangential.tangential_kernels` and ``T = I - n
-n^T``.  A contact starts a step sliding if it slips (faster than
-:data:`~.tangential.SLIP` against the body's surface), else sticking.  After a solve a
-sticking particle whose tangential impulse ``r_t`` leaves the cone (``|r_t| > mu N``) slides
-(``d = -r_t / |r_t|``), and a sliding one whose slip turned against ``t`` by the step's end
-sticks; the step is solved again (:mod:`.stick_slide`).  The gradient is that of the modes
-the step chose: exact within them (as DiffCloth's), one-sided at a stick/slide switch, where
-the simulated map is continuous only up to the difference between ``r_t``'s direction and
-``t``.
+n^T``, smoothed below :data:`~.tangential.SLIP`-scale slips and linearized in the step's
+velocity change by the seam (:mod:`.tangential`), so the slide's direction follows the slip
+the step makes.  A contact starts a step sliding if it slips, else sticking; after a solve a
+sticking particle whose tangential impulse ``r_t`` leaves the cone (``|r_t| > mu N``)
+slides, and a sliding one whose slide overshot sticks (:mod:`.stick_slide`).  The gradient
+is that of the modes the step chose, exact within them: every quantity of F is a function
+of the step's start state and is differentiated.
 
 This file is the whole law: a new one (anisotropic friction, say) is a file like it, a
 :class:`~.tangential.TangentialLaw` given to a body as ``Contact(friction=...)``.

@@ -4,8 +4,10 @@ Each particle in it is held on one body.  Without friction its velocity along th
 normal ``n`` is prescribed (``P = n n^T``).  With friction (:mod:`.tangential`) each particle
 also has a mode: ``normal`` (its normal velocity held, as without friction) and ``stick``
 (its tangential velocity held to the body's surface velocity, ``T = I - n n^T``), so
-``P = stick I + (normal - stick) n n^T``, and ``friction``, the Coulomb impulse a sliding
-particle gets (a function of the step's start state).  The prescribed change of velocity is
+``P = stick I + (normal - stick) n n^T``; a sliding particle gets the law's impulse
+linearized in its velocity change, ``friction - blocks dv`` (:mod:`.tangential`: both
+functions of the step's start state), whose ``blocks`` join the step's matrix.  The
+prescribed change of velocity is
 
     z = normal n (c - n . v) + stick T (v_body - v)
 
@@ -28,8 +30,10 @@ class HeldSet:
     particles let go.  ``geometry`` ``(k, g)``: each particle's body geometry at the step's
     start and end, as the hold's kernels took it.  With friction (else None): ``normal`` and
     ``stick`` ``(k,)`` bools, ``velocity`` ``(k, 3)`` the body's surface velocity,
-    ``direction`` ``(k, 3)`` where a slide starts, ``friction`` ``(k, 3)`` the sliding
-    impulse and, after the solve, ``residual`` ``(k, 3)``, the hold's whole impulse."""
+    ``friction`` ``(k, 3)`` and ``blocks`` ``(k, 3, 3)`` the sliding impulse at no velocity
+    change and its matrix (zero where a particle sticks), ``left`` ``(k,)`` the particles
+    that left a stick within the step (they stick no more in it) and, after the solve,
+    ``residual`` ``(k, 3)``, the hold's whole impulse."""
 
     particles: np.ndarray
     body: np.ndarray
@@ -41,8 +45,9 @@ class HeldSet:
     normal: np.ndarray | None = None
     stick: np.ndarray | None = None
     velocity: np.ndarray | None = None
-    direction: np.ndarray | None = None
     friction: np.ndarray | None = None
+    blocks: np.ndarray | None = None
+    left: np.ndarray | None = None
     residual: np.ndarray | None = None
 
     @property
@@ -105,6 +110,21 @@ class HeldSet:
         out = np.zeros((n, 3))
         out[self.particles] = self.friction
         return out
+
+    def sliding_product(self, y: np.ndarray) -> np.ndarray | None:
+        """The sliding particles' matrix times ``y`` ``(n, 3)`` (flat accepted), ``(n, 3)``;
+        None without friction."""
+        if not self.frictional:
+            return None
+        y = np.asarray(y).reshape(-1, 3)
+        out = np.zeros_like(y)
+        out[self.particles] = np.einsum("kab,kb->ka", self.blocks, y[self.particles])
+        return out
+
+    def change(self, q: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """The members' velocity change ``(k, 3)`` from the solved step's ``q = (dv - z) - r``
+        (:func:`~...integrators.held_solve.held_q`) at start velocities ``v``."""
+        return q + self.prescribed(v)[self.particles] + self.hold_residual()
 
     def solved(self, residual: np.ndarray) -> "HeldSet":
         """The same set with the impulses of a solved step, from ``A dv - b`` (flat)."""

@@ -100,9 +100,11 @@ class HeldBody:
         """The body's geometry at t and at t + dt, as the symbolic step takes it."""
         return np.concatenate([self.body.parameters(t), self.body.parameters(t + dt)])
 
-    def rows(self, x, t, dt) -> np.ndarray:
-        """Each point's geometry at t and t + dt as one row ``(n, g)``."""
-        return np.hstack([*self.body.local_geometry(x, t), *self.body.local_geometry(x, t + dt)])
+    def rows(self, x, t, dt, reach=None) -> np.ndarray:
+        """Each point's geometry at t and t + dt as one row ``(n, g)`` (exact within
+        ``reach``, :meth:`~.colliders.Body.local_geometry`)."""
+        return np.hstack([*self.body.local_geometry(x, t, reach),
+                          *self.body.local_geometry(x, t + dt, reach)])
 
     def columns(self, rows, dt, flags=None):
         """The kernels' columns after x and v for the particles of geometry ``rows``: the
@@ -118,7 +120,7 @@ class HeldBody:
     def candidates(self, x, v, t, dt):
         """``(phi_0 (n,), normals (n, 3), targets (n,), velocities (n, 3) or None, rows)`` of
         every particle, step from t."""
-        rows = self.rows(x, t, dt)
+        rows = self.rows(x, t, dt, self.body.reach(v, t, dt))
         out = self.mapped["hold"](x, v, *self.columns(rows, dt))
         velocity = out[3] if self.law is not None else None
         return out[0].ravel(), out[1], out[2].ravel(), velocity, rows
@@ -303,7 +305,7 @@ class BodyHold(Interaction):
     def decision_parameters(self, found, t, dt):
         """Which particles are held on each body (0/1, body after body), then each body's
         geometry at t and t + dt (a mesh's: one column per particle), then with a tangential law
-        the flags and directions of :meth:`.stick_slide.StickSlide.parameters`."""
+        the flags of :meth:`.stick_slide.StickSlide.parameters`."""
         masks = np.zeros((len(self.bodies), self.n))
         if found is not None:
             masks[found.body, found.particles] = 1.0
@@ -333,7 +335,8 @@ class BodyHold(Interaction):
             gx[particles], gv[particles] = layer.vjp(x, v, dt, held, pick, lam[particles],
                                                      q[pick], nu[particles])
         if self.stick_slide is not None:  # the sliding impulses join b: S lam multiplies them
-            fx, fv = self.stick_slide.vjp(x, v, dt, held, held.unheld_part(lam))
+            fx, fv = self.stick_slide.vjp(x, v, dt, held, held.unheld_part(lam),
+                                          held.change(q, v))
             gx, gv = gx + fx, gv + fv
         return gx, gv
 
@@ -343,19 +346,20 @@ class BodyHold(Interaction):
         for layer, pick, particles in self._by_body(held):
             out[particles] = layer.jvp(x, v, dt, held, pick, q[pick], dx, dv)
         if self.stick_slide is not None:
-            out += held.unheld_part(self.stick_slide.jvp(x, v, dt, held, dx, dv))
+            out += held.unheld_part(self.stick_slide.jvp(x, v, dt, held, held.change(q, v),
+                                                         dx, dv))
         return out
 
     def symbolic_held(self, X, V, D, dt):
         """``(normals 3 x n, targets 1 x n)`` of the held particles (zero elsewhere), from
         :meth:`decision_parameters` D; with a tangential law also ``(velocities 3 x n, normal 1 x n,
-        stick 1 x n, sliding impulses 3 x n)``."""
+        stick 1 x n, sliding impulses 3 x n, their matrices 9 x n)``."""
         n, masks = self.n, D[:len(self.bodies) * self.n]
         at = masks.shape[0]
         tangential = self.stick_slide
         flags = None if tangential is None else tangential.symbolic(D, self.decision_size())
         normals, targets, velocity = ca.SX.zeros(3, n), ca.SX.zeros(1, n), ca.SX.zeros(3, n)
-        pushed = ca.SX.zeros(3, n)
+        pushed, matrices = ca.SX.zeros(3, n), ca.SX.zeros(9, n)
         for b, layer in enumerate(self.bodies):
             if layer.body.local:
                 size = sum(layer.sizes) * n
@@ -373,11 +377,12 @@ class BodyHold(Interaction):
                 velocity += ca.repmat(held, 3, 1) * out[3]
                 if layer.law is not None:
                     columns = parts + [ca.repmat(ca.DM(layer.layer), 1, n), ca.repmat(dt, 1, n)]
-                    pushed += ca.repmat(held, 3, 1) * tangential.symbolic_impulses(
-                        b, X, V, columns, dt, flags)
+                    F, B = tangential.symbolic_impulses(b, X, V, columns, dt, flags)
+                    pushed += ca.repmat(held, 3, 1) * F
+                    matrices += ca.repmat(held, 9, 1) * B
         if flags is None:
             return normals, targets
-        return normals, targets, velocity, flags[0], flags[1], pushed
+        return normals, targets, velocity, flags[0], flags[1], pushed, matrices
 
     # no force: the hold acts through the step's solve only
     def forces(self, x, v, t, found):

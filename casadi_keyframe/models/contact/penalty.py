@@ -88,10 +88,12 @@ class BodyPenalty(ParticleInteraction):
         return [*rows, np.broadcast_to(self.body.contact.gains, (self.n, 4))]
 
     def decide(self, step, carried):
-        """On a mesh: ``(x, rows)``, each particle's feature at the step's start."""
+        """On a mesh: ``(x, rows)``, each particle's feature at the step's start (exact
+        within the body's reach: beyond it the springs do not act)."""
         if not self.body.local:
             return None
-        return step.x, self.body.local_geometry(step.x, step.t)
+        reach = self.body.reach(step.v, step.t, step.dt)
+        return step.x, self.body.local_geometry(step.x, step.t, reach)
 
     def decision_parameters(self, found, t, dt):
         """On a mesh, the rows of :meth:`decide` (one column of the symbolic step's per

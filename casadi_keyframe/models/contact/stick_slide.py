@@ -4,10 +4,13 @@ A particle in contact with such a body (held on it, or inside the penalty spring
 sticks or slides (:class:`~.held_set.HeldSet`'s ``stick``).  A contact starts a step sliding
 if it slips (faster than :data:`~.tangential.SLIP` against the body's surface), else
 sticking.  After a solve a sticking particle whose tangential impulse ``r_t`` leaves the
-law's stick region (:meth:`~.tangential.TangentialLaw.leaves`) slides, starting along ``d =
--r_t / |r_t|``, and a sliding one whose slip turned against its impulse by the step's end
-sticks; the step is solved again.  The sliding impulses and their derivatives are the laws'
-kernels (:func:`~.tangential.tangential_kernels`), body by body.
+law's stick region (:meth:`~.tangential.TangentialLaw.leaves`) slides, and a sliding one
+whose impulse pushed it along its slip by the step's end (the slide overshot: it would have
+stopped) sticks, unless it left a stick within the step; the step is solved again.  So each
+particle switches at most twice per step and the decisions settle.  The sliding impulses,
+their matrices and their derivatives are the laws' kernels
+(:func:`~.tangential.tangential_kernels`), body by body: every one a function of the
+step's start state, so the decisions are the only thing the derivative holds.
 """
 from __future__ import annotations
 
@@ -51,15 +54,14 @@ class StickSlide:
                        {k: MappedKernel(f, jit=jit) for k, f in kernels.items()}
                        for kernels in self.kernels]
 
-    def _inputs(self, b, x, v, dt, held, pick, direction=None):
+    def _inputs(self, b, x, v, dt, held, pick):
         particles = held.particles[pick]
         k = particles.size
         layer = self.bodies[b]
         coefficients = [np.full((k, c.size), c) for c in self.laws[b].coefficients()]
         return [x[particles], v[particles], *layer.columns(held.geometry[pick], dt, []),
                 held.normal[pick, None].astype(float), self.masses[particles, None],
-                np.broadcast_to(self.gravity, (k, 3)),
-                held.direction[pick] if direction is None else direction, *coefficients]
+                np.broadcast_to(self.gravity, (k, 3)), *coefficients]
 
     def _each(self, held):
         for b in range(len(self.bodies)):
@@ -67,26 +69,24 @@ class StickSlide:
             if pick.size:
                 yield b, pick
 
-    def impulses(self, held, x, v, dt, direction=None):
-        """``(F (k, 3), N (k,))``: every member's sliding impulse and normal impulse with
-        the directions ``direction`` (default: the set's)."""
-        F, N = np.zeros((held.count, 3)), np.zeros(held.count)
+    def impulses(self, held, x, v, dt):
+        """``(F (k, 3), B (k, 3, 3), N (k,))``: every member's sliding impulse at no velocity
+        change, its matrix and its normal impulse (zero off the bodies with a law)."""
+        F, B, N = np.zeros((held.count, 3)), np.zeros((held.count, 3, 3)), np.zeros(held.count)
         for b in range(len(self.bodies)):
             pick = np.flatnonzero(held.body == b)
             if pick.size and self.acts[b]:
-                d = None if direction is None else direction[pick]
-                out = self.mapped[b]["impulse"](*self._inputs(b, x, v, dt, held, pick, d))
-                F[pick], N[pick] = out[0], out[1].ravel()
-        return F, N
+                out = self.mapped[b]["impulse"](*self._inputs(b, x, v, dt, held, pick))
+                F[pick], B[pick], N[pick] = out[0], out[1].reshape(-1, 3, 3), out[2].ravel()
+        return F, B, N
 
-    def _with(self, held, x, v, dt, stick, direction) -> HeldSet:
+    def _with(self, held, x, v, dt, stick, left) -> HeldSet:
         held = HeldSet(held.particles, held.body, held.normals, held.targets,
                        released=held.released, geometry=held.geometry, normal=held.normal,
-                       stick=stick, velocity=held.velocity, direction=direction,
-                       friction=np.zeros((held.count, 3)))
-        F, _ = self.impulses(held, x, v, dt)
-        F[stick] = 0.0
-        return replace(held, friction=F)
+                       stick=stick, velocity=held.velocity, left=left)
+        F, B, _ = self.impulses(held, x, v, dt)
+        F[stick], B[stick] = 0.0, 0.0
+        return replace(held, friction=F, blocks=B)
 
     def decide(self, step, held, body, seen, released) -> HeldSet | None:
         """The contacts of a step: ``held`` (normal held, on ``body``), plus the free
@@ -105,13 +105,12 @@ class StickSlide:
         fields = self._fields(seen, body, particles)
         acts = self.acts[body[particles]]
         slip = _tangent(fields["normals"], step.v[particles] - fields["velocity"])
-        speed = np.linalg.norm(slip, axis=1)
-        slide = (speed > SLIP) & acts
-        direction = slip / np.maximum(speed, 1e-300)[:, None]
+        slide = (np.linalg.norm(slip, axis=1) > SLIP) & acts
         members = HeldSet(particles, body[particles], fields["normals"], fields["targets"],
                           released=released, geometry=fields["rows"], normal=held[particles],
                           stick=acts & ~slide, velocity=fields["velocity"])
-        return self._with(members, step.x, step.v, step.dt, members.stick, direction)
+        return self._with(members, step.x, step.v, step.dt, members.stick,
+                          np.zeros(particles.size, bool))
 
     def _fields(self, seen, body, particles):
         """The candidates' normals, targets, body velocities and geometry rows of
@@ -153,20 +152,22 @@ class StickSlide:
         return held.stick & out
 
     def _checked(self, held, end):
+        """``(held, changed)``: the sticks that leave their law's region slide, the slides
+        that overshot stick (module docstring)."""
         x, v, dt = end.x, end.v, end.dt
         r_t = _tangent(held.normals, held.residual)
-        size = np.linalg.norm(r_t, axis=1)
-        onset = -r_t / np.maximum(size, 1e-300)[:, None]
-        _, N = self.impulses(held, x, v, dt, np.where(held.stick[:, None], onset,
-                                                      held.direction))
+        _, _, N = self.impulses(held, x, v, dt)
         leaves = self._leaving(held, r_t, N)
-        slip = _tangent(held.normals, (end.x1 - x)[held.particles] / dt - held.velocity)
-        sliding = ~held.stick & self.acts[held.body]
-        turned = sliding & (np.einsum("ka,ka->k", held.friction, slip) > 0)
+        k = held.particles
+        dv = (end.x1 - x)[k] / dt - v[k]
+        slip = _tangent(held.normals, v[k] + dv - held.velocity)
+        pushed = held.friction - np.einsum("kab,kb->ka", held.blocks, dv)
+        sliding = ~held.stick & self.acts[held.body] & ~held.left
+        turned = sliding & (np.einsum("ka,ka->k", pushed, slip) > 0)
         if not (leaves.any() or turned.any()):
             return held, False
-        direction = np.where(leaves[:, None], onset, held.direction)
-        return self._with(held, x, v, dt, (held.stick & ~leaves) | turned, direction), True
+        return self._with(held, x, v, dt, (held.stick & ~leaves) | turned,
+                          held.left | leaves), True
 
     def _joined(self, held, end, late, body):
         """``held`` with the normals of ``late`` held (members already or new ones)."""
@@ -175,7 +176,7 @@ class StickSlide:
         parts = {"particles": late, "body": body[late], "normals": new["normals"],
                  "targets": new["targets"], "geometry": new["rows"],
                  "normal": np.ones(late.size, bool), "stick": self.acts[body[late]],
-                 "velocity": new["velocity"], "direction": np.zeros((late.size, 3))}
+                 "velocity": new["velocity"], "left": np.zeros(late.size, bool)}
         released = np.zeros(self.n, bool)
         if held is not None:
             keep = ~np.isin(held.particles, late)
@@ -185,51 +186,53 @@ class StickSlide:
             released = held.released.copy()
             released[late] = False
         members = HeldSet(**parts, released=released)
-        return self._with(members, end.x, end.v, end.dt, members.stick, members.direction)
+        return self._with(members, end.x, end.v, end.dt, members.stick, members.left)
 
-    def vjp(self, x, v, dt, held, lam):
-        """``(gx, gv)``, gradients of ``lam . F`` (``lam`` ``(n, 3)``, the multiplier of the
-        step's right-hand side)."""
+    def vjp(self, x, v, dt, held, lam, change):
+        """``(gx, gv)``, gradients of ``lam . (F - B q)`` (``lam`` ``(n, 3)``, the multiplier
+        of the step's right-hand side; ``q``: the members' velocity ``change`` ``(k, 3)``,
+        held)."""
         gx, gv = np.zeros((self.n, 3)), np.zeros((self.n, 3))
         for b, pick in self._each(held):
             p = held.particles[pick]
-            gx[p], gv[p] = self.mapped[b]["vjp"](*self._inputs(b, x, v, dt, held, pick), lam[p])
+            gx[p], gv[p] = self.mapped[b]["vjp"](*self._inputs(b, x, v, dt, held, pick), lam[p],
+                                                 change[pick])
         return gx, gv
 
-    def jvp(self, x, v, dt, held, dx, dv):
-        """The derivative of the sliding impulses along ``(dx, dv)``, ``(n, 3)``."""
+    def jvp(self, x, v, dt, held, change, dx, dv):
+        """The derivative of the sliding impulses ``F - B q`` along ``(dx, dv)``, ``(n, 3)``
+        (``q``: the members' velocity ``change``, held)."""
         out = np.zeros((self.n, 3))
         for b, pick in self._each(held):
             p = held.particles[pick]
-            out[p] = self.mapped[b]["jvp"](*self._inputs(b, x, v, dt, held, pick), dx[p],
-                                           dv[p])[0]
+            out[p] = self.mapped[b]["jvp"](*self._inputs(b, x, v, dt, held, pick), change[pick],
+                                           dx[p], dv[p])[0]
         return out
 
     def parameters(self, found) -> np.ndarray:
-        """The flags ``normal``, ``stick`` and ``slide`` (0/1 per particle) and the slide
-        directions ``(n, 3)``, flat, for the symbolic step."""
-        flags, direction = np.zeros((3, self.n)), np.zeros((self.n, 3))
+        """The flags ``normal``, ``stick`` and ``slide`` (0/1 per particle), flat, for the
+        symbolic step."""
+        flags = np.zeros((3, self.n))
         if found is not None:
             flags[0, found.particles] = found.normal
             flags[1, found.particles] = found.stick
             flags[2, found.particles] = ~found.stick & self.acts[found.body]
-            direction[found.particles] = found.direction
-        return np.concatenate([flags.ravel(), direction.ravel()])
+        return flags.ravel()
 
     def symbolic(self, D, size: int):
-        """``(normal, stick, slide, direction)`` (``1 x n`` each, the last ``3 x n``) from the
-        hold's decision parameters D of ``size`` entries (:meth:`parameters` last)."""
+        """``(normal, stick, slide)`` (``1 x n`` each) from the hold's decision parameters D
+        of ``size`` entries (:meth:`parameters` last)."""
         n = self.n
-        tail = D[size - 6 * n:size]
-        return (ca.reshape(tail[:n], 1, n), ca.reshape(tail[n:2 * n], 1, n),
-                ca.reshape(tail[2 * n:3 * n], 1, n), ca.reshape(tail[3 * n:], 3, n))
+        tail = D[size - 3 * n:size]
+        return tuple(ca.reshape(tail[k * n:(k + 1) * n], 1, n) for k in range(3))
 
     def symbolic_impulses(self, b, X, V, columns, dt, flags):
-        """The sliding impulses on body b, ``3 x n``, from the hold's geometry ``columns``."""
+        """``(F 3 x n, B 9 x n)``: the sliding impulses on body b and their matrices
+        (row-major), from the hold's geometry ``columns``."""
         n = X.shape[1]
-        normal, _, slide, direction = flags
+        normal, _, slide = flags
         coefficients = [ca.repmat(ca.DM(c), 1, n) for c in self.laws[b].coefficients()]
-        F, _ = self.kernels[b]["impulse"].map(n)(
+        F, B, _ = self.kernels[b]["impulse"].map(n)(
             X, V, *columns, normal, ca.DM(self.masses).T, ca.repmat(ca.DM(self.gravity), 1, n),
-            direction, *coefficients)
-        return ca.repmat(slide, 3, 1) * F
+            *coefficients)
+        return ca.repmat(slide, 3, 1) * F, ca.repmat(slide, 9, 1) * B

@@ -127,3 +127,59 @@ def test_an_unknown_start_is_refused_before_the_search():
     prob = sheet_problem()
     with pytest.raises(ValueError, match="start"):
         ck.solve(prob, method="transcription", options={"start": "somewhere"})
+
+
+def test_the_command_line_solves_a_sheet_from_rest_and_its_controls_replay(tmp_path):
+    """``solve cloth_shapes --method transcription --option start=rest`` converges (exit 0)
+    with every keyframe within its tolerance, and the written controls replay the result."""
+    import json
+
+    from casadi_keyframe.cli import main
+
+    args = ["cloth_shapes", "--set", "rows=4", "--set", "cols=4", "--set", "steps=60"]
+    assert main(["solve", *args, "--method", "transcription", "--option", "start=rest",
+                 "--out", str(tmp_path), "--quiet", "--no-animation", "--no-viewer"]) == 0
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert summary["method"] == "transcription"
+    prob = ck.load_problem("cloth_shapes", rows=4, cols=4, steps=60)
+    u = np.load(tmp_path / "result.npz")["u"]
+    assert all(m["rms_position_error"] <= 0.02 for m in prob.breakdown(u)["misses"])
+
+
+def test_the_spring_correction_never_adds_to_the_springs_excess():
+    """Steps far past the linear model (random, up to 30 cm a frame) are corrected for the
+    stiff springs: the springs' squared excess over their expected lengths never grows,
+    where more springs meet at a particle than it has freedoms."""
+    from casadi_keyframe.optimize.positions.restore import LengthRestoration, _excess
+
+    prob = sheet_problem()
+    tr = Transcription(prob)
+    restore = LengthRestoration(tr)
+    z = tr.unknowns(prob.simulate(None, records=False).x)
+    rng = np.random.default_rng(4)
+    x0 = tr.frames(z)[1:]
+    length0, d0 = restore.lengths(x0)
+    for scale in (0.01, 0.1, 0.3):
+        step = scale * rng.standard_normal(z.size)
+        x = tr.frames(z + step)[1:]
+        expected = length0 + np.einsum("...a,...a->...", d0 / length0[..., None],
+                                       (x - x0)[:, restore.j] - (x - x0)[:, restore.i])
+        target = np.maximum(expected, restore.rest)
+        fixed = tr.frames(restore(z, z + step))[1:]
+        assert _excess(restore.lengths(fixed)[0], target) <= _excess(restore.lengths(x)[0],
+                                                                     target)
+
+
+def test_a_plan_that_tears_the_cloth_is_never_kept():
+    """A plan with a spring past the model's blow-up stretch is broken (the simulation
+    would refuse it): the search treats it as a rejected trial."""
+    from casadi_keyframe.optimize.finish.constraint import control_hessian
+    from casadi_keyframe.optimize.positions.sqp import PositionSQP
+
+    prob = sheet_problem()
+    tr = Transcription(prob)
+    solver = PositionSQP(tr, goal_constraints(tr), control_hessian(prob))
+    plan = prob.simulate(None, records=False).x
+    assert not solver._broken(tr.unknowns(plan))
+    plan[7, 12] += [0.0, 5.0, 0.0]  # one particle 5 m out at one frame
+    assert solver._broken(tr.unknowns(plan))

@@ -31,15 +31,19 @@ STARTS = ("controls", "rest", "blend")
 @dataclass(frozen=True)
 class TranscriptionOptions(TypedOptions):
     """``start``: where the positions start (module docstring); ``margin``: the share of
-    each keyframe's tolerance held."""
+    each keyframe's tolerance held; ``settle``: converged once the goal holds and the
+    control cost has changed by less than this share over the last kept steps (the search's
+    ``tol`` is the gradient methods' and far finer than a trust region settles to)."""
 
     label: ClassVar[str] = "the transcription"
     CHECKS: ClassVar[dict] = {
         "start": (f"one of {', '.join(STARTS)}", lambda v: v in STARTS),
-        "margin": ("a number in (0, 1]", lambda v: real(v) and 0 < v <= 1)}
+        "margin": ("a number in (0, 1]", lambda v: real(v) and 0 < v <= 1),
+        "settle": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1)}
 
     start: str = "controls"
     margin: float = MARGIN
+    settle: float = 1e-3
 
 
 def start_positions(problem, start: str, u0) -> np.ndarray:
@@ -63,19 +67,24 @@ def run(problem, ev, u0, call):
     constraints = goal_constraints(tr, options.margin)
     solver = PositionSQP(tr, constraints, control_hessian(problem))
     z0 = tr.unknowns(start_positions(problem, options.start, u0))
+    replayed = []
 
     def kept(report, point):
         if report.kept:
-            ev.offer(replay_controls(problem, tr.frames(point.z), check).u)
+            replayed.append(replay_controls(problem, tr.frames(point.z), check))
+            ev.offer(replayed[-1].u)
         call.on_iteration()
 
-    outcome, _ = solver.run(z0, maxiter=call.maxiter, tol=call.tol, on_iteration=kept,
+    outcome, _ = solver.run(z0, maxiter=call.maxiter, tol=options.settle, on_iteration=kept,
                             should_stop=lambda: (check() or False) or call.deadline.passed())
-    said = f"{outcome.iterations} iterations in positions"
+    said = f"{outcome.iterations} iterations in positions" + (
+        "" if not replayed else f"; the last kept plan replayed within "
+        f"{1e3 * replayed[-1].deviation:.1e} mm (frame {replayed[-1].frame})")
     if outcome.reason == "converged":
-        return CONVERGED, f"converged: the control cost settled with the keyframes held ({said})"
+        return CONVERGED, (f"converged: the control cost settled (within {options.settle:g} "
+                           f"over the last kept steps) with the keyframes held ({said})")
     if outcome.reason == "stopped":
         return LIMIT, f"time limit reached ({said})"
     if outcome.reason == "stalled":
         return FAILED, f"no step lowers the merit any further ({said})"
-    return LIMIT, f"{call.maxiter} iterations (maxiter) in positions"
+    return LIMIT, f"maxiter reached ({said})"

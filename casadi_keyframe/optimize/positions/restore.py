@@ -8,7 +8,9 @@ tiny steps wherever the cloth turns.  The correction moves every frame's particl
 least (mass-weighted) distance that brings each stiff spring the step stretched beyond the
 length the model expected back to that length (Goldenthal et al. 2007, "Efficient
 simulation of inextensible cloth": fast projection), by a few Gauss-Newton iterations on
-the springs' lengths: a curvilinear step the merit then judges as any other.
+the springs' lengths, each kept only if it lowers the springs' squared excess (where more
+springs meet at a particle than it has freedoms, their lengths can conflict): a curvilinear
+step the merit then judges as any other.
 """
 from __future__ import annotations
 
@@ -20,6 +22,12 @@ from ...models.springs import BEND, ChoiKoSprings
 
 ITERATIONS = 4
 SLACK = 1e-6  # relative: a spring this close to its expected length is left alone
+DAMPING = 1e-3  # of the projection's normal matrix's diagonal, added to it
+
+
+def _excess(length, target) -> float:
+    """The squared excess of the springs over their targets (the projection's measure)."""
+    return float(np.sum(np.maximum(length - target, 0.0) ** 2))
 
 
 class LengthRestoration:
@@ -53,13 +61,18 @@ class LengthRestoration:
         expected = length0 + np.einsum("...a,...a->...", d0 / length0[..., None],
                                        dx[:, self.j] - dx[:, self.i])
         target = np.maximum(expected, self.rest)
+        length, d = self.lengths(x)
+        worst = _excess(length, target)
         for _ in range(ITERATIONS):
-            length, d = self.lengths(x)
             excess = length - target
             frame, spring = np.nonzero(excess > SLACK * self.rest)
             if frame.size == 0:
                 break
-            x = x + self._projection(x, d, length, excess, frame, spring)
+            moved = x + self._projection(x, d, length, excess, frame, spring)
+            length_m, d_m = self.lengths(moved)
+            if _excess(length_m, target) >= worst:  # the springs' targets conflict: stop
+                break
+            x, length, d, worst = moved, length_m, d_m, _excess(length_m, target)
         return tr.unknowns(np.concatenate([tr.base[:1], x]))
 
     def _projection(self, x, d, length, excess, frame, spring):
@@ -76,6 +89,8 @@ class LengthRestoration:
         G = sp.csr_matrix((vals, (rows, cols)), shape=shape)
         W = sp.diags(np.tile(self.weight.ravel(), x.shape[0]))
         GW = G @ W
-        S = (GW @ G.T).tocsc() + sp.identity(frame.size) * 1e-12 * np.max(self.weight)
+        S = (GW @ G.T).tocsc()
+        # damped: more springs than a particle has freedoms ask for lengths that conflict
+        S = S + sp.diags(DAMPING * S.diagonal())
         lam = splu(S).solve(excess[frame, spring])
         return -(GW.T @ lam).reshape(x.shape)

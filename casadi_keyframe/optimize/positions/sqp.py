@@ -5,21 +5,25 @@ At an iterate z, with the controls ``u(z)`` (:class:`~.transcription.Transcripti
 Jacobian ``J`` and the control terms' constant Hessian ``Q``, each step solves
 
     minimise  g^T p + 1/2 p^T (J^T Q J + sum_k lambda_k C_k + mu D) p
-    subject to c_k + a_k^T p <= c_k - theta max(c_k, 0)   (the goal, :mod:`.goal`)
+    subject to c_k + a_k^T p <= (1 - theta) c_k if c_k > 0, else 0   (the goal, :mod:`.goal`)
 
 (``g = J^T Q u``: the effort's gradient; ``C_k`` the constraints' constant Hessians and
-``lambda_k`` their last multipliers; ``D`` the unknowns' masses over dt^2, squared and
-weighed as the control cost weighs a force, so ``mu`` is a pure number): one sparse Cholesky
-factorisation, one solve per constraint and a tiny active-set problem for the multipliers.
-``mu`` and ``theta`` (the share of a violated constraint one step removes) make a trust
-region: the linear model of the forces holds only for small moves where the cloth buckles
-or turns, and a step that asks the whole goal at once follows the model into motions the
-nonlinear step does not have.  The trial is corrected for the stiff springs
-(:mod:`.restore`) and kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls
-by a share of what the model predicts; then ``mu`` halves and ``theta`` doubles, else
-``mu`` grows fourfold and ``theta`` halves.  It ends when the constraints hold and a kept
-step changes the effort by less than ``tol`` (relative), at ``maxiter``, when asked to stop,
-or when no step is kept at the largest damping.
+``lambda_k`` their last multipliers; ``D`` :func:`damping_metric`, weighed as the control
+cost weighs a force, so ``mu`` is a pure number): one sparse Cholesky factorisation, one
+solve per constraint and a tiny active-set problem for the multipliers.  ``mu`` and
+``theta`` (the share of a violated constraint one step removes) make a trust region: the
+linear model of the forces holds only for small moves where the cloth buckles or turns (a
+buckling sheet's positions move far for forces that change little to first order, the
+controls' sensitivity seen from the other side).  The trial is corrected for the stiff
+springs (:mod:`.restore`) and, where it breaks a keyframe's bound beyond the linear model
+(the misses are quadratic in the positions), by a second-order correction on the same
+factor; a plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a
+share of what the model predicts (``sigma`` at least twice the multipliers, the QP's and
+their least-squares estimate).  Then ``mu`` halves and ``theta`` doubles; else ``mu`` grows
+(fourfold, sixteenfold when the merit rose) and ``theta`` halves if the goal's own model
+failed.  It ends when the constraints hold and the effort has changed by less than ``tol``
+(relative) over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or
+when no step is kept at the largest damping.
 """
 from __future__ import annotations
 
@@ -34,11 +38,14 @@ except ImportError:  # SuperLU instead (slower, same answer)
     cholmod = None
 from scipy.sparse.linalg import splu
 
+from ...state import SimulationError
 from .restore import LengthRestoration
 
 ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
-MU_START, MU_MIN, MU_MAX = 1e-2, 1e-10, 1e12  # damping, in the metric D
-THETA_START, THETA_MIN = 0.25, 1e-3  # the share of the constraints' violation a step removes
+MU_START, MU_MIN, MU_MAX = 1.0, 1e-10, 1e12  # damping, in the metric D
+THETA_START, THETA_MIN = 1.0, 1e-3  # the share of the goal's violation a step removes
+SETTLED = 3  # kept steps over which the effort must have settled
+POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themselves
 
 
 @dataclass
@@ -132,12 +139,7 @@ class PositionSQP:
         self.sigma = 0.0  # the merit's penalty weight, never lowered
         self.restore = LengthRestoration(tr)
         self.mu_used = None
-        # the damping's metric: the control cost's curvature of a unit move of one frame of
-        # one particle (its mass over dt^2, squared, weighed as the cost weighs a force),
-        # so mu is a pure number
-        masses = np.repeat(tr.problem.model.masses, 3)[tr.free_flat]
-        weight = float(np.mean(Q.diagonal()))
-        self.metric = np.tile(weight * (masses / tr.dt ** 2) ** 2, tr.N)
+        self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
 
     def point(self, z, jacobian: bool = True) -> Point:
         """The iterate at ``z`` (with the control Jacobian when asked)."""
@@ -154,7 +156,7 @@ class PositionSQP:
         ``should_stop()`` checked before each, True to end the search)."""
         x = self.point(z0)
         lam = np.zeros(len(self.constraints))
-        mu, theta, history = MU_START, THETA_START, []
+        mu, theta, history, efforts = MU_START, THETA_START, [], [x.effort]
         reason, it = "maxiter", 0
         for it in range(1, maxiter + 1):
             if should_stop is not None and should_stop():
@@ -164,24 +166,38 @@ class PositionSQP:
             mu = self.mu_used
             merit = lambda p: p.effort + sigma * p.violation()  # noqa: E731
             trial = self.point(self.restore(x.z, x.z + step), jacobian=False)
+            if self._broken(trial.z):  # a plan the simulation would refuse (torn cloth)
+                trial.effort = np.inf
+            elif trial.violation() > 0:
+                # the trial's own multiplier estimates (the constraints' gradients can vanish
+                # at x, on a keyframe's target) keep a miss from being bought with effort
+                A_t = self._gradients(trial.z)
+                sigma = self._penalty(A_t, x.gradient)
+                corrected = self._corrected(x, trial, step, A_t)
+                if (corrected is not None and merit(corrected) < merit(trial)
+                    and not self._broken(corrected.z)):
+                    trial = corrected
             actual = merit(x) - merit(trial)
             ratio = actual / predicted if predicted > 0 else -np.inf
             kept = ratio >= ACCEPT
-            previous = x
             if kept:
                 x, lam = self.point(trial.z), lam_new
                 if ratio > 0.5:
                     mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, 1.0)
             else:
-                mu, theta = min(4.0 * mu + MU_MIN, MU_MAX), max(theta / 2.0, THETA_MIN)
+                mu = min((16.0 if ratio < -1.0 else 4.0) * mu + MU_MIN, MU_MAX)
+                if trial.violation() > 0.5 * (x.violation() + np.maximum(self._linear, 0).sum()):
+                    theta = max(theta / 2.0, THETA_MIN)  # the goal's model failed too
             report = Progress(it, x.effort, x.violation(),
                               [k.miss(x.z) for k in self.constraints], mu,
                               float(np.linalg.norm(step)), kept, theta, ratio)
             history.append(report)
             if on_iteration is not None:
                 on_iteration(report, x)
-            if kept and x.violation() == 0 and abs(previous.effort - x.effort) <= tol * max(
-                    abs(x.effort), 1e-300):
+            if kept:
+                efforts.append(x.effort)
+            if (kept and x.violation() == 0 and len(efforts) > SETTLED
+                    and np.ptp(efforts[-SETTLED - 1:]) <= tol * max(abs(x.effort), 1e-300)):
                 reason = "converged"
                 break
             if not kept and mu >= MU_MAX:
@@ -199,21 +215,79 @@ class PositionSQP:
                 H = H + l * C
         while True:  # a matrix that does not factor (round-off): more damping
             try:
-                solve = self.factor((H + sp.diags(mu * self.metric)).tocsc())
+                solve = self.factor((H + mu * self.metric).tocsc())
                 break
             except ArithmeticError:
                 mu = max(4.0 * mu, 1e-8)
         self.mu_used = mu
-        A = np.stack([k.gradient(x.z) for k in self.constraints], axis=1)
+        A = self._gradients(x.z)
         p0 = -solve(x.gradient)
         W = solve(A)
-        aim = x.c - theta * np.maximum(x.c, 0.0)  # c + a^T p <= c - theta max(c, 0)
+        # c + a^T p <= c - theta c where violated (a share of it removed), <= 0 elsewhere
+        aim = np.where(x.c > 0, theta * x.c, x.c)
         step, lam_a = _active_set(aim, A, p0, W)
-        self.sigma = sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
+        self._solve, self._linear = solve, x.c + A.T @ step
+        self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
+        sigma = self._penalty(A, x.gradient)
         linear = x.c + A.T @ step
         model = -(x.gradient @ step + 0.5 * step @ (H @ step))
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
+
+
+    def _broken(self, z) -> bool:
+        """Whether the plan ``z`` has a frame the model's own checks refuse (non-finite,
+        beyond bounds, a cloth's spring past its blow-up stretch)."""
+        x = self.tr.frames(z)
+        v = np.diff(x, axis=0) / self.tr.dt
+        try:
+            for n in range(1, x.shape[0]):
+                self.tr.problem.model.check_state(x[n], v[n - 1], n)
+        except SimulationError:
+            return True
+        return False
+
+    def _gradients(self, z) -> np.ndarray:
+        return np.stack([k.gradient(z) for k in self.constraints], axis=1)
+
+    def _penalty(self, A, gradient) -> float:
+        """The merit's penalty weight, raised to twice the multipliers' least-squares
+        estimate ``-a_k^T g / |a_k|^2`` where that is larger (never lowered)."""
+        estimate = -(A.T @ gradient) / np.maximum(np.einsum("ik,ik->k", A, A), 1e-300)
+        self.sigma = max(self.sigma, 2.0 * estimate.max(initial=0.0))
+        return self.sigma
+
+    def _corrected(self, x: Point, trial: Point, step, A_t) -> Point | None:
+        """The trial with a second-order correction for the constraints it breaks beyond
+        their linearization (the keyframes' misses are quadratic in the positions): the
+        least move in the step's metric, on the factor already made, that brings them to
+        first order at the trial back to the linear model's value (or to zero); None when
+        none needs it."""
+        target = np.maximum(self._linear, 0.0)
+        broken = np.flatnonzero(trial.c > target)
+        if broken.size == 0:
+            return None
+        W = self._solve(A_t[:, broken])
+        S = A_t[:, broken].T @ W
+        y = np.linalg.lstsq(S, trial.c[broken] - target[broken], rcond=1e-12)[0]
+        return self.point(self.restore(x.z, x.z + step - W @ y), jacobian=False)
+
+
+def damping_metric(tr, weight: float, share: float = POSITION_SHARE) -> sp.csr_matrix:
+    """The damping's metric: the control cost (``weight`` per unit force squared) of the
+    inertial forces ``M (p_{n+1} - 2 p_n + p_{n-1}) / dt^2`` a change ``p`` of the positions
+    asks, plus ``share`` of the cost of ``M p / dt^2`` itself.  The first damps a change
+    that jerks a frame (a snap onto a keyframe) hard and one spread smoothly over many
+    frames lightly, where a metric of the positions alone prefers the snap (it moves the
+    fewest frames); the second bounds the smooth changes too, the directions in which a
+    buckling sheet's forces change the least to first order and the linear model fails
+    soonest."""
+    N = tr.N
+    T = sp.diags([np.ones(N), -2 * np.ones(N - 1), np.ones(N - 2)], [0, -1, -2],
+                 shape=(N, N))  # row: step n; column: frame n+1, n, n-1 (frames 1..N)
+    scale = np.repeat(tr.problem.model.masses, 3)[tr.free_flat] / tr.dt ** 2
+    S = sp.kron(T, sp.diags(scale)).tocsr()
+    return (weight * (S.T @ S + share * sp.diags(np.tile(scale ** 2, N)))).tocsr()
 
 
 def _active_set(c, A, p0, W):

@@ -183,3 +183,30 @@ def test_a_plan_that_tears_the_cloth_is_never_kept():
     assert not solver._broken(tr.unknowns(plan))
     plan[7, 12] += [0.0, 5.0, 0.0]  # one particle 5 m out at one frame
     assert solver._broken(tr.unknowns(plan))
+
+
+def test_the_strain_penalty_is_the_problems_own_term_with_its_slope():
+    """The search's strain penalty is the problem's StrainLimit term on the same motion, and
+    its gradient ``Jr^T r`` the slope of central differences (stable over three steps)."""
+    from casadi_keyframe.objectives import StrainLimit
+    from casadi_keyframe.optimize.positions.strain import StrainPenalty
+
+    model = ClothModel.grid(5, 5, pinned=[0, 4])
+    x0 = model.rest_positions
+    prob = ControlProblem(model=model, integrator=LinearizedBackwardEuler("direct"), x0=x0,
+                          v0=np.zeros_like(x0), steps=STEPS, dt=1 / 30,
+                          controls=StepForces(),
+                          objective=StateKeyframe(STEPS, x=x0, tolerance=0.01)
+                          + StrainLimit(1.01, 1e3), name="strained")
+    tr = Transcription(prob)
+    traj = prob.simulate(None, records=False)
+    z = tr.unknowns(traj.x)
+    r, J = StrainPenalty(tr).residuals(z)
+    term = prob.objective_terms.trajectory_terms[0]
+    assert r.size > 0 and 0.5 * r @ r == pytest.approx(term.value(traj), rel=1e-12)
+    d = np.random.default_rng(3).standard_normal(z.size)
+    slope = (J.T @ r) @ d
+    for h in (1e-5, 1e-6, 1e-7):
+        ahead, back = (StrainPenalty(tr).residuals(z + s * h * d, False)[0] for s in (1, -1))
+        assert (0.5 * ahead @ ahead - 0.5 * back @ back) / (2 * h) == pytest.approx(slope,
+                                                                                  rel=1e-5)

@@ -40,9 +40,10 @@ from scipy.sparse.linalg import splu
 
 from ...state import SimulationError
 from .restore import LengthRestoration
+from .strain import StrainPenalty
 
 ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
-MU_START, MU_MIN, MU_MAX = 1.0, 1e-10, 1e12  # damping, in the metric D
+MU_START, MU_MIN, MU_MAX = 1e3, 1e-10, 1e12  # damping, in the metric D
 THETA_START, THETA_MIN = 1.0, 1e-3  # the share of the goal's violation a step removes
 SETTLED = 3  # kept steps over which the effort must have settled
 POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themselves
@@ -50,7 +51,8 @@ POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themsel
 
 @dataclass
 class Point:
-    """An iterate: unknowns, controls, effort, its gradient in z, constraint values."""
+    """An iterate: unknowns, controls, effort (control cost and strain penalty), its
+    gradient in z, constraint values, and the Jacobians when asked."""
 
     z: np.ndarray
     u: np.ndarray
@@ -58,6 +60,7 @@ class Point:
     gradient: np.ndarray
     c: np.ndarray
     J: object = None
+    Jr: object = None  # the strain penalty's residuals' Jacobian
 
     def violation(self) -> float:
         return float(np.sum(np.maximum(self.c, 0.0)))
@@ -138,18 +141,22 @@ class PositionSQP:
         self.evaluations = 0
         self.sigma = 0.0  # the merit's penalty weight, never lowered
         self.restore = LengthRestoration(tr)
+        self.strain = StrainPenalty(tr)
         self.mu_used = None
         self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
 
     def point(self, z, jacobian: bool = True) -> Point:
-        """The iterate at ``z`` (with the control Jacobian when asked)."""
+        """The iterate at ``z`` (with the Jacobians when asked): its effort is the control
+        cost plus the problem's strain penalty (:mod:`.strain`)."""
         self.evaluations += 1
         u = self.tr.controls(z)
         effort, grad_u = self.tr.problem.control_cost(u)
+        r, Jr = self.strain.residuals(z, jacobian)
+        effort += 0.5 * float(r @ r)
         J = self.tr.control_jacobian(z) if jacobian else None
-        gradient = None if J is None else J.T @ grad_u
+        gradient = None if J is None else J.T @ grad_u + Jr.T @ r
         c = np.array([k.value(z) for k in self.constraints])
-        return Point(z, u, effort, gradient, c, J)
+        return Point(z, u, effort, gradient, c, J, Jr)
 
     def run(self, z0, *, maxiter: int, tol: float, on_iteration=None, should_stop=None):
         """From ``z0``: the :class:`Outcome` (``on_iteration(Progress, point)`` after each,
@@ -209,7 +216,7 @@ class PositionSQP:
         """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
         violated constraints asked to fall by the share ``theta``."""
         JQ = self.Q @ x.J
-        H = (x.J.T @ JQ).tocsc()
+        H = (x.J.T @ JQ + x.Jr.T @ x.Jr).tocsc()
         for l, C in zip(lam, self.C):
             if l > 0:
                 H = H + l * C

@@ -293,7 +293,12 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
     * ``vjp(x, v, *params, lam, w, q, dt) -> (gx, gv)``: the gradients in x and v of
       ``lam . (dt f + dt^2 K w + dt D q)``, the exact adjoint of a linearized step,
       second derivatives contracted per interaction;
-    * ``jvp(x, v, *params, w, q, dt, dx, dv) -> dg``: the same function along ``(dx, dv)``.
+    * ``jvp(x, v, *params, w, q, dt, dx, dv) -> dg``: the same function along ``(dx, dv)``;
+    * ``step(x, v, *params, w, q, dt) -> g``: that function itself, the interaction's part
+      of a linearized step's right side (the transcription's inverse step is written with
+      it, :mod:`casadi_keyframe.optimize.positions`);
+    * ``step_jac(x, v, *params, w, q, dt) -> vec dg/d(x, v, w, q)``, row-major: its Jacobian,
+      the blocks the transcription's sparse Jacobian is gathered from.
     """
     K = (ca.jacobian(ca.substitute(force, v, ca.SX.zeros(v.shape)), x) if stiffness is None
          else stiffness)
@@ -313,4 +318,7 @@ def interaction_kernels(name: str, x, v, params: list, force, stiffness=None) ->
                            [ca.gradient(phi, x), ca.gradient(phi, v)]),
         "jvp": ca.Function(f"{name}_jvp", args + [w, q, dt, dx, dv],
                            [ca.jtimes(g, ca.vertcat(x, v), ca.vertcat(dx, dv))]),
+        "step": ca.Function(f"{name}_step", args + [w, q, dt], [g]),
+        "step_jac": ca.Function(f"{name}_step_jac", args + [w, q, dt], [ca.reshape(
+            ca.jacobian(g, ca.vertcat(x, v, w, q)).T, -1, 1)]),
     }

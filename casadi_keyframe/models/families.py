@@ -288,6 +288,26 @@ class FamilyModel(BlockJacobians, StepHold):
             out += family.symbolic_forces(X, V, part, mine)
         return out
 
+    def step_jacobians(self, x, v, w, q, times, dt) -> list:
+        """Each family's :meth:`~.interaction.Interaction.step_jacobian` at many steps at
+        once (x, v, w, q ``(steps, n, 3)``): ``[(particles, blocks), ...]``, the families
+        that add nothing left out."""
+        out = []
+        for family in self.families:
+            found = family.step_jacobian(x, v, w, q, times, dt)
+            if found is not None:
+                out.append(found)
+        return out
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        """``dt f + dt^2 K W + dt D Q`` (``3 x n``, the right side of a linearized step less
+        its control) summed over the families, each written per interaction; S the
+        :meth:`scene_parameters` at the step's time and ``decisions`` the step's."""
+        out = 0
+        for family, part, mine in self.scene_parts(S, decisions):
+            out += family.symbolic_step(X, V, W, Q, part, dt, mine)
+        return out
+
     def symbolic_jacobians(self, X, V, S=None, decisions=None):
         """:meth:`jacobians` as sparse CasADi expressions ``(K, D)``, assembled from the same
         kernels and patterns (so K is the step's clamped stiffness, not ``df/dx``), given the

@@ -50,3 +50,15 @@ class GravityAndDrag(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=(None, ca.DM(np.asarray(self.damping_blocks).T)))
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        """Drag only: ``-dt drag m`` in v and in q (gravity is constant)."""
+        steps, n = x.shape[:2]
+        blocks = np.zeros((steps, n, 4, 3, 3))
+        block = -dt * self.air_drag * self.masses[:, None, None] * np.eye(3)
+        blocks[:, :, 1] = blocks[:, :, 3] = block
+        return np.arange(n)[:, None], blocks
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        drag = self.air_drag * ca.repmat(ca.DM(self.masses).T, 3, 1)
+        return dt * (ca.DM(self.gravity.T) - drag * V) - dt * drag * Q

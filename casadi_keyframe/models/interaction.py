@@ -178,6 +178,23 @@ class Interaction:
         systems), given what the step decided (:meth:`decision_parameters`; None: nothing)."""
         raise NotImplementedError
 
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        """``dt f + dt^2 K W + dt D Q`` as a ``3 x n`` CasADi expression: the family's part
+        of a linearized step's right side, written per interaction (no assembled K or D,
+        so a transcription of many steps stays small); X, V, W, Q ``3 x n``."""
+        raise NotImplementedError(f"{type(self).__name__} has no symbolic step: the "
+                                  "transcription cannot write its inverse step")
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        """The Jacobian of :meth:`symbolic_step`'s function at many steps at once:
+        ``(particles, blocks)``, ``particles`` ``(P, k)`` the interactions' particles (the
+        same at every step) and ``blocks`` ``(steps, P, 4, 3k, 3k)``, the derivatives of
+        each interaction's ``3k`` outputs in x, v, w and q of its particles; x, v, w, q are
+        ``(steps, n, 3)``, ``times`` the steps' start times.  None: the family adds
+        nothing (the hold, which acts through the solve)."""
+        raise NotImplementedError(f"{type(self).__name__} has no step Jacobian: the "
+                                  "transcription cannot write its inverse step")
+
 
 class PairInteraction(Interaction):
     """A law of two particles, ``(d = x_j - x_i, dv = v_j - v_i, *params) -> f_i``, lifted
@@ -261,6 +278,29 @@ class PairInteraction(Interaction):
         i, j, blocks = self._symbolic("jac", X, V, decisions)
         return FamilyBlocks(i, j, tuple(blocks))
 
+    def step_jacobian(self, x, v, w, q, times, dt):
+        if not self.fixed_pairs:
+            raise NotImplementedError(f"{self.name} acts over pairs found per state: the "
+                                      "transcription has no fixed pattern for it")
+        i, j = self.all_pairs()
+        steps, P = x.shape[0], i.size
+        inputs = [(a[:, j] - a[:, i]).reshape(-1, 3) for a in (x, v)]
+        params = [np.tile(p, (steps, 1)) for p in self.pair_parameters(i, j)]
+        deltas = [(a[:, j] - a[:, i]).reshape(-1, 3) for a in (w, q)]
+        (jac,) = _kernel(self, "step_jac")(*inputs, *params, *deltas, np.full((steps * P, 1), dt))
+        A = jac.reshape(steps, P, 3, 4, 3).transpose(0, 1, 3, 2, 4)  # (steps, P, 4, 3, 3)
+        blocks = np.empty((steps, P, 4, 6, 6))
+        blocks[..., :3, :3] = blocks[..., 3:, 3:] = -A  # g on i, -g on j; g of x_j - x_i
+        blocks[..., :3, 3:] = blocks[..., 3:, :3] = A
+        return np.stack([i, j], axis=1), blocks
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        i, j = self.all_pairs()
+        params = self.symbolic_pair_parameters(i, j, decisions)
+        g = self.kernels["step"].map(i.size)(X[:, j] - X[:, i], V[:, j] - V[:, i], *params,
+                                             W[:, j] - W[:, i], Q[:, j] - Q[:, i], dt)
+        return ca.mtimes(g, pair_incidence(i, j, self.n))
+
 
 class ParticleInteraction(Interaction):
     """A law of one particle, ``(x, v, *columns) -> f``, over every particle; its Jacobian
@@ -314,6 +354,21 @@ class ParticleInteraction(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(particles=tuple(self._symbolic("jac", X, V, S, decisions)))
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        steps, n = x.shape[:2]
+        jac = np.empty((steps, n, 36))
+        for k in range(steps):
+            (jac[k],) = _kernel(self, "step_jac")(x[k], v[k], *self.columns_at(x[k], times[k], None),
+                                        w[k], q[k], np.full((n, 1), dt))
+        blocks = jac.reshape(steps, n, 3, 4, 3).transpose(0, 1, 3, 2, 4)
+        return np.arange(n)[:, None], blocks
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        n = X.shape[1]
+        columns = [c if c.shape[1] == n else ca.repmat(c, 1, n)
+                   for c in self.symbolic_columns(S, decisions)]
+        return self.kernels["step"].map(n)(X, V, *columns, W, Q, dt)
 
 
 class StencilInteraction(Interaction):
@@ -378,3 +433,32 @@ class StencilInteraction(Interaction):
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks(stencil=self.stencils,
                             stencil_blocks=tuple(self._symbolic("jac", X, V)))
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        steps = x.shape[0]
+        P, k = self.stencils.shape
+        stacked = [a[:, self.stencils].reshape(steps * P, 3 * k) for a in (x, v, w, q)]
+        params = [np.tile(p, (steps, 1)) for p in self.stencil_parameters()]
+        (jac,) = _kernel(self, "step_jac")(*stacked[:2], *params, *stacked[2:],
+                                 np.full((steps * P, 1), dt))
+        blocks = jac.reshape(steps, P, 3 * k, 4, 3 * k).transpose(0, 1, 3, 2, 4)
+        return self.stencils, blocks
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        P, k = self.stencils.shape
+        columns = self.stencils.ravel().tolist()
+        stacked = [ca.reshape(A[:, columns], 3 * k, P) for A in (X, V, W, Q)]
+        params = [ca.DM(np.asarray(a).T) for a in self.stencil_parameters()]
+        g = self.kernels["step"].map(P)(*stacked[:2], *params, *stacked[2:], dt)
+        return ca.mtimes(ca.reshape(g, 3, self.stencils.size),
+                         stencil_incidence(self.stencils, self.n))
+
+
+def _kernel(family, name: str) -> MappedKernel:
+    """The family's mapped kernel ``name`` (the transcription's ``step_jac``), made (and
+    compiled) at its first use."""
+    made = family.__dict__.setdefault("_transcription_kernels", {})
+    if name not in made:
+        made[name] = MappedKernel(family.kernels[name],
+                                  jit=getattr(family.mapped.get("force"), "jit", None))
+    return made[name]

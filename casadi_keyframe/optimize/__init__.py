@@ -29,7 +29,9 @@ Wings:
 * :mod:`.residual`: the residual family, one linearization, descents and step-size rules;
 * :mod:`.shooting`: multiple shooting, a stage of :func:`solve` (``shooting=K``);
 * :mod:`.finish`: the last stage, with the keyframes held (:func:`lower_effort`,
-  :func:`~.finish.land`).
+  :func:`~.finish.land`);
+* :mod:`.positions`: the problem in positions (the transcription), a method of
+  :data:`METHODS` (``method="transcription"``).
 """
 from .finish import lower_effort
 from .methods import METHODS, Method

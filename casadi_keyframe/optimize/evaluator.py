@@ -83,13 +83,17 @@ class Evaluator:
     ``report``: the ``"best"`` point so far or the ``"last"`` evaluated; with
     ``failed_best`` a failed evaluation stands as the best while there is no other.  With
     ``stop="goal"`` each iteration raises :class:`~.goal.GoalReached` once the best point
-    meets the goal.
+    meets the goal.  ``ranks="effort"`` ranks the points that meet the goal by their control
+    cost instead of the merit (a method that lowers the effort under the goal).
     """
 
     def __init__(self, problem, gradient, checkpoint, *, stage: int = 0, export=None,
                  goal=None, stop: str = "method", merit=None, report: str = "best",
-                 failed_best: bool = True, final: bool = True):
+                 failed_best: bool = True, final: bool = True, ranks: str = "objective"):
         self.problem, self.final = problem, final
+        if ranks not in ("objective", "effort"):
+            raise ValueError(f"Evaluator ranks must be 'objective' or 'effort', got {ranks!r}")
+        self.ranks = ranks
         self.merit = RouteMerit(problem, gradient, goal) if merit is None else merit
         self.gradient = self.merit.route
         self.checkpoint, self.stage = checkpoint, stage
@@ -164,10 +168,21 @@ class Evaluator:
     def _rank(self, u, f, g, info) -> None:
         """Make the point ``u`` the best if its standing beats the best's."""
         met = info is not None and self.merit.meets(self.goal, info)
-        if Standing(met, f).beats(Standing(self.best_met, self.best_f)) and (
+        if self._standing(u, met, f).beats(self._best_standing()) and (
                 info is not None or self.failed_best):
             self.best_u, self.best_f, self.best_g, self.best_info = u, f, g, info
             self.best_traj, self.best_met = None, met
+
+    def _standing(self, u, met: bool, f) -> Standing:
+        """A point's :class:`~.kept.Standing` (its control cost too where it meets the goal
+        and the evaluator ranks by effort)."""
+        effort = (self.goal.control_cost(u)[0] if met and self.ranks == "effort" else None)
+        return Standing(met, f, effort)
+
+    def _best_standing(self) -> Standing:
+        if self.best_u is None:
+            return Standing(False, np.inf)
+        return self._standing(self.best_u, self.best_met, self.best_f)
 
     def judge(self, u, *, records: bool = False) -> Evaluation | None:
         """The problem's objective and run at the controls ``u`` without a gradient (an
@@ -254,7 +269,8 @@ class Evaluator:
         if self.checkpoint is None or self.best_u is None:
             return
         u, fun = self._described("best")[:2]
-        self.checkpoint.write(self.export(u), Standing(bool(self.best_met), float(fun)),
+        standing = self._standing(u, bool(self.best_met), float(fun))
+        self.checkpoint.write(self.export(u), standing,
                               final=self.final, nit=nit, stage=self.stage,
                               stage_dt=float(self.problem.dt))
 

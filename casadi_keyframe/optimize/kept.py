@@ -23,13 +23,17 @@ from .result import Result, assemble, stage_record
 @dataclass(frozen=True)
 class Standing:
     """Where a point stands: whether it ``met`` the goal, then its ``objective`` (lower is
-    better)."""
+    better); a solve that ranks the points meeting the goal by their control cost (least
+    effort under the goal: the transcription) gives their ``effort`` too, and those points
+    are then ranked by it."""
 
     met: bool
     objective: float
+    effort: float | None = None
 
     def _key(self) -> tuple:
-        return (bool(self.met), -float(self.objective))
+        value = self.effort if self.met and self.effort is not None else self.objective
+        return (bool(self.met), -float(value))
 
     def beats(self, other: "Standing | None") -> bool:
         """Strictly better than ``other`` (anything beats None)."""

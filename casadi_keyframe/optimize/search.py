@@ -60,7 +60,8 @@ def solve(problem, settings: SolveSettings | str | None = None, *, u0=None,
     objective.  Each setting and stage in full: ``docs/explanations/solving.md``.
     """
     settings = as_settings(settings, **keywords)
-    stop = check_stop(settings.stop, goal or problem)
+    stop = check_stop(settings.stop if settings.stop is not None
+                      else get_method(settings.method).stop, goal or problem)
     if settings.finish is not None:
         check_finish(problem, settings.finish)
     checkpoint = as_checkpoint(checkpoint)
@@ -123,7 +124,8 @@ def run_stages(problem, settings: SolveSettings, search, u0=None, *, goal=None,
         final = p is problem
         export = lambda v, p=p: carry(p, v, problem)  # noqa: E731
         ev = Evaluator(p, strategy, search.checkpoint, stage=len(stages), export=export,
-                       goal=(goal or problem) if final else p, stop=stop, final=final)
+                       goal=(goal or problem) if final else p, stop=stop, final=final,
+                       ranks=get_method(settings.method).ranks)
         begin, polish = p.initial_controls() if u is None else u, True
         origin = ("the start" if k == 0 or not stages else handed
                   or f"stage {stages[-1]['stage']}'s best, carried here")
@@ -210,7 +212,8 @@ def _shoot(p, k, opts, start, search, stages, ev, origin, limit):
     if opts.polish and record["status"] != INTERRUPTED and not limit.passed():
         if aimed is not p:
             ev = Evaluator(aimed, ev.gradient, ev.checkpoint, stage=len(stages),
-                           export=ev.export, goal=ev.goal, stop=ev.stop, final=ev.final)
+                           export=ev.export, goal=ev.goal, stop=ev.stop, final=ev.final,
+                           ranks=ev.ranks)
         return start, ev, True
     evaluate_at(ev, start, exact=record["status"] != INTERRUPTED and not limit.passed())
     record["status"], record["message"] = judge(record["status"], record["message"],

@@ -402,3 +402,9 @@ class BodyHold(Interaction):
 
     def symbolic_blocks(self, X, V, S, decisions=None):
         return FamilyBlocks()
+
+    def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
+        return ca.SX.zeros(3, X.shape[1])
+
+    def step_jacobian(self, x, v, w, q, times, dt):
+        return None

@@ -11,6 +11,7 @@ from __future__ import annotations
 import difflib
 from collections.abc import Mapping
 
+from ..positions import method as transcription
 from . import gauss_newton, ipopt, lbfgsb, least_squares
 from .base import LibraryOptions, Method, SearchCall, TypedOptions
 
@@ -21,6 +22,9 @@ METHODS: dict[str, Method] = {
                            gauss_newton.GaussNewtonOptions),
     "least-squares": Method("scipy's least_squares", least_squares.run,
                             least_squares.LeastSquaresOptions),
+    "transcription": Method("the transcription in positions", transcription.run,
+                            transcription.TranscriptionOptions, stop="method",
+                            ranks="effort"),
 }
 
 __all__ = ["METHODS", "LibraryOptions", "Method", "SearchCall", "TypedOptions",

@@ -61,6 +61,13 @@ class Method:
     label: str
     run: Callable
     options: type
+    stop: str | None = None
+    """The stop rule where the settings leave it open (None: the solve's default, the goal
+    where keyframes declare tolerances); a method whose point is what follows the goal
+    (least effort under it) says "method"."""
+    ranks: str = "objective"
+    """How the points that meet the goal are ranked: by the objective, or ("effort") by
+    their control cost, for a method that minimises the effort under the goal."""
 
 
 class LibraryOptions:

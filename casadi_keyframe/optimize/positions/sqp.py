@@ -1,0 +1,322 @@
+r"""Least effort under the goal, in positions: a sequential quadratic programme with the
+effort's Gauss-Newton matrix, in a trust region.
+
+At an iterate z, with the controls ``u(z)`` (:class:`~.transcription.Transcription`), their
+Jacobian ``J`` and the control terms' constant Hessian ``Q``, each step solves
+
+    minimise  g^T p + 1/2 p^T (J^T Q J + sum_k lambda_k C_k + mu D) p
+    subject to c_k + a_k^T p <= (1 - theta) c_k if c_k > 0, else 0   (the goal, :mod:`.goal`)
+
+(``g = J^T Q u``: the effort's gradient; ``C_k`` the constraints' constant Hessians and
+``lambda_k`` their last multipliers; ``D`` :func:`damping_metric`, weighed as the control
+cost weighs a force, so ``mu`` is a pure number): one sparse Cholesky factorisation, one
+solve per constraint and a tiny active-set problem for the multipliers.  ``mu`` and
+``theta`` (the share of a violated constraint one step removes) make a trust region: the
+linear model of the forces holds only for small moves where the cloth buckles or turns (a
+buckling sheet's positions move far for forces that change little to first order, the
+controls' sensitivity seen from the other side).  The trial is corrected for the stiff
+springs (:mod:`.restore`) and, where it breaks a keyframe's bound beyond the linear model
+(the misses are quadratic in the positions), by a second-order correction on the same
+factor; a plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a
+share of what the model predicts (``sigma`` at least twice the multipliers, the QP's and
+their least-squares estimate).  Then ``mu`` halves and ``theta`` doubles; else ``mu`` grows
+(fourfold, sixteenfold when the merit rose) and ``theta`` halves if the goal's own model
+failed.  It ends when the constraints hold and the effort has changed by less than ``tol``
+(relative) over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or
+when no step is kept at the largest damping.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+try:
+    from cvxopt import cholmod, matrix, spmatrix
+except ImportError:  # SuperLU instead (slower, same answer)
+    cholmod = None
+from scipy.sparse.linalg import splu
+
+from ...state import SimulationError
+from .restore import LengthRestoration
+from .strain import StrainPenalty
+
+ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
+MU_START, MU_MIN, MU_MAX = 1e3, 1e-10, 1e12  # damping, in the metric D
+THETA_START, THETA_MIN = 1.0, 1e-3  # the share of the goal's violation a step removes
+SETTLED = 3  # kept steps over which the effort must have settled
+POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themselves
+
+
+@dataclass
+class Point:
+    """An iterate: unknowns, controls, effort (control cost and strain penalty), its
+    gradient in z, constraint values, and the Jacobians when asked."""
+
+    z: np.ndarray
+    u: np.ndarray
+    effort: float
+    gradient: np.ndarray
+    c: np.ndarray
+    J: object = None
+    Jr: object = None  # the strain penalty's residuals' Jacobian
+
+    def violation(self) -> float:
+        return float(np.sum(np.maximum(self.c, 0.0)))
+
+
+@dataclass
+class Progress:
+    """What an iteration reports: the kept point's effort, violation and misses (m), the
+    damping and share it ends with, the trial step's length, whether it was kept and the
+    ratio of the merit's actual to predicted decrease."""
+
+    iteration: int
+    effort: float
+    violation: float
+    misses: list
+    mu: float
+    step: float
+    kept: bool
+    theta: float
+    ratio: float
+
+
+@dataclass
+class Outcome:
+    """How the search ended: its point, why (``converged``, ``maxiter``, ``stalled``,
+    ``stopped``), its iterations and their reports."""
+
+    z: np.ndarray
+    reason: str  # "converged", "maxiter", "stalled", "stopped"
+    iterations: int
+    history: list = field(default_factory=list)
+
+
+class Factor:
+    """Sparse Cholesky (CHOLMOD through cvxopt, its analysis kept while the pattern holds;
+    SuperLU without cvxopt) of a symmetric positive definite matrix."""
+
+    def __init__(self):
+        self._pattern = None
+        self._symbolic = None
+        self._matrix = None
+
+    def __call__(self, B: sp.csc_matrix):
+        B = sp.csc_matrix(B)
+        B.sort_indices()
+        if cholmod is None:
+            lu = splu(B)
+            return lambda rhs: lu.solve(np.asarray(rhs, float))
+        lower = sp.tril(B, format="csc")
+        lower.sort_indices()
+        key = (lower.indptr.tobytes(), lower.indices.tobytes())
+        if key != self._pattern:
+            col = np.repeat(np.arange(lower.shape[1]), np.diff(lower.indptr))
+            self._matrix = spmatrix(matrix(lower.data), matrix(lower.indices.astype(np.int64)),
+                                    matrix(col.astype(np.int64)), lower.shape)
+            self._symbolic, self._pattern = cholmod.symbolic(self._matrix, uplo="L"), key
+        else:
+            self._matrix.V = matrix(lower.data)
+        cholmod.numeric(self._matrix, self._symbolic)
+        factor = self._symbolic
+
+        def solve(rhs):
+            b = matrix(np.asarray(rhs, float).reshape(B.shape[0], -1))
+            cholmod.solve(factor, b)
+            return np.asarray(b).reshape(np.shape(rhs))
+
+        return solve
+
+
+class PositionSQP:
+    """The module docstring's search on a transcription ``tr`` under ``constraints``."""
+
+    def __init__(self, tr, constraints, Q: sp.spmatrix):
+        self.tr, self.constraints = tr, constraints
+        self.Q = sp.csr_matrix(Q)
+        self.C = [c.hessian() for c in constraints]
+        self.factor = Factor()
+        self.evaluations = 0
+        self.sigma = 0.0  # the merit's penalty weight, never lowered
+        self.restore = LengthRestoration(tr)
+        self.strain = StrainPenalty(tr)
+        self.mu_used = None
+        self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
+
+    def point(self, z, jacobian: bool = True) -> Point:
+        """The iterate at ``z`` (with the Jacobians when asked): its effort is the control
+        cost plus the problem's strain penalty (:mod:`.strain`)."""
+        self.evaluations += 1
+        u = self.tr.controls(z)
+        effort, grad_u = self.tr.problem.control_cost(u)
+        r, Jr = self.strain.residuals(z, jacobian)
+        effort += 0.5 * float(r @ r)
+        J = self.tr.control_jacobian(z) if jacobian else None
+        gradient = None if J is None else J.T @ grad_u + Jr.T @ r
+        c = np.array([k.value(z) for k in self.constraints])
+        return Point(z, u, effort, gradient, c, J, Jr)
+
+    def run(self, z0, *, maxiter: int, tol: float, on_iteration=None, should_stop=None):
+        """From ``z0``: the :class:`Outcome` (``on_iteration(Progress, point)`` after each,
+        ``should_stop()`` checked before each, True to end the search)."""
+        x = self.point(z0)
+        lam = np.zeros(len(self.constraints))
+        mu, theta, history, efforts = MU_START, THETA_START, [], [x.effort]
+        reason, it = "maxiter", 0
+        for it in range(1, maxiter + 1):
+            if should_stop is not None and should_stop():
+                reason = "stopped"
+                break
+            step, lam_new, predicted, sigma = self._step(x, lam, mu, theta)
+            mu = self.mu_used
+            merit = lambda p: p.effort + sigma * p.violation()  # noqa: E731
+            trial = self.point(self.restore(x.z, x.z + step), jacobian=False)
+            if self._broken(trial.z):  # a plan the simulation would refuse (torn cloth)
+                trial.effort = np.inf
+            elif trial.violation() > 0:
+                # the trial's own multiplier estimates (the constraints' gradients can vanish
+                # at x, on a keyframe's target) keep a miss from being bought with effort
+                A_t = self._gradients(trial.z)
+                sigma = self._penalty(A_t, x.gradient)
+                corrected = self._corrected(x, trial, step, A_t)
+                if (corrected is not None and merit(corrected) < merit(trial)
+                    and not self._broken(corrected.z)):
+                    trial = corrected
+            actual = merit(x) - merit(trial)
+            ratio = actual / predicted if predicted > 0 else -np.inf
+            kept = ratio >= ACCEPT
+            if kept:
+                x, lam = self.point(trial.z), lam_new
+                if ratio > 0.5:
+                    mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, 1.0)
+            else:
+                mu = min((16.0 if ratio < -1.0 else 4.0) * mu + MU_MIN, MU_MAX)
+                if trial.violation() > 0.5 * (x.violation() + np.maximum(self._linear, 0).sum()):
+                    theta = max(theta / 2.0, THETA_MIN)  # the goal's model failed too
+            report = Progress(it, x.effort, x.violation(),
+                              [k.miss(x.z) for k in self.constraints], mu,
+                              float(np.linalg.norm(step)), kept, theta, ratio)
+            history.append(report)
+            if on_iteration is not None:
+                on_iteration(report, x)
+            if kept:
+                efforts.append(x.effort)
+            if (kept and x.violation() == 0 and len(efforts) > SETTLED
+                    and np.ptp(efforts[-SETTLED - 1:]) <= tol * max(abs(x.effort), 1e-300)):
+                reason = "converged"
+                break
+            if not kept and mu >= MU_MAX:
+                reason = "stalled"
+                break
+        return Outcome(x.z, reason, it, history), x
+
+    def _step(self, x: Point, lam, mu, theta):
+        """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
+        violated constraints asked to fall by the share ``theta``."""
+        JQ = self.Q @ x.J
+        H = (x.J.T @ JQ + x.Jr.T @ x.Jr).tocsc()
+        for l, C in zip(lam, self.C):
+            if l > 0:
+                H = H + l * C
+        while True:  # a matrix that does not factor (round-off): more damping
+            try:
+                solve = self.factor((H + mu * self.metric).tocsc())
+                break
+            except ArithmeticError:
+                mu = max(4.0 * mu, 1e-8)
+        self.mu_used = mu
+        A = self._gradients(x.z)
+        p0 = -solve(x.gradient)
+        W = solve(A)
+        # c + a^T p <= c - theta c where violated (a share of it removed), <= 0 elsewhere
+        aim = np.where(x.c > 0, theta * x.c, x.c)
+        step, lam_a = _active_set(aim, A, p0, W)
+        self._solve, self._linear = solve, x.c + A.T @ step
+        self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
+        sigma = self._penalty(A, x.gradient)
+        linear = x.c + A.T @ step
+        model = -(x.gradient @ step + 0.5 * step @ (H @ step))
+        predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
+        return step, lam_a, predicted, sigma
+
+
+    def _broken(self, z) -> bool:
+        """Whether the plan ``z`` has a frame the model's own checks refuse (non-finite,
+        beyond bounds, a cloth's spring past its blow-up stretch)."""
+        x = self.tr.frames(z)
+        v = np.diff(x, axis=0) / self.tr.dt
+        try:
+            for n in range(1, x.shape[0]):
+                self.tr.problem.model.check_state(x[n], v[n - 1], n)
+        except SimulationError:
+            return True
+        return False
+
+    def _gradients(self, z) -> np.ndarray:
+        return np.stack([k.gradient(z) for k in self.constraints], axis=1)
+
+    def _penalty(self, A, gradient) -> float:
+        """The merit's penalty weight, raised to twice the multipliers' least-squares
+        estimate ``-a_k^T g / |a_k|^2`` where that is larger (never lowered)."""
+        estimate = -(A.T @ gradient) / np.maximum(np.einsum("ik,ik->k", A, A), 1e-300)
+        self.sigma = max(self.sigma, 2.0 * estimate.max(initial=0.0))
+        return self.sigma
+
+    def _corrected(self, x: Point, trial: Point, step, A_t) -> Point | None:
+        """The trial with a second-order correction for the constraints it breaks beyond
+        their linearization (the keyframes' misses are quadratic in the positions): the
+        least move in the step's metric, on the factor already made, that brings them to
+        first order at the trial back to the linear model's value (or to zero); None when
+        none needs it."""
+        target = np.maximum(self._linear, 0.0)
+        broken = np.flatnonzero(trial.c > target)
+        if broken.size == 0:
+            return None
+        W = self._solve(A_t[:, broken])
+        S = A_t[:, broken].T @ W
+        y = np.linalg.lstsq(S, trial.c[broken] - target[broken], rcond=1e-12)[0]
+        return self.point(self.restore(x.z, x.z + step - W @ y), jacobian=False)
+
+
+def damping_metric(tr, weight: float, share: float = POSITION_SHARE) -> sp.csr_matrix:
+    """The damping's metric: the control cost (``weight`` per unit force squared) of the
+    inertial forces ``M (p_{n+1} - 2 p_n + p_{n-1}) / dt^2`` a change ``p`` of the positions
+    asks, plus ``share`` of the cost of ``M p / dt^2`` itself.  The first damps a change
+    that jerks a frame (a snap onto a keyframe) hard and one spread smoothly over many
+    frames lightly, where a metric of the positions alone prefers the snap (it moves the
+    fewest frames); the second bounds the smooth changes too, the directions in which a
+    buckling sheet's forces change the least to first order and the linear model fails
+    soonest."""
+    N = tr.N
+    T = sp.diags([np.ones(N), -2 * np.ones(N - 1), np.ones(N - 2)], [0, -1, -2],
+                 shape=(N, N))  # row: step n; column: frame n+1, n, n-1 (frames 1..N)
+    scale = np.repeat(tr.problem.model.masses, 3)[tr.free_flat] / tr.dt ** 2
+    S = sp.kron(T, sp.diags(scale)).tocsr()
+    return (weight * (S.T @ S + share * sp.diags(np.tile(scale ** 2, N)))).tocsr()
+
+
+def _active_set(c, A, p0, W):
+    """``(step, multipliers)`` of the QP's few constraints ``c + A^T p <= 0`` given the
+    unconstrained step ``p0`` and ``W = B^-1 A``: a primal active set (a constraint is
+    added while its linearization is violated, dropped while its multiplier is negative)."""
+    m = c.size
+    active = [k for k in range(m) if c[k] + A[:, k] @ p0 > 0]
+    lam = np.zeros(m)
+    for _ in range(4 * m + 4):
+        lam[:] = 0.0
+        if active:
+            S = A[:, active].T @ W[:, active]
+            rhs = c[active] + A[:, active].T @ p0
+            lam[active] = np.linalg.lstsq(S, rhs, rcond=1e-12)[0]
+        step = p0 - W @ lam
+        negative = [k for k in active if lam[k] < 0]
+        if negative:
+            active.remove(min(negative, key=lambda k: lam[k]))
+            continue
+        violated = [k for k in range(m) if k not in active and c[k] + A[:, k] @ step > 0]
+        if not violated:
+            break
+        active.append(max(violated, key=lambda k: c[k] + A[:, k] @ step))
+    return step, lam

@@ -15,7 +15,11 @@ the zero-force start (``rest_band=0.05``), one BLAS thread, CPU time from
 ``--known N``: N problems whose targets are reachable by construction, each the 12 x 12
 sheet's frames 40 and 80 under random forces smooth in time and over the sheet (rms 6 m/s^2,
 seeds 0..N-1), solved from the rest state; each row against the forces that made it (their
-control cost, rms and peak).
+control cost and strain penalty, the search's objective; rms and peak).  These problems
+have no strain penalty: the sheet hanging from two corners stretches to 1.37-1.39 under
+these forces as under none, past the walkthrough's strain limit (1.2) and its physical
+limit (1.3), so with the penalty the search must lift the sheet the forces let sag, and
+its cost says nothing about reaching targets that are reachable by construction.
 """
 import argparse
 import os
@@ -29,6 +33,8 @@ import numpy as np  # noqa: E402
 
 import casadi_keyframe as ck  # noqa: E402
 from casadi_keyframe.meshes import check_mesh  # noqa: E402
+from casadi_keyframe.optimize.positions.method import start_positions  # noqa: E402
+from casadi_keyframe.optimize.positions.replay import replay_controls  # noqa: E402
 from casadi_keyframe.scenes.mesh_cloths import mesh_keyframe_problem  # noqa: E402
 from casadi_keyframe.scenes.mesh_targets import hanging_sheet  # noqa: E402
 
@@ -45,6 +51,16 @@ def row(name, prob, u, seconds, nit, message=""):
     return (f"| {name} | {misses} mm | {b['physical']['max_stretch']:.3f} | "
             f"{e['rms_acceleration']:.1f} / {e['peak_acceleration']:.0f} | {nit} | "
             f"{seconds:.0f} | {message} |")
+
+
+def searched(prob, u) -> str:
+    """What the search in positions minimises at ``u``: the control cost plus the problem's
+    strain penalty."""
+    cost = prob.control_cost(u)[0]
+    traj = prob.simulate(u, records=False)
+    strain = sum(t.value(traj) for t in prob.objective_terms.trajectory_terms
+                 if isinstance(t, ck.StrainLimit))
+    return f"cost {cost:.3g} + strain {strain:.3g}"
 
 
 def known_targets(seed: int):
@@ -71,7 +87,7 @@ def known_targets(seed: int):
                                                       for f in (40, 80)],
         steps=None, dt=base.dt, mass=0.3, pinned=base.model.pinned, control="forces",
         colliders=[], weight=100.0, alpha=1e-4, align=False, strain_limit=1.2,
-        strain_weight=1e3, wrinkle=0.002, guess="none", rest_band=0.05)
+        strain_weight=0.0, wrinkle=0.002, guess="none", rest_band=0.05)
     return problem, forces
 
 
@@ -87,6 +103,8 @@ def main():
         guess, start = CASES[name]
         prob = ck.load_problem("mesh_keyframes", guess=guess, rest_band=0.05)
         u0 = prob.initial_controls()
+        if start != "controls":  # the controls that move the sheet along the start's plan
+            u0 = replay_controls(prob, start_positions(prob, start, u0)).u
         print(row(f"{name}: the start", prob, u0, 0, 0), flush=True)
         t = time.process_time()
         result = ck.solve(prob, method="transcription", maxiter=args.maxiter,
@@ -96,14 +114,14 @@ def main():
                   result.message), flush=True)
     for seed in range(args.known):
         prob, forces = known_targets(seed)
-        print(row(f"known {seed}: the forces (cost {prob.control_cost(forces)[0]:.3g})", prob,
-                  forces, 0, 0), flush=True)
+        print(row(f"known {seed}: the forces ({searched(prob, forces)})", prob, forces, 0, 0),
+              flush=True)
         t = time.process_time()
         result = ck.solve(prob, method="transcription", maxiter=args.maxiter,
                           options={"start": "rest"}, quiet=True)
         seconds = time.process_time() - t
-        print(row(f"known {seed}: from rest (cost {prob.control_cost(result.x)[0]:.3g})", prob,
-                  result.x, seconds, result.nit, result.message), flush=True)
+        print(row(f"known {seed}: from rest ({searched(prob, result.x)})", prob, result.x,
+                  seconds, result.nit, result.message), flush=True)
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     print(f"\npeak memory of the process: {peak:.0f} MB")
 

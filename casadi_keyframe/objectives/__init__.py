@@ -5,7 +5,8 @@
   :mod:`.mesh`: a keyframe given as a mesh;
 * :mod:`.effort`: the control effort; :mod:`.strain`: the soft strain limit;
 * :mod:`.tolerances`: when a keyframe counts as met, and a motion as physical;
-* :mod:`.markers`: what a keyframe term shows; :mod:`.keyframe_goal`: how the goal judges it.
+* :mod:`.markers`: what a keyframe term shows; :mod:`.keyframe_goal`: how the goal judges it;
+* :mod:`.paths`: paths through the keyframes' targets (guesses and starts without a controller).
 """
 from .effort import Smoothness
 from .keyframes import CenterOfMassKeyframe, ParticleKeyframe, StateKeyframe

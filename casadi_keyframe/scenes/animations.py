@@ -15,7 +15,8 @@ from functools import cached_property
 import numpy as np
 
 from ..checks import check_fields, check_number
-from .maths import bump, rotation, smoothstep, soft_max, soft_min
+from ..objectives.paths import smoothstep
+from .maths import bump, rotation, soft_max, soft_min
 from .skeleton import J, JOINTS, Character, Pose, angles, blend
 
 GRAVITY = 9.81

@@ -13,7 +13,7 @@ import numpy as np
 
 from ..checks import frame_at
 from ..state import State
-from .maths import smoothstep
+from ..objectives.paths import smoothstep
 
 
 def blend_steps(steps, window, dt: float) -> int:

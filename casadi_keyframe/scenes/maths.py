@@ -1,4 +1,5 @@
-"""Small maths the scenes share: rotations and C^2 ramps that keep animations smooth."""
+"""Small maths the scenes share: rotations and C^2 bumps and soft limits that keep animations
+smooth (the smoothstep ramp is :mod:`..objectives.paths`'s)."""
 from __future__ import annotations
 
 import numpy as np
@@ -28,13 +29,6 @@ def slerp(start: np.ndarray, end: np.ndarray, s: float) -> np.ndarray:
     along the geodesic (the shortest turn between them)."""
     turn = Rotation.from_matrix(start.T @ end).as_rotvec()
     return start @ Rotation.from_rotvec(s * turn).as_matrix()
-
-
-def smoothstep(u):
-    """Quintic 0 -> 1 on [0, 1], clamped outside; first and second derivatives vanish at
-    both ends, so a blend through it keeps C^2 poses C^2."""
-    u = np.clip(u, 0.0, 1.0)
-    return u ** 3 * (10 - 15 * u + 6 * u ** 2)
 
 
 def bump(u):

@@ -22,7 +22,7 @@ from ..views import ClothView
 from .body_meshes import read_body
 from .cape_tracking import tracking_forces
 from .cloths import cloth_problem
-from .maths import smoothstep
+from ..objectives.paths import keyframe_path
 
 PROBLEM = "mesh_keyframes"
 EXAMPLE = "40:wave.obj,80:fold.obj"
@@ -173,20 +173,6 @@ def wrinkled(model, depth: float) -> np.ndarray:
     bump = depth * np.sin(np.pi * ab[:, 0]) * np.sin(np.pi * ab[:, 1])
     bump[model.pinned] = 0.0
     return x + bump[:, None] * at_vertex
-
-
-def keyframe_path(x0, terms, steps: int, aims=None) -> np.ndarray:
-    """``(steps + 1, n, 3)`` positions from ``x0`` through each keyframe's target at its
-    frame (or through ``aims``, one position array per term), smoothstep between them, so
-    the path rests at each; held after the last."""
-    aims = [t.position_target for t in terms] if aims is None else aims
-    stops = [(0, x0)] + [(t.frame, a) for t, a in zip(terms, aims)]
-    path = np.empty((steps + 1,) + x0.shape)
-    for (f0, a), (f1, b) in zip(stops, stops[1:]):
-        s = smoothstep((np.arange(f0, f1 + 1) - f0) / max(f1 - f0, 1))
-        path[f0:f1 + 1] = a + s[:, None, None] * (b - a)
-    path[stops[-1][0]:] = stops[-1][1]
-    return path
 
 
 def tracking_guess(prob, land: bool = True, aim: int = 0) -> np.ndarray:

@@ -17,6 +17,7 @@ from typing import ClassVar
 import numpy as np
 
 from ...interrupts import check
+from ...objectives.paths import keyframe_path
 from ..finish.constraint import control_hessian
 from ..options import TypedOptions, real
 from ..outcome import CONVERGED, FAILED, LIMIT
@@ -51,8 +52,6 @@ def start_positions(problem, start: str, u0) -> np.ndarray:
     if start == "rest":
         return np.repeat(problem.x0[None], problem.steps + 1, axis=0)
     if start == "blend":
-        from ...scenes.mesh_cloths import keyframe_path  # the scene's path, no controller
-
         terms = sorted((t for t in problem.objective_terms.state_terms
                         if getattr(t, "position_target", None) is not None),
                        key=lambda t: t.frame)

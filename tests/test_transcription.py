@@ -210,3 +210,28 @@ def test_the_strain_penalty_is_the_problems_own_term_with_its_slope():
         ahead, back = (StrainPenalty(tr).residuals(z + s * h * d, False)[0] for s in (1, -1))
         assert (0.5 * ahead @ ahead - 0.5 * back @ back) / (2 * h) == pytest.approx(slope,
                                                                                   rel=1e-5)
+
+
+def test_the_factorisations_analysis_is_made_once_for_the_whole_search(monkeypatch):
+    """The step's matrix keeps one sparsity pattern across iterations (the strain penalty's
+    rows and the products' exact zeros come and go): CHOLMOD's analysis runs once."""
+    from casadi_keyframe.objectives import StrainLimit
+    from casadi_keyframe.optimize.finish.constraint import control_hessian
+    from casadi_keyframe.optimize.positions import sqp
+
+    if sqp.cholmod is None:
+        pytest.skip("without cvxopt the step's matrix is factored by SuperLU")
+    analyses = []
+    symbolic = sqp.cholmod.symbolic
+    monkeypatch.setattr(sqp.cholmod, "symbolic",
+                        lambda *a, **k: analyses.append(1) or symbolic(*a, **k))
+    prob = sheet_problem()
+    prob = ControlProblem(model=prob.model, integrator=prob.integrator, x0=prob.x0,
+                          v0=prob.v0, steps=STEPS, dt=prob.dt, controls=StepForces(),
+                          objective=prob.objective_terms + StrainLimit(1.01, 1e3),
+                          name="strained")
+    tr = Transcription(prob)
+    solver = sqp.PositionSQP(tr, goal_constraints(tr), control_hessian(prob))
+    outcome, _ = solver.run(tr.unknowns(prob.simulate(None, records=False).x), maxiter=6,
+                            tol=1e-12)
+    assert outcome.iterations == 6 and len(analyses) == 1

@@ -142,6 +142,7 @@ class PositionSQP:
         self.sigma = 0.0  # the merit's penalty weight, never lowered
         self.restore = LengthRestoration(tr)
         self.strain = StrainPenalty(tr)
+        self._fill = None
         self.mu_used = None
         self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
 
@@ -222,7 +223,7 @@ class PositionSQP:
                 H = H + l * C
         while True:  # a matrix that does not factor (round-off): more damping
             try:
-                solve = self.factor((H + mu * self.metric).tocsc())
+                solve = self.factor((H + mu * self.metric + self._pattern(x)).tocsc())
                 break
             except ArithmeticError:
                 mu = max(4.0 * mu, 1e-8)
@@ -241,6 +242,24 @@ class PositionSQP:
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
 
+
+    def _pattern(self, x: Point) -> sp.csr_matrix:
+        """Every place the step's matrix can ever hold a value, each at a value far below
+        round-off (1e-300): added to the matrix it keeps one sparsity pattern across
+        iterations, so the factorisation's analysis and its matrix are made once (the strain
+        penalty's rows and the products' exact zeros come and go)."""
+        if self._fill is None:
+            def ones(M):  # every stored entry as 1, its value zero or not
+                M = sp.csr_matrix(M, copy=True)
+                M.data[:] = 1.0
+                return M
+
+            J = ones(x.J)
+            P = (J.T @ ones(self.Q) @ J + self.strain.pattern().T @ self.strain.pattern()
+                 + ones(self.metric) + sum((ones(C) for C in self.C),
+                                           sp.csr_matrix((J.shape[1], J.shape[1]))))
+            self._fill = (1e-300 * ones(P)).tocsr()
+        return self._fill
 
     def _broken(self, z) -> bool:
         """Whether the plan ``z`` has a frame the model's own checks refuse (non-finite,

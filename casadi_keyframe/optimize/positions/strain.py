@@ -55,3 +55,26 @@ class StrainPenalty:
         J = sp.csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                           shape=(r.size, tr.size))
         return r, J
+
+    def pattern(self) -> sp.csr_matrix:
+        """Where the residuals' Jacobian can hold a value: a row of ones per spring and
+        counted frame, whatever its stretch."""
+        tr, rows, cols, start = self.tr, [], [], 0
+        for term in self.terms:
+            frames = np.array([n for n in range(1, tr.N + 1) if term.counts(n, tr.dt)], int)
+            frame, spring = (a.ravel() for a in np.meshgrid(np.arange(frames.size),
+                                                              np.arange(term._rest.size),
+                                                              indexing="ij"))
+            for end in (term._j, term._i):
+                comp = 3 * end[spring][:, None] + np.arange(3)
+                col = self.column[comp]
+                keep = col >= 0
+                base = (frames[frame] - 1)[:, None] * tr.nf
+                rows.append(np.broadcast_to(start + np.arange(frame.size)[:, None],
+                                            comp.shape)[keep])
+                cols.append((base + col)[keep])
+            start += frame.size
+        if not rows:
+            return sp.csr_matrix((0, tr.size))
+        r, c = np.concatenate(rows), np.concatenate(cols)
+        return sp.csr_matrix((np.ones(r.size), (r, c)), shape=(start, tr.size))

@@ -5,6 +5,7 @@ constraints.
 
 * :mod:`.transcription`: the problem in positions, its forces and their sparse Jacobian;
 * :mod:`.goal`: the keyframes' tolerances as constraints on the positions;
+* :mod:`.strain`: the problem's strain limit as a penalty in the positions;
 * :mod:`.sqp`: the search, a sequential quadratic programme on the effort's Gauss-Newton
   matrix, and :mod:`.restore`: its correction for the stiff springs;
 * :mod:`.replay`: controls that move the simulation along planned positions;

@@ -1,8 +1,9 @@
 """The transcription as a search method: ``solve(prob, method="transcription")``,
 ``casadi-keyframe solve P --method transcription [--option start=blend]``.
 
-It minimises the problem's control cost over the positions of every frame with every
-keyframe held within ``margin`` of its tolerance (:mod:`.sqp`), starting from the motion of
+It minimises the problem's control cost (and its strain penalty, :mod:`.strain`) over the
+positions of every frame with every keyframe held within ``margin`` of its tolerance
+(:mod:`.sqp`), starting from the motion of
 the start controls (``start="controls"``: the problem's guess, or zero forces), the start
 state held still (``"rest"``) or the positions blended between the keyframes' targets
 (``"blend"``).  Each kept iterate's controls are replayed along its positions

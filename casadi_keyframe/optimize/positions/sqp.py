@@ -234,14 +234,13 @@ class PositionSQP:
         # c + a^T p <= c - theta c where violated (a share of it removed), <= 0 elsewhere
         aim = np.where(x.c > 0, theta * x.c, x.c)
         step, lam_a = _active_set(aim, A, p0, W)
-        self._solve, self._linear = solve, x.c + A.T @ step
+        linear = x.c + A.T @ step
+        self._solve, self._linear = solve, linear  # for the trial's correction
         self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
         sigma = self._penalty(A, x.gradient)
-        linear = x.c + A.T @ step
         model = -(x.gradient @ step + 0.5 * step @ (H @ step))
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
-
 
     def _pattern(self, x: Point) -> sp.csr_matrix:
         """Every place the step's matrix can ever hold a value, each at a value far below

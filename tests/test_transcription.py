@@ -235,3 +235,15 @@ def test_the_factorisations_analysis_is_made_once_for_the_whole_search(monkeypat
     outcome, _ = solver.run(tr.unknowns(prob.simulate(None, records=False).x), maxiter=6,
                             tol=1e-12)
     assert outcome.iterations == 6 and len(analyses) == 1
+
+
+def test_a_resumed_search_goes_on_from_the_given_controls_whatever_its_start():
+    """Controls handed in (``u0=``, as ``--resume`` does) are where the search goes on from,
+    not the start the options name: the continue line repeats ``start=rest``."""
+    prob = sheet_problem()
+    first = ck.solve(prob, method="transcription", maxiter=6, options={"start": "rest"},
+                     quiet=True)
+    again = ck.solve(prob, method="transcription", maxiter=1, options={"start": "rest"},
+                     u0=first.x, quiet=True)
+    assert "from the given controls' motion (not start=rest)" in again.message
+    assert prob.control_cost(again.x)[0] <= prob.control_cost(first.x)[0]

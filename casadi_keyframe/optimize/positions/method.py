@@ -6,7 +6,8 @@ positions of every frame with every keyframe held within ``margin`` of its toler
 (:mod:`.sqp`), starting from the motion of
 the start controls (``start="controls"``: the problem's guess, or zero forces), the start
 state held still (``"rest"``) or the positions blended between the keyframes' targets
-(``"blend"``).  Each kept iterate's controls are replayed along its positions
+(``"blend"``); controls handed in (``--resume``, ``u0=``) override ``start``: the search
+goes on from their motion.  Each kept iterate's controls are replayed along its positions
 (:mod:`.replay`) and offered to the evaluator, which judges and keeps the best as for any
 method; the result's controls replay through ``simulate``.
 """
@@ -66,7 +67,11 @@ def run(problem, ev, u0, call):
     tr = Transcription(problem)
     constraints = goal_constraints(tr, options.margin)
     solver = PositionSQP(tr, constraints, control_hessian(problem))
-    z0 = tr.unknowns(start_positions(problem, options.start, u0))
+    start = options.start
+    given = u0 is not None and not np.array_equal(np.asarray(u0), problem.initial_controls())
+    if given:  # controls handed in (--resume, u0=) are where this search goes on from
+        start = "controls"
+    z0 = tr.unknowns(start_positions(problem, start, u0))
     replayed = []
 
     def kept(report, point):
@@ -78,6 +83,8 @@ def run(problem, ev, u0, call):
     outcome, _ = solver.run(z0, maxiter=call.maxiter, tol=options.settle, on_iteration=kept,
                             should_stop=lambda: (check() or False) or call.deadline.passed())
     said = f"{outcome.iterations} iterations in positions" + (
+        f" from the given controls' motion (not start={options.start})"
+        if given and options.start != start else "") + (
         "" if not replayed else f"; the last kept plan replayed within "
         f"{1e3 * replayed[-1].deviation:.1e} mm (frame {replayed[-1].frame})")
     if outcome.reason == "converged":

@@ -91,6 +91,6 @@ class LengthRestoration:
         GW = G @ W
         S = (GW @ G.T).tocsc()
         # damped: more springs than a particle has freedoms ask for lengths that conflict
-        S = S + sp.diags(DAMPING * S.diagonal())
+        S = S + sp.diags(DAMPING * S.diagonal() + 1e-12 * np.max(self.weight))
         lam = splu(S).solve(excess[frame, spring])
         return -(GW.T @ lam).reshape(x.shape)

@@ -97,7 +97,7 @@ class IpoptOptions(LibraryOptions):
         return check_options(options)
 
 
-class _Function(ca.Callback):
+class NumericFunction(ca.Callback):
     """A function of the ``n`` unknowns for IPOPT: ``value(x)`` shaped ``out``, with the
     Callback :class:`_Jacobian` of ``jacobian(x)`` on the sparsity ``pattern``.  The
     objective is one (its gradient from the chosen route), the equality constraints
@@ -145,17 +145,17 @@ class _Jacobian(ca.Callback):
         return [self.jacobian(np.asarray(arg[0]).ravel())]
 
 
-def _objective(ev, n) -> _Function:
+def _objective(ev, n) -> NumericFunction:
     """phi(x) from the evaluator ``ev``, its Jacobian ``ev``'s gradient."""
-    return _Function("phi", n, ca.Sparsity.dense(1, 1), lambda x: ev(x)[0],
+    return NumericFunction("phi", n, ca.Sparsity.dense(1, 1), lambda x: ev(x)[0],
                      ca.Sparsity.dense(1, n), lambda x: ev(x)[1].reshape(1, -1))
 
 
-def _constraints(con, n) -> _Function:
+def _constraints(con, n) -> NumericFunction:
     """``con.values(x)`` (``con.size`` of them, held at 0), its Jacobian ``con.jacobian(x)``
     (a scipy sparse matrix) read on ``con.pattern``."""
     rows, cols = con.pattern.get_triplet()
-    return _Function("g", n, ca.Sparsity.dense(con.size, 1), con.values, con.pattern,
+    return NumericFunction("g", n, ca.Sparsity.dense(con.size, 1), con.values, con.pattern,
                      lambda x: ca.DM(con.pattern,
                                      np.asarray(con.jacobian(x)[rows, cols]).ravel()))
 

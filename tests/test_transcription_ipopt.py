@@ -97,3 +97,38 @@ def test_a_time_limit_ends_ipopt_with_its_best_point_kept():
 def test_an_unknown_solver_is_refused_with_the_valid_ones():
     with pytest.raises(ValueError, match="sqp, ipopt"):
         ck.solve(sheet_problem(), method="transcription", options={"solver": "snopt"})
+
+
+def test_the_exact_hessian_is_the_central_difference_of_the_efforts_gradient():
+    """``hessian=exact``: the Gauss-Newton matrix plus the forces' and the strain penalty's
+    second derivatives (:mod:`.curvature`) is the slope of the gradient (stable over three
+    steps), on a sheet whose springs are stretched past the strain limit."""
+    from casadi_keyframe.objectives import StrainLimit
+
+    prob = sheet_problem(rows=4)
+    prob = ck.ControlProblem(model=prob.model, integrator=prob.integrator, x0=prob.x0,
+                             v0=prob.v0, steps=prob.steps, dt=prob.dt, controls=prob.controls,
+                             objective=prob.objective_terms + StrainLimit(1.01, 1e3),
+                             name="strained")
+    tr = Transcription(prob)
+    exact = PositionNLP(tr, goal_constraints(tr), control_hessian(prob),
+                        StretchLimit(tr, prob.limits.stretch), exact=True)
+    z, d = _moved(exact), np.random.default_rng(6).standard_normal(tr.size)
+    assert exact.strain.residuals(z, False)[0].size > 0
+    upper = exact.hessian(z, 1.0, np.zeros(exact.m))
+    turn = (upper + sp.triu(upper, k=1).T) @ d
+    gauss_newton = exact.hessian(z, 1.0, np.zeros(exact.m)) - sp.triu(
+        exact.curvature(z, exact.point(z)["grad_u"]))
+    scale = np.abs(turn).max()
+    for h in (1e-6, 1e-7, 1e-8):  # (a larger h crosses the spring law's kink at rest)
+        slope = _central(lambda y: exact.point(y)["gradient"], z, d, h)
+        assert np.abs(slope - turn).max() <= 1e-7 * scale
+    # the second-order part matters here: the Gauss-Newton matrix alone is off by percents
+    turn_gn = (gauss_newton + sp.triu(gauss_newton, k=1).T) @ d
+    assert np.abs(slope - turn_gn).max() >= 1e-2 * scale
+
+
+def test_the_exact_hessian_is_ipopts_only():
+    with pytest.raises(ValueError, match="give solver=ipopt"):
+        ck.solve(sheet_problem(), method="transcription", options={"hessian": "exact"},
+                 quiet=True)

@@ -26,6 +26,7 @@ import scipy.sparse as sp
 
 from ...interrupts import Interrupted, OutOfTime, catching
 from ..methods.ipopt import IterationHook, NumericFunction
+from .curvature import EffortCurvature
 from .strain import StrainPenalty
 from .stretch import StretchLimit
 
@@ -46,11 +47,13 @@ def _ones(M) -> sp.csr_matrix:
 class PositionNLP:
     """The problem of the module docstring on a transcription ``tr``: ``goals`` the
     keyframes' constraints, ``Q`` the control terms' Hessian, ``stretch`` a
-    :class:`~.stretch.StretchLimit`."""
+    :class:`~.stretch.StretchLimit`; ``exact``: the effort's exact Hessian
+    (:mod:`.curvature`) in place of its Gauss-Newton matrix."""
 
-    def __init__(self, tr, goals, Q, stretch: StretchLimit):
+    def __init__(self, tr, goals, Q, stretch: StretchLimit, exact: bool = False):
         self.tr, self.goals, self.Q, self.stretch = tr, goals, sp.csr_matrix(Q), stretch
         self.strain = StrainPenalty(tr)
+        self.curvature = EffortCurvature(tr, self.strain) if exact else None
         self.C = [g.hessian() for g in goals]
         self.m = len(goals) + stretch.size
         self._key, self._point = None, None
@@ -67,7 +70,8 @@ class PositionNLP:
             r, Jr = self.strain.residuals(z)
             J = self.tr.control_jacobian(z)
             self._point = {"effort": effort + 0.5 * float(r @ r),
-                           "gradient": J.T @ grad_u + Jr.T @ r, "J": J, "Jr": Jr}
+                           "gradient": J.T @ grad_u + Jr.T @ r, "J": J, "Jr": Jr,
+                           "grad_u": grad_u}
             self._key = key
         return self._point
 
@@ -97,6 +101,8 @@ class PositionNLP:
         """Its upper triangle (module docstring), on the fixed pattern."""
         p = self.point(z)
         H = sigma * (p["J"].T @ (self.Q @ p["J"]) + p["Jr"].T @ p["Jr"])
+        if self.curvature is not None:
+            H = H + sigma * self.curvature(z, p["grad_u"])
         for l, C in zip(lam, self.C):
             H = H + l * C
         H = H + self.stretch.hessian(lam[len(self.goals):])

@@ -35,6 +35,7 @@ from .transcription import Transcription, TranscriptionError
 
 STARTS = ("controls", "rest", "blend")
 SOLVERS = ("sqp", "ipopt")
+HESSIANS = ("gauss-newton", "exact")
 
 
 @dataclass(frozen=True)
@@ -45,19 +46,22 @@ class TranscriptionOptions(TypedOptions):
     ``tol`` is the gradient methods' and far finer than a trust region settles to);
     ``solver``: "sqp" (:mod:`.sqp`) or "ipopt" (:mod:`.interior`: the same effort, the
     physical stretch limit held at every spring and frame as well; ``settle`` is then
-    IPOPT's ``tol``)."""
+    IPOPT's ``tol``); ``hessian``: IPOPT's Hessian of the effort, its Gauss-Newton matrix
+    or the exact one (:mod:`.curvature`)."""
 
     label: ClassVar[str] = "the transcription"
     CHECKS: ClassVar[dict] = {
         "start": (f"one of {', '.join(STARTS)}", lambda v: v in STARTS),
         "margin": ("a number in (0, 1]", lambda v: real(v) and 0 < v <= 1),
         "settle": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1),
-        "solver": (f"one of {', '.join(SOLVERS)}", lambda v: v in SOLVERS)}
+        "solver": (f"one of {', '.join(SOLVERS)}", lambda v: v in SOLVERS),
+        "hessian": (f"one of {', '.join(HESSIANS)}", lambda v: v in HESSIANS)}
 
     start: str = "controls"
     margin: float = MARGIN
     settle: float = 1e-3
     solver: str = "sqp"
+    hessian: str = "gauss-newton"
 
 
 def start_positions(problem, start: str, u0) -> np.ndarray:
@@ -75,6 +79,9 @@ def start_positions(problem, start: str, u0) -> np.ndarray:
 def run(problem, ev, u0, call):
     """One search in positions (module docstring); ``(status, message)``."""
     options = call.options
+    if options.hessian != "gauss-newton" and options.solver != "ipopt":
+        raise TranscriptionError(f"hessian={options.hessian} is IPOPT's: give solver=ipopt "
+                                 "too (the SQP's matrix is the Gauss-Newton one)")
     tr = Transcription(problem)
     constraints = goal_constraints(tr, options.margin)
     start = options.start
@@ -121,7 +128,8 @@ def _interior(problem, tr, constraints, z0, call, offer, replayed):
             f"{problem.name}: solver=ipopt holds a cloth's springs within the physical "
             "stretch limit, and this problem has none: use solver=sqp")
     nlp = PositionNLP(tr, constraints, control_hessian(problem),
-                      StretchLimit(tr, problem.limits.stretch))
+                      StretchLimit(tr, problem.limits.stretch),
+                      exact=call.options.hessian == "exact")
 
     offered = []
 

@@ -15,7 +15,7 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from .transcription import Buffered, _step_function
+from .transcription import Buffered, inverse_step_function
 
 
 class EffortCurvature:
@@ -25,7 +25,7 @@ class EffortCurvature:
     def __init__(self, tr, strain):
         self.tr, self.strain = tr, strain
         n, N = tr.n, tr.N
-        step = _step_function(tr.problem.model, tr.dt).expand()
+        step = inverse_step_function(tr.problem.model, tr.dt).expand()
         frames = [ca.SX.sym(name, 3, n) for name in ("before", "now", "next")]
         scene = ca.SX.sym("scene", tr.scene.shape[0])
         weights = ca.SX.sym("w", 3, n)

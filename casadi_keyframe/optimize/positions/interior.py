@@ -25,7 +25,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...interrupts import Interrupted, OutOfTime, catching
-from ..methods.ipopt import IterationHook, NumericFunction
+from ..ipopt_callbacks import IterationHook, NumericFunction
 from .curvature import EffortCurvature
 from .strain import StrainPenalty
 from .stretch import StretchLimit

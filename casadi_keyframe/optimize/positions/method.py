@@ -18,19 +18,17 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...interrupts import check
+from ...interrupts import OutOfTime, check
 from ...objectives.paths import keyframe_path
+from ...state import SimulationError
 from ..finish.constraint import control_hessian
 from ..options import TypedOptions, real
-from ..outcome import CONVERGED, FAILED, LIMIT
-from ...interrupts import OutOfTime
-from ...state import SimulationError
-from ..outcome import ipopt_outcome
+from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
 from .goal import MARGIN, goal_constraints
 from .interior import PositionNLP, search
-from .stretch import StretchLimit
 from .replay import replay_controls
 from .sqp import PositionSQP
+from .stretch import StretchLimit
 from .transcription import Transcription, TranscriptionError
 
 STARTS = ("controls", "rest", "blend")

@@ -29,13 +29,15 @@ from .formulation_run import MEASURED
 @dataclass(frozen=True)
 class Formulation:
     """One column: how ``casadi-keyframe solve`` is asked to solve (``method``,
-    ``gradient``, the method's ``options``, multiple shooting's ``segments``)."""
+    ``gradient``, the method's ``options``, multiple shooting's ``segments`` and its other
+    ``shooting`` options)."""
 
     label: str
     method: str
     gradient: str | None = None
     options: dict = field(default_factory=dict)
     segments: int | None = None
+    shooting: dict = field(default_factory=dict)
 
     @property
     def name(self) -> str:
@@ -45,7 +47,9 @@ class Formulation:
     def given(self, budget: "Budget") -> dict:
         """The solve request's values (``solve_run``'s ``given``)."""
         return {"method": self.method, "gradient": self.gradient,
-                "options": dict(self.options) or None, "shooting": self.segments,
+                "options": dict(self.options) or None,
+                "shooting": {"segments": self.segments, **self.shooting} if self.segments
+                else None,
                 "maxiter": budget.maxiter, "time_limit": budget.time_limit}
 
     def flags(self, budget: "Budget") -> str:
@@ -53,7 +57,9 @@ class Formulation:
         said = [f"--method {self.method}"] + (
             [f"--gradient {self.gradient}"] if self.gradient else []) + [
             f"--option {k}={v}" for k, v in self.options.items()] + (
-            [f"--segments {self.segments}"] if self.segments else [])
+            [f"--segments {self.segments}"] if self.segments else []) + (
+            ["--shooting " + ",".join(f"{k}={v}" for k, v in self.shooting.items())]
+            if self.shooting else [])
         return " ".join(said + [f"--maxiter {budget.maxiter}",
                                 f"--time-limit {budget.time_limit:g}"])
 
@@ -62,13 +68,16 @@ FORMULATIONS = (
     Formulation("single shooting, exact adjoint", "lbfgsb", "adjoint"),
     Formulation("single shooting, swapped adjoint", "lbfgsb", "swapped"),
     Formulation("multiple shooting, 4 segments", "lbfgsb", "adjoint", segments=4),
+    Formulation("multiple shooting, 4 segments, 2 rounds", "lbfgsb", "adjoint", segments=4,
+                shooting={"rounds": 2}),
     Formulation("transcription from rest", "transcription", options={"start": "rest"}),
     Formulation("transcription from zero forces", "transcription",
                 options={"start": "controls"}),
     Formulation("least squares (the file's SOLVE)", "least-squares", "adjoint"),
 )
 """The columns, left to right: L-BFGS-B on the controls with each gradient route, multiple
-shooting on L-BFGS-B (nodes from the zero-force run, ``init=passive``), the transcription
+shooting on L-BFGS-B (nodes from the zero-force run, ``init=passive``; its default eight
+augmented-Lagrangian rounds share the iterations, two rounds give each more), the transcription
 from the rest state held still and from the zero-force motion, and what the problem file's
 ``SOLVE`` runs from zero forces (scipy's trust-region least squares)."""
 

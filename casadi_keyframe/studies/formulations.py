@@ -118,7 +118,6 @@ class Case:
                 "keyframes": f"40:{files['wave']},80:{files['fold']}", "guess": "none"}
 
 
-
 def command(overrides: dict) -> str:
     """``casadi-keyframe solve mesh_keyframes --set ...`` with these build overrides."""
     sets = " ".join(f"--set {k}={','.join(map(str, v)) if isinstance(v, tuple) else v}"

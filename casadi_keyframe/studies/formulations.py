@@ -23,6 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..adjoints import Adjoint, Swapped
 from .formulation_run import MEASURED
 
 
@@ -65,15 +66,15 @@ class Formulation:
 
 
 FORMULATIONS = (
-    Formulation("single shooting, exact adjoint", "lbfgsb", "adjoint"),
-    Formulation("single shooting, swapped adjoint", "lbfgsb", "swapped"),
-    Formulation("multiple shooting, 4 segments", "lbfgsb", "adjoint", segments=4),
-    Formulation("multiple shooting, 4 segments, 2 rounds", "lbfgsb", "adjoint", segments=4,
+    Formulation("single shooting, exact adjoint", "lbfgsb", Adjoint.name),
+    Formulation("single shooting, swapped adjoint", "lbfgsb", Swapped.name),
+    Formulation("multiple shooting, 4 segments", "lbfgsb", Adjoint.name, segments=4),
+    Formulation("multiple shooting, 4 segments, 2 rounds", "lbfgsb", Adjoint.name, segments=4,
                 shooting={"rounds": 2}),
     Formulation("transcription from rest", "transcription", options={"start": "rest"}),
     Formulation("transcription from zero forces", "transcription",
                 options={"start": "controls"}),
-    Formulation("least squares (the file's SOLVE)", "least-squares", "adjoint"),
+    Formulation("least squares (the file's SOLVE)", "least-squares", Adjoint.name),
 )
 """The columns, left to right: L-BFGS-B on the controls with each gradient route, multiple
 shooting on L-BFGS-B (nodes from the zero-force run, ``init=passive``; its default eight

@@ -80,7 +80,10 @@ FORMULATIONS = (
 shooting on L-BFGS-B (nodes from the zero-force run, ``init=passive``; its default eight
 augmented-Lagrangian rounds share the iterations, two rounds give each more), the transcription
 from the rest state held still and from the zero-force motion, and what the problem file's
-``SOLVE`` runs from zero forces (scipy's trust-region least squares)."""
+``SOLVE`` runs from zero forces (scipy's trust-region least squares).  A column is one
+entry: the transcription on another solver, once it takes one, would be
+``Formulation("transcription, IPOPT", "transcription", options={"start": "rest",
+"solver": "ipopt"})``."""
 
 
 @dataclass(frozen=True)

@@ -36,3 +36,29 @@ def test_study_command_prints_its_table(capsys, study, expect):
     assert main(["study", study, "--quick"]) == 0
     out = capsys.readouterr().out
     assert expect in out and "1/60" in out
+
+
+def test_formulations_study_judges_each_run_by_its_replay(tmp_path):
+    from casadi_keyframe.studies import formulations as f
+
+    case, budget = f.Case(4), f.Budget(1, 120.0)
+    good = f.Formulation("single shooting", "lbfgsb", "adjoint")
+    bad = f.Formulation("no such option", "lbfgsb", options={"no_such_option": 1})
+    rows = f.run_study([case], budget, tmp_path, formulations=(good, bad),
+                       progress=lambda line: None)
+    run, failed = rows
+    assert run["exit"] in (0, 1, 3) and run["nit"] == 1 and run["cpu_seconds"] > 0
+    assert run["peak_mb"] >= run["built_mb"] > 0
+    assert run["tolerances_mm"] == pytest.approx([10.0, 10.0], rel=0.05)
+    assert run["replay_mm"] < 1e-9 and run["reported_mm"] < 1e-9
+    assert len(run["misses_mm"]) == 2 and min(run["misses_mm"]) > run["tolerances_mm"][0]
+    assert "--method lbfgsb --gradient adjoint --maxiter 1" in run["command"]
+    assert "error" in failed and "no_such_option" in (tmp_path / case.name /
+                                                      f"{bad.name}.log").read_text()
+    text = f.table(rows)
+    assert "| single shooting | no such option |" in text and "failed" in text
+
+
+def test_formulations_study_refuses_a_grid(capsys):
+    assert main(["study", "formulations", "--grid", "dt=1/30"]) == 2
+    assert "runs its own plan" in capsys.readouterr().err

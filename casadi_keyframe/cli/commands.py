@@ -155,6 +155,8 @@ def cmd_gradcheck(args) -> int:
 def cmd_study(args) -> int:
     from ..studies import accuracy
 
+    if args.study == "formulations":
+        return _formulations(args)
     if args.grid:
         from ..studies.sweeps import study_sweep
         from ..sweep import report
@@ -181,6 +183,22 @@ def cmd_study(args) -> int:
         print(accuracy.format_gradient_accuracy(accuracy.gradient_accuracy(quick=args.quick)))
     else:
         print(accuracy.format_one_step_gap(accuracy.one_step_gap(quick=args.quick)))
+    return 0
+
+
+def _formulations(args) -> int:
+    """``study formulations``: every formulation on every case, one process per run, kept
+    in ``--out``; the table, then each run's command line and message."""
+    from ..studies.accuracy import quick_mode
+    from ..studies.formulations import messages, run_study, study_plan, table
+
+    if args.grid or args.set:
+        raise ValueError("--grid and --set go with the accuracy studies; the formulations "
+                         "study runs its own plan (--quick: the small one)")
+    out = writable_folder(out_folder(args, "study-formulations"), "--out")
+    rows = run_study(*study_plan(args.quick or quick_mode()), out)
+    print(table(rows))
+    print(messages(rows))
     return 0
 
 

@@ -168,13 +168,13 @@ def gradcheck_parser(sub) -> None:
 
 def study_parser(sub) -> None:
     """The ``study`` command's arguments (and its grid on the sweep runner)."""
-    st = sub.add_parser("study", help="print an accuracy study (the notebooks' tables), or "
-                                      "run a grid of it as a sweep (--grid)",
+    st = sub.add_parser("study", help="print a study (the notebooks' tables: accuracy, "
+                                      "formulations), or run a grid of it as a sweep (--grid)",
                         epilog=SWEEP_EXIT_CODES + "\n\nexample: casadi-keyframe study "
                         "gradient-accuracy --grid dt=1/30,1/60,1/120 --grid stretch=50,500",
                         formatter_class=argparse.RawDescriptionHelpFormatter)
     st.add_argument("study", choices=("gradient-accuracy", "integrator-accuracy",
-                                      "swap-validity"))
+                                      "swap-validity", "formulations"))
     st.add_argument("--quick", action="store_true", help="small sizes (as CASADI_KEYFRAME_QUICK=1)")
     st.add_argument("--grid", action="append", metavar="KEY=V1,V2,...",
                     help="run the study at every combination of these values on the sweep "
@@ -188,7 +188,8 @@ def study_parser(sub) -> None:
     st.add_argument("--figure", help="the figure ranked and plotted (gradient-accuracy: "
                                      "relative_error; integrator-accuracy: gap_x or gap_v; "
                                      "swap-validity: relative_error, growth_swapped, cosine)")
-    st.add_argument("--out", help="output folder (default results/study-STUDY)")
+    st.add_argument("--out", help="output folder (default results/study-STUDY; formulations: "
+                                  "where each run's folder is kept)")
     _addrunner_options(st)
     st.set_defaults(func=cmd_study)
 

@@ -120,3 +120,18 @@ def test_the_tail_s_gradient_is_the_forward_pass_s_derivative(moving):
     _, g_ref = tail.objective_and_gradient(u, "casadi")  # its parameters at t + K dt
     assert np.linalg.norm(g - g_ref) <= 1e-8 * np.linalg.norm(g_ref)
     assert_forward_derivative(tail, u, g @ d, d)
+
+
+def test_a_keyframe_the_kept_frames_miss_fails_the_whole_shot(first, tmp_path, capsys):
+    """The frames after K meet their goal, but RUN (zero forces) misses the wave at frame
+    20, which lies in the kept frames: exit 1, and the message says why."""
+    passive = solve_args(first, "fold", tmp_path / "passive", "--maxiter", "1", "--method",
+                         "lbfgsb", sets={"guess": "none", "rest_band": "0"}.items())
+    assert main(passive) in (1, 3)
+    again = solve_args(first, "fold60", tmp_path / "again", "--resume",
+                       str(tmp_path / "passive"), "--from-frame", "30",
+                       sets={"rest_band": "0"}.items())
+    assert main(again) == 1
+    summary = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert "meet their goal, the whole shot does not" in summary["message"]
+    assert "MeshKeyframe@20" in summary["message"], summary["message"]

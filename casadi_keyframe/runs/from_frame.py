@@ -31,6 +31,7 @@ from ..objectives import Objective
 from ..objectives.terms import StateTerm
 from ..optimize.goal import verdict
 from ..optimize.kept import Standing
+from ..optimize.outcome import CONVERGED, FAILED
 from ..problem import ControlProblem
 from ..saved import RESULT, Checkpoint, read_run
 from ..simulate import simulate
@@ -206,13 +207,23 @@ def tail_problem(whole: ControlProblem, frame: int, x, v, carried, guess=None) -
 def whole_result(held: HeldStart, result):
     """The tail's ``result`` as a result of the whole shot: RUN's held controls and frames
     0..K before the tail's, the whole problem's breakdown and objective there; the gradient
-    of the held controls is not computed (NaN)."""
+    of the held controls is not computed (NaN).  The tail's goal met, the whole shot's is
+    judged too: a keyframe or a limit RUN's kept frames miss makes it a failed search that
+    says so."""
     u = np.concatenate([held.head, result.x])
     traj = held.spliced(result.trajectory)
     breakdown = held.whole.breakdown(u, traj)
     jac = np.concatenate([np.full(held.head.size, np.nan), result.jac])
+    status, message = result.status, result.message
+    judged = verdict(held.whole, traj)
+    if status == CONVERGED and judged.checked and not judged.met:
+        status = FAILED
+        message = (f"frames {held.frame + 1}.. meet their goal, the whole shot does not "
+                   f"({judged.describe()}): frames 0..{held.frame} are "
+                   f"{held.record['path']}'s; solve from an earlier frame, or the whole shot")
     return dataclasses.replace(result, x=u, fun=breakdown["objective"], jac=jac,
-                               trajectory=traj, breakdown=breakdown)
+                               trajectory=traj, breakdown=breakdown, status=status,
+                               success=status == CONVERGED, message=message)
 
 
 class HeldCheckpoint(Checkpoint):

@@ -68,11 +68,13 @@ def test_the_kept_frames_are_bit_identical_and_the_new_keyframe_is_hit(first, tm
     ("pins", "does not move the pinned vertices as mesh_keyframes does now"),
     ("cloth", "the cloth cannot change"),
     ("checkpoint", "holds no motion (a checkpoint)"),
+    ("coarse", "does not combine with --continuation"),
 ])
 def test_bad_input_exits_2_naming_the_option(first, tmp_path, capsys, case, words):
     frame = {"beyond": "45", "before": "10", "last": "40"}.get(case, "30")
     run = f"{first['run']}/checkpoint.npz" if case == "checkpoint" else first["run"]
     more = ([] if case == "no run" else ["--resume", run]) + ["--from-frame", frame]
+    more += ["--continuation", "1/30"] if case == "coarse" else []
     files, sets = first, {"dt": {"dt": "0.02"}, "pins": {"pins": "0,4"}}.get(case, {})
     if case == "cloth":  # a 5 x 5 sheet with its own targets
         files = {k: str(v) for k, v in write_sheet_and_targets(tmp_path / "five", 5, 5).items()}

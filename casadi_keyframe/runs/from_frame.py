@@ -35,7 +35,7 @@ from ..optimize.outcome import CONVERGED, FAILED
 from ..problem import ControlProblem
 from ..saved import RESULT, Checkpoint, read_run
 from ..simulate import simulate
-from ..state import Trajectory
+from ..state import SimulationError, Trajectory
 
 OPTION = "--from-frame"
 PIN_TOLERANCE = 1e-9  # m: a pin led as now, to round-off
@@ -97,21 +97,31 @@ def held_start(whole: ControlProblem, source, frame: int) -> HeldStart:
 
 
 def better_start(problem, kept) -> tuple[np.ndarray, str]:
-    """``(controls, which)``: RUN's controls after the frame (``kept``) or, when the problem
-    makes its own start (a guess rule: a controller that tracks the keyframes as they are
-    now), that one on the frames after K if it stands better (the goal met first, then the
-    objective: :class:`~..optimize.kept.Standing`)."""
-    if problem.guess_rule is None:
+    """``(controls, which)``: RUN's controls after the frame (``kept``) or, when they miss
+    the goal and the problem makes its own start (a guess rule: a controller that tracks the
+    keyframes as they are now), that one on the frames after K if it stands better (the goal
+    met first, then the objective: :class:`~..optimize.kept.Standing`; a start whose
+    simulation fails stands last)."""
+    ran = _standing(problem, kept)
+    if problem.guess_rule is None or (ran is not None and ran.met):
         return kept, "RUN's controls"
-    own = problem.initial_controls()
-    standings = []
-    for u in (kept, own):
-        traj = problem.simulate(u, records=False)
-        standings.append(Standing(verdict(problem, traj).met,
-                                  problem.breakdown(u, traj)["objective"]))
-    if standings[1].beats(standings[0]):
+    try:
+        own = problem.initial_controls()
+    except SimulationError:  # the controller's own runs fail: RUN's controls it is
+        return kept, "RUN's controls"
+    mine = _standing(problem, own)
+    if mine is not None and mine.beats(ran):
         return own, "the problem's own start (its guess on the frames after K)"
     return kept, "RUN's controls"
+
+
+def _standing(problem, u) -> Standing | None:
+    """Where the controls ``u`` stand on ``problem`` (None: its simulation fails)."""
+    try:
+        traj = problem.simulate(u, records=False)
+    except SimulationError:
+        return None
+    return Standing(verdict(problem, traj).met, problem.breakdown(u, traj)["objective"])
 
 
 def _check_same(whole, x, dt: float, u, path) -> None:

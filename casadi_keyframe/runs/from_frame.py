@@ -58,7 +58,13 @@ class HeldStart:
     record: dict
 
     def checkpoint(self, path, **meta) -> "HeldCheckpoint":
-        return HeldCheckpoint(path, self.head, **meta)
+        """The search's checkpoint at ``path``: whole-shot controls, ``from_frame`` in its
+        metadata."""
+        return HeldCheckpoint(path, self.head, **meta, from_frame=self.frame)
+
+    def breakdown(self, u, tail: Trajectory) -> dict:
+        """The whole shot's breakdown with the tail's controls ``u`` and its run ``tail``."""
+        return self.whole.breakdown(np.concatenate([self.head, u]), self.spliced(tail))
 
     def spliced(self, tail: Trajectory) -> Trajectory:
         """RUN's frames 0..K, then the frames after K of ``tail`` (a run of the tail)."""
@@ -222,7 +228,7 @@ def whole_result(held: HeldStart, result):
     says so."""
     u = np.concatenate([held.head, result.x])
     traj = held.spliced(result.trajectory)
-    breakdown = held.whole.breakdown(u, traj)
+    breakdown = held.breakdown(result.x, result.trajectory)
     jac = np.concatenate([np.full(held.head.size, np.nan), result.jac])
     status, message = result.status, result.message
     judged = verdict(held.whole, traj)

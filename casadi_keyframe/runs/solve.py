@@ -15,8 +15,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from types import SimpleNamespace
 
-import numpy as np
-
 from .. import progress
 from ..interrupts import OutOfTime, check, limited
 from ..optimize.deadline import Deadline, now
@@ -98,9 +96,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
     out = spec.out
     deadline = Deadline(spec.started, spec.settings.time_limit)
     held = _held(spec)
-    prob = spec.problem if held is None else held.problem
-    u0, resumed = ((held.u0, held.record) if held is not None else resume_controls(spec)
-                   if spec.resume else (spec.u0, {}))
+    prob, u0, resumed = _start_of(spec, held)
     origin = ("resumed" if resumed else "given" if u0 is not None
               else "guess" if prob.has_guess else "passive")
     start_controls = prob.initial_controls() if u0 is None else u0
@@ -108,8 +104,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
         with limited(deadline), progress.task(f"{prob.name}: the start ({origin})"):
             start_trajectory = prob.simulate(start_controls, records=False)
         start = (prob.breakdown(start_controls, start_trajectory) if held is None else
-                 held.whole.breakdown(np.concatenate([held.head, start_controls]),
-                                      held.spliced(start_trajectory)))  # the whole shot's
+                 held.breakdown(start_controls, start_trajectory))  # the whole shot's
     except SimulationError as err:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
@@ -127,8 +122,7 @@ def _solve(spec: SolveRun, caught, done) -> int:
             "overrides": spec.overrides, "method": spec.settings.method,
             "gradient": spec.settings.gradient.name, **input_record(prob)}
     done.started = True
-    checkpoint = (Checkpoint(out / CHECKPOINT, **meta) if held is None else
-                  held.checkpoint(out / CHECKPOINT, **meta, from_frame=held.frame))
+    checkpoint = (Checkpoint if held is None else held.checkpoint)(out / CHECKPOINT, **meta)
     result = _search(spec, prob, u0, checkpoint, resumed=resumed, deadline=deadline,
                      start_run=start_trajectory)
     if held is not None:
@@ -169,6 +163,15 @@ def _warn_inside(prob, physical) -> None:
               f"{1e3 * prob.limits.depth:.3g} mm): no search can pull it out; check that "
               f"each body is a closed mesh whose faces point out (see the notes above) and "
               f"that the cloth starts outside it", file=sys.stderr)
+
+
+def _start_of(spec: SolveRun, held) -> tuple:
+    """``(problem, u0, resumed)``: the problem searched (the frames after a ``held`` one),
+    the controls it starts from (None: its own start) and where they came from."""
+    if held is not None:
+        return held.problem, held.u0, held.record
+    u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
+    return spec.problem, u0, resumed
 
 
 def _held(spec: SolveRun):

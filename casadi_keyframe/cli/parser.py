@@ -142,7 +142,9 @@ def solve_parser(sub) -> None:
                         "controls before K held, its state at K the start) and solve only "
                         "frames K+1.., against the problem as it is now (changed keyframes, "
                         "colliders: other --set values are fine), warm-started from RUN's "
-                        "controls after K; the result is the whole shot.  RUN is its folder's "
+                        "controls after K (or, where they miss and it stands better, the "
+                        "problem's own start on those frames); the result is the whole "
+                        "shot, judged whole.  RUN is its folder's "
                         "result.npz; K from the first keyframe to before the last; the cloth, "
                         "dt, the controls and the pins cannot change")
     s.set_defaults(func=cmd_solve)

@@ -24,14 +24,14 @@ import sys
 import bpy
 
 TORSO = ((0.0, 0.0, 0.92), (0.0, 0.0, 1.34), 0.17)  # axis ends and radius (m)
-HEAD = ((0.0, 0.0, 1.66), 0.11)  # centre, radius
+HEAD = ((0.0, 0.0, 1.63), (0.0, 0.0, 1.69), 0.10)  # a short capsule
 BACK_GAP = 0.035  # m between the back and the hanging cape
 SHOULDER, LENGTH, WIDTH = 1.40, 0.8, 0.40  # the cape's top height, its length and width
 
 
 def capsule(a, b, radius, around=16, rings=4):
-    """``(vertices, faces)`` of a closed capsule about the segment ``a``-``b`` (along z)
-    with outward faces; ``a == b`` makes a sphere."""
+    """``(vertices, faces)`` of a closed capsule about the segment ``a``-``b`` (along z,
+    ``a`` below ``b``) with outward faces."""
     verts = [(a[0], a[1], a[2] - radius)]
     for end, lo, hi in ((a, -math.pi / 2, 0.0), (b, 0.0, math.pi / 2)):
         steps = [lo + (hi - lo) * k / rings for k in range(1, rings + 1)] if end is a else \
@@ -58,7 +58,7 @@ def character_mesh():
     """The body and the head as one mesh of two closed pieces, with the vertex indices of
     each piece."""
     torso_v, torso_f = capsule(*TORSO)
-    head_v, head_f = capsule(HEAD[0], HEAD[0], HEAD[1], rings=4)
+    head_v, head_f = capsule(*HEAD)
     n = len(torso_v)
     faces = torso_f + [tuple(i + n for i in f) for f in head_f]
     return torso_v + head_v, faces, range(n), range(n, n + len(head_v))

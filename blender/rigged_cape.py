@@ -131,9 +131,12 @@ def make_cape(scene, rig, cols: int, rows: int):
 def add_target(cape, frame: int, flare: float):
     """Shape key ``flare@FRAME``: the cape swung backwards, ``flare`` degrees from hanging
     straight down at its top row and curling on to 1.4 times that at its hem, each column
-    bent along an arc (its length kept: a pose the cloth can take without stretching)."""
-    cape.shape_key_add(name="Basis")
-    key = cape.shape_key_add(name=f"flare@{frame}")
+    bent along an arc (its length kept: a pose the cloth can take without stretching).
+    Called again, it reshapes the key."""
+    if cape.data.shape_keys is None:
+        cape.shape_key_add(name="Basis")
+    key = (cape.data.shape_keys.key_blocks.get(f"flare@{frame}")
+           or cape.shape_key_add(name=f"flare@{frame}"))
     key.value = 0.0  # a target, not a shape to show
     top = cape.data.vertices[0].co
     start = math.radians(flare)
@@ -180,8 +183,8 @@ def animate(rig, start: int, frames: int, fps: float, speed: float, turn: float)
         spine.keyframe_insert("rotation_euler", frame=frame)
 
 
-def build(*, fps: int = 24, start: int = 1, frames: int = 60, key_frame: int = 40,
-          flare: float = 30.0, cols: int = 10, rows: int = 14, speed: float = 1.0,
+def build(*, fps: int = 24, start: int = 1, frames: int = 60, key_frame: int = 24,
+          flare: float = 12.0, cols: int = 8, rows: int = 11, speed: float = 1.0,
           turn: float = 60.0) -> dict:
     """The example in the current (emptied) scene; its objects by name."""
     scene = bpy.context.scene

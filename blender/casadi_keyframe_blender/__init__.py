@@ -60,6 +60,9 @@ class CKF_Settings(bpy.types.PropertyGroup):
                            description="Where the meshes and the result go (empty: "
                                        "//casadi_keyframe/OBJECT next to the .blend, or a "
                                        "temporary folder)")
+    options: StringProperty(name="Solver options", default="",
+                            description="More casadi-keyframe solve options, as on its "
+                                        "command line, e.g. --finish land --time-limit 300")
     status: StringProperty(name="Status", default="")
     misses: StringProperty(name="Misses", default="")
 
@@ -218,7 +221,7 @@ class CKF_PT_panel(bpy.types.Panel):
 
     def draw(self, context):
         settings, layout = context.scene.casadi_keyframe, self.layout
-        for name in ("pins_group", "tolerance", "maxiter", "steps", "folder"):
+        for name in ("pins_group", "tolerance", "maxiter", "steps", "folder", "options"):
             layout.prop(settings, name)
         layout.operator(CKF_OT_solve.bl_idname)
         obj = context.active_object

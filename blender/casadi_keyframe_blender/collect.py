@@ -6,6 +6,7 @@ written as mesh files in world space; and the command that solves them."""
 from __future__ import annotations
 
 import contextlib
+import shlex
 import tempfile
 from pathlib import Path
 
@@ -175,6 +176,14 @@ def pinned(obj, group_name: str) -> list[int]:
                                             for g in v.groups)]
 
 
+def solver_options(text: str) -> list[str]:
+    """The settings' extra solver options as arguments (quoted as in a shell)."""
+    try:
+        return shlex.split(text)
+    except ValueError as err:
+        raise ValueError(f"Solver options: {err} in {text!r}") from None
+
+
 def prepare(context, executable: str, resume=None, from_frame: int | None = None):
     """Write the cloth, its targets, its pins' motion and the colliders, and return
     ``(command, out folder)``; with ``resume`` (a finished run's folder) the command keeps
@@ -209,5 +218,5 @@ def prepare(context, executable: str, resume=None, from_frame: int | None = None
         executable, cloth=cloth, targets=files, pins=pins,
         dt=bridge.fps_fraction(scene.render.fps, scene.render.fps_base), steps=steps,
         out=out, maxiter=settings.maxiter, bodies=bodies, pin_motion=motion, resume=resume,
-        from_frame=from_frame)
+        from_frame=from_frame, extra=solver_options(settings.options))
     return command, out

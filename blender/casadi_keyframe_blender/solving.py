@@ -81,6 +81,15 @@ class SolveProcess:
         return self.process.wait()
 
 
+def result_frames(out: Path) -> list:
+    """The result's positions per frame (world space, from ``result.npz``, which a solve
+    stopped by a signal writes too; Blender bundles numpy)."""
+    import numpy as np
+
+    with np.load(out / "result.npz", allow_pickle=False) as data:
+        return data["x"].tolist()
+
+
 def frame_transforms(obj, scene, count: int) -> list:
     """World-to-local 4x4 matrices (row lists) of ``obj`` at the ``count`` frames from the
     scene's start (a cloth parented to a moving rig has one per frame)."""
@@ -119,10 +128,9 @@ def finish(context, obj, out: Path, code: int) -> list[str]:
         raise RuntimeError(f"casadi-keyframe failed (exit code {code}): see the console")
     lines = bridge.describe_misses(bridge.read_misses(out), settings.tolerance,
                                    scene.frame_start)
-    frames, start, rate = bridge.read_pc2(out / f"{bridge.PROBLEM}.pc2")
+    frames = result_frames(out)
     local = bridge.write_pc2(out / f"{bpy.path.clean_name(obj.name)}_local.pc2",
-                             bridge.to_local(frames, frame_transforms(obj, scene, len(frames))),
-                             start, rate)
+                             bridge.to_local(frames, frame_transforms(obj, scene, len(frames))))
     install_cache(obj, local, scene.frame_start)
     scene.frame_end = max(scene.frame_end, scene.frame_start + len(frames) - 1)
     settings.misses = "; ".join(lines)

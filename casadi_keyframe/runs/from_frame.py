@@ -29,6 +29,8 @@ from ..controls import StepForces
 from ..integrators.shifted import Shifted
 from ..objectives import Objective
 from ..objectives.terms import StateTerm
+from ..optimize.goal import verdict
+from ..optimize.kept import Standing
 from ..problem import ControlProblem
 from ..saved import RESULT, Checkpoint, read_run
 from ..simulate import simulate
@@ -86,10 +88,29 @@ def held_start(whole: ControlProblem, source, frame: int) -> HeldStart:
     kept = run["u"][frame * block:frame * block + tail.size]
     tail[:kept.size] = kept
     carried = _carried(whole, head, tail, x[:frame + 1], path)
-    problem = tail_problem(whole, frame, x[frame], v[frame], carried, tail)
+    problem = tail_problem(whole, frame, x[frame], v[frame], carried, whole.guess_rule)
+    u0, start = better_start(problem, tail)
     record = {"path": str(path), "nit": run["meta"].get("nit"), "fun": run["meta"].get("fun"),
-              "from_frame": frame}
-    return HeldStart(problem, whole, frame, head, x[:frame + 1], v[:frame + 1], tail, record)
+              "from_frame": frame, "start": start}
+    return HeldStart(problem, whole, frame, head, x[:frame + 1], v[:frame + 1], u0, record)
+
+
+def better_start(problem, kept) -> tuple[np.ndarray, str]:
+    """``(controls, which)``: RUN's controls after the frame (``kept``) or, when the problem
+    makes its own start (a guess rule: a controller that tracks the keyframes as they are
+    now), that one on the frames after K if it stands better (the goal met first, then the
+    objective: :class:`~..optimize.kept.Standing`)."""
+    if problem.guess_rule is None:
+        return kept, "RUN's controls"
+    own = problem.initial_controls()
+    standings = []
+    for u in (kept, own):
+        traj = problem.simulate(u, records=False)
+        standings.append(Standing(verdict(problem, traj).met,
+                                  problem.breakdown(u, traj)["objective"]))
+    if standings[1].beats(standings[0]):
+        return own, "the problem's own start (its guess on the frames after K)"
+    return kept, "RUN's controls"
 
 
 def _check_same(whole, x, dt: float, u, path) -> None:
@@ -158,11 +179,11 @@ def _carried(whole, head, tail, kept, path):
     return carried
 
 
-def tail_problem(whole: ControlProblem, frame: int, x, v, carried, guess) -> ControlProblem:
+def tail_problem(whole: ControlProblem, frame: int, x, v, carried, guess=None) -> ControlProblem:
     """``whole``'s steps after ``frame``, from the state ``(x, v)``: step n is the whole's
     step ``frame + n`` (after one that left ``carried``), each keyframe after ``frame``
     ``frame`` frames earlier, those up to it dropped, a trajectory term's ``until`` (s)
-    moved back as far; starting the search from ``guess``."""
+    moved back as far; ``guess``: its start (flat controls or a guess rule)."""
     terms = []
     for term in whole.objective_terms.terms:
         if isinstance(term, StateTerm):

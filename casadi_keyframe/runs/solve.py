@@ -181,7 +181,8 @@ def _held(spec: SolveRun):
                          "frame: give the run with --resume RUN")
     held = held_start(spec.problem, spec.resume, spec.from_frame)
     print(f"{spec.problem.name}: frames 0..{held.frame} kept from {held.record['path']}; "
-          f"frames {held.frame + 1}..{spec.problem.steps} solved again")
+          f"frames {held.frame + 1}..{spec.problem.steps} solved again, from "
+          f"{held.record['start']}")
     return held
 
 

@@ -7,6 +7,7 @@ The option names in messages are the problem file's: ``cloth``, ``keyframes``, `
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -250,6 +251,18 @@ def tracking_guess(prob, land: bool = True, aim: int = 0) -> np.ndarray:
     return _tracked(prob, terms, aims)
 
 
+@dataclass(frozen=True)
+class TrackingGuess:
+    """:func:`tracking_guess` as a problem's guess rule: made when the search first asks,
+    for whichever problem asks (the whole shot, or the frames after a kept one)."""
+
+    land: bool = True
+    aim: int = 0
+
+    def __call__(self, prob) -> np.ndarray:
+        return tracking_guess(prob, land=self.land, aim=self.aim)
+
+
 def _tracked(prob, terms, aims) -> np.ndarray:
     """The PD controller's forces along the path through ``aims``, as ``prob``'s controls."""
     forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps, aims))
@@ -293,5 +306,5 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
                          + ([] if pin_motion is None else [pin_motion]))
     if guess == "none" or control != "forces":
         return prob
-    return prob.with_guess(tracking_guess(prob, land=guess == "land",
-                                          aim=AIM_RUNS if guess == "aim" else 0))
+    return prob.with_guess(TrackingGuess(land=guess == "land",
+                                         aim=AIM_RUNS if guess == "aim" else 0))

@@ -24,6 +24,7 @@ from casadi_keyframe_blender import collect  # noqa: E402 (once enabled)
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import rigged_cape  # noqa: E402
+from bl_workbench import workbench  # noqa: E402
 
 objects = rigged_cape.build(**job["build"])
 cape, character, rig = objects["cape"], objects["character"], objects["rig"]
@@ -50,16 +51,7 @@ for obj, colour in ((cape, (0.35, 0.55, 0.85, 1.0)), (character, (0.75, 0.72, 0.
 wire = target.modifiers.new("wire", "WIREFRAME")
 wire.thickness, wire.use_replace = 0.006, True
 
-scene.render.engine = "BLENDER_WORKBENCH"
-scene.display.shading.light, scene.display.shading.color_type = "STUDIO", "MATERIAL"
-scene.display.shading.show_shadows = False
-scene.world = bpy.data.worlds.new("bg")
-scene.world.color = (0.92, 0.92, 0.92)
-scene.render.resolution_x, scene.render.resolution_y = 560, 720
-camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-scene.collection.objects.link(camera)
-camera.data.lens = 40
-scene.camera = camera
+camera = workbench(scene, 560, 720, lens=40)
 
 seen = {"misses": scene.casadi_keyframe.misses, "seconds": seconds, "key_frame": key_frame}
 for frame in job["renders"]:

@@ -10,23 +10,15 @@ import os
 import subprocess
 import sys
 import tempfile
-import zipfile
 from pathlib import Path
 
 from PIL import Image, ImageDraw, ImageFont
 
+from make_screenshot import addon_zip
+
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 RENDERS = [1, 12, 24]  # scene frames: the start, on the way, the keyframe
-
-
-def addon_zip(work: Path) -> Path:
-    path = work / "casadi_keyframe_blender.zip"
-    with zipfile.ZipFile(path, "w") as z:
-        for f in sorted((HERE / "casadi_keyframe_blender").glob("*")):
-            if f.suffix in (".py", ".toml"):
-                z.write(f, f"casadi_keyframe_blender/{f.name}")
-    return path
 
 
 def caption(frame: int, seen: dict) -> str:

@@ -4,7 +4,7 @@ Solve pressed headless on the cape (with ``cancel_after``: the add-on's solve pr
 started and cancelled as Esc does after that many seconds of search, its best point
 loaded); with ``resolve_from``, a target pose then added later in the shot
 (``resolve_target``: frame and flare) and "Re-solve from Current Frame" pressed at that
-frame.  What Blender then shows is dumped per frame: the cape
+frame (with the Solver options ``resolve_options``).  What Blender then shows is dumped per frame: the cape
 through its Mesh Cache in world space, how far its pinned vertices are from where the rig
 puts them, how deep any cape vertex is inside the evaluated character, and the cape against
 its target shape key at the keyframe."""
@@ -156,6 +156,7 @@ else:
                                    "seconds": time.monotonic() - began})]
 if "resolve_from" in job:  # a pose added later in the shot, re-solved from a frame on
     rigged_cape.add_target(cape, *job["resolve_target"])
+    settings.options = job.get("resolve_options", "")
     scene.frame_set(scene.frame_start + job["resolve_from"])
     began = time.monotonic()
     result = bpy.ops.casadi_keyframe.resolve()

@@ -18,7 +18,10 @@ EXECUTABLE = shutil.which("casadi-keyframe") or str(Path(sys.executable).with_na
 BUILD = {"fps": 24, "frames": 60, "key_frame": 24, "flare": 12.0, "cols": 8, "rows": 11}
 PIN_TOLERANCE, DEPTH_TOLERANCE = 1e-3, 5e-3  # m
 RESOLVE_FROM = 23  # result frame (scene frame 24, the first keyframe)
-RESOLVE_TARGET = (34, 18.0)  # a pose added after it: scene frame, flare (degrees)
+RESOLVE_TARGET = (36, 8.0)  # a pose added after it: scene frame, flare (degrees)
+# the search alone stops 11.6 mm short of it (L-BFGS-B's relative reduction test); the
+# landing stage puts it within its tolerance
+RESOLVE_OPTIONS = "--finish land"
 
 
 def job(tmp_path, addon_zip, **more) -> dict:
@@ -64,7 +67,9 @@ def describe(what: str, run: dict, figures: dict) -> str:
 def test_rigged_cape_solved_played_and_resolved_in_blender(tmp_path, addon_zip):
     """Solved, then a pose added later in the shot and re-solved from the first keyframe."""
     seen = run_blender("bl_rig.py", job(tmp_path, addon_zip, resolve_from=RESOLVE_FROM,
-                                        resolve_target=RESOLVE_TARGET), tmp_path, timeout=1800)
+                                        resolve_target=RESOLVE_TARGET,
+                                        resolve_options=RESOLVE_OPTIONS),
+                       tmp_path, timeout=1800)
     first, again = seen["runs"]
     figures = []
     for run in (first, again):
@@ -74,7 +79,8 @@ def test_rigged_cape_solved_played_and_resolved_in_blender(tmp_path, addon_zip):
     REPORT.append(f"  rigged cape in Blender {seen['blender']} ({BUILD}):")
     REPORT.append(describe("solve", first, figures[0]))
     REPORT.append(describe(f"re-solve from result frame {RESOLVE_FROM} after a pose added at "
-                           f"scene frame {RESOLVE_TARGET[0]}", again, figures[1]))
+                           f"scene frame {RESOLVE_TARGET[0]} ({RESOLVE_OPTIONS})", again,
+                           figures[1]))
     kept, before = figures[1]["x"][:RESOLVE_FROM + 1], figures[0]["x"][:RESOLVE_FROM + 1]
     assert np.array_equal(kept, before)  # the motion up to the frame kept bit for bit
     assert len(figures[1]["x"]) == RESOLVE_TARGET[0]

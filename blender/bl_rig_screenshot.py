@@ -1,7 +1,7 @@
 """Run by a Blender Python (``python bl_rig_screenshot.py -- JOB.json``; see
 ``make_rig_screenshot.py``), not by the library: the rigged example (``rigged_cape.py``)
 built, the add-on's Solve pressed on its cape, then one Workbench render per frame of
-``renders`` from a camera that follows the character: the cape in blue, the character in
+``renders`` from a camera that follows the character (beside it, a little behind): the cape in blue, the character in
 grey, the cape's target shape key as a red wireframe at its frame.  Writes ``rig_F.png`` per
 render and ``seen.json`` (the add-on's misses, the solve's seconds, the cape's rms off its
 target at the keyframe)."""
@@ -51,11 +51,14 @@ for obj, colour in ((cape, (0.35, 0.55, 0.85, 1.0)), (character, (0.75, 0.72, 0.
 wire = target.modifiers.new("wire", "WIREFRAME")
 wire.thickness, wire.use_replace = 0.006, True
 
-camera = workbench(scene, 560, 720, lens=40)
+camera = workbench(scene, 560, 720, lens=50)
 
-seen = {"misses": scene.casadi_keyframe.misses, "seconds": seconds, "key_frame": key_frame}
+seen = {"misses": scene.casadi_keyframe.misses, "seconds": seconds, "key_frame": key_frame,
+        "walked": {}, "turned": {}}
 for frame in job["renders"]:
     scene.frame_set(frame)
+    seen["walked"][frame] = rig.matrix_world.translation.length
+    seen["turned"][frame] = rig.matrix_world.to_euler().z
     target.hide_render = frame != key_frame
     centre = rig.matrix_world @ Vector((0.0, 0.0, 1.05))
     behind = rig.matrix_world.to_3x3() @ Vector(job["camera"])  # in the rig's frame

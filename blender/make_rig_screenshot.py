@@ -6,6 +6,7 @@ with what was measured (the add-on's misses, the solve's seconds, the commit).
     BLENDER_PYTHON=.venv-blender/bin/python .venv/bin/python blender/make_rig_screenshot.py
 """
 import json
+import math
 import os
 import subprocess
 import sys
@@ -21,10 +22,13 @@ ROOT = HERE.parent
 RENDERS = [1, 12, 24]  # scene frames: the start, on the way, the keyframe
 
 
-def caption(frame: int, seen: dict) -> str:
-    if frame == seen["key_frame"]:
-        return f"frame {frame}: the keyframe (target in red)"
-    return f"frame {frame}: {'the start' if frame == RENDERS[0] else 'on the way'}"
+def caption(frame: int, seen: dict) -> list[str]:
+    """What the render at ``frame`` shows, and how far the character has walked and
+    turned by then: two lines."""
+    what = ("the keyframe (its target in red)" if frame == seen["key_frame"] else
+            "the start, at rest" if frame == RENDERS[0] else "on the way")
+    walked, turned = seen["walked"][str(frame)], math.degrees(seen["turned"][str(frame)])
+    return [f"frame {frame}: {what}", f"walked {walked:.2f} m, turned {turned:.0f} degrees"]
 
 
 def main() -> None:
@@ -34,7 +38,7 @@ def main() -> None:
     work = Path(tempfile.mkdtemp(prefix="ckf_rig_"))
     job = {"addon": str(addon_zip(work)), "out": str(work), "build": {}, "maxiter": 40,
            "executable": str(Path(sys.executable).with_name("casadi-keyframe")),
-           "renders": RENDERS, "camera": [1.6, -2.2, 0.5]}
+           "renders": RENDERS, "camera": [2.3, -0.9, 0.3]}
     (work / "job.json").write_text(json.dumps(job))
     subprocess.run([os.environ.get("BLENDER_PYTHON", ".venv-blender/bin/python"),
                     str(HERE / "bl_rig_screenshot.py"), "--", str(work / "job.json")],
@@ -42,15 +46,16 @@ def main() -> None:
     seen = json.loads((work / "seen.json").read_text())
     shots = [Image.open(work / f"rig_{frame}.png").convert("RGB") for frame in RENDERS]
     width, height = shots[0].size
-    sheet = Image.new("RGB", (width * len(shots), height + 40), "white")
+    sheet = Image.new("RGB", (width * len(shots), height + 64), "white")
     draw = ImageDraw.Draw(sheet)
     try:
-        font = ImageFont.truetype("DejaVuSans.ttf", 20)
+        font = ImageFont.truetype("DejaVuSans.ttf", 18)
     except OSError:
         font = ImageFont.load_default()
     for k, (frame, shot) in enumerate(zip(RENDERS, shots)):
         sheet.paste(shot, (k * width, 0))
-        draw.text((k * width + 16, height + 8), caption(frame, seen), fill="black", font=font)
+        for row, text in enumerate(caption(frame, seen)):
+            draw.text((k * width + 16, height + 8 + 26 * row), text, fill="black", font=font)
     target = ROOT / "docs" / "gallery" / "rigged_cape.png"
     sheet.save(target)
     record = {**seen, "commit": commit_of(), "command": "blender/make_rig_screenshot.py"}

@@ -139,7 +139,11 @@ def dump(tag: str, extra: dict) -> dict:
 
 seen = {"fps": scene.render.fps / scene.render.fps_base, "frame_start": scene.frame_start,
         "blender": bpy.app.version_string}
-if job.get("break_topology"):  # the character builds its faces up over the shot
+if job.get("break_topology"):  # no result to re-solve; the character's faces built up
+    try:
+        bpy.ops.casadi_keyframe.resolve()
+    except RuntimeError as err:
+        seen["resolve_error"] = str(err)
     build = character.modifiers.new("Build", "BUILD")
     build.frame_start, build.frame_duration = scene.frame_start, 20
     try:

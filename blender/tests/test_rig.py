@@ -101,7 +101,9 @@ def test_esc_stops_the_solve_and_loads_its_best_point(tmp_path, addon_zip):
 
 
 def test_a_rig_whose_mesh_changes_topology_is_refused_by_name(tmp_path, addon_zip):
+    """And a re-solve with no result before it is refused, saying what to do."""
     seen = run_blender("bl_rig.py", job(tmp_path, addon_zip, break_topology=True), tmp_path)
+    assert "no result to keep: press Solve Keyframes first" in seen["resolve_error"]
     assert "operator" not in seen, seen
     assert "collider Character changes its faces at frame" in seen["error"], seen["error"]
     assert not any(name.endswith(".pc2") for name in seen["files"]), seen["files"]

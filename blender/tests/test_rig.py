@@ -3,7 +3,8 @@ an armature that walks and turns, a cape sewn at its shoulders, a target pose at
 the add-on's solve headless, and what Blender then plays through the Mesh Cache: the pinned
 vertices where the rig puts them, no cape vertex deep inside the evaluated character, the
 cache at the scene's frame rate (its frame k is the result's frame k at scene frame
-start + k), the keyframe pose; Esc stopping the solve with its best point loaded; a
+start + k), the keyframe pose; Re-solve from Current Frame after a pose is added later
+(the frames before kept bit for bit); Esc stopping the solve with its best point loaded; a
 character whose mesh changes topology refused with its name."""
 import shutil
 import sys

@@ -49,8 +49,9 @@ def solve(folder: Path, fold_file: str, out: str, guess: str, resume=None,
 
 
 def misses(folder: Path, out: str) -> str:
+    """A run's status, each keyframe's rms miss (the tolerance is 10 mm) and iterations."""
     summary = json.loads((folder / out / "summary.json").read_text())
-    rows = [f"{m['term']}: max {m['max_position_error'] * 1e3:.3g} mm"
+    rows = [f"{m['term']}: rms {m['rms_position_error'] * 1e3:.3g} mm"
             for m in summary["breakdown"]["misses"]]
     return f"{summary['status_name']} ({'; '.join(rows)}), {summary['nit']} iterations"
 

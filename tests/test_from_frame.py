@@ -68,11 +68,13 @@ def test_the_kept_frames_are_bit_identical_and_the_new_keyframe_is_hit(first, tm
     ("pins", "does not move the pinned vertices as mesh_keyframes does now"),
     ("cloth", "the cloth cannot change"),
     ("checkpoint", "holds no motion (a checkpoint)"),
+    ("coarse", "does not combine with --continuation"),
 ])
 def test_bad_input_exits_2_naming_the_option(first, tmp_path, capsys, case, words):
     frame = {"beyond": "45", "before": "10", "last": "40"}.get(case, "30")
     run = f"{first['run']}/checkpoint.npz" if case == "checkpoint" else first["run"]
     more = ([] if case == "no run" else ["--resume", run]) + ["--from-frame", frame]
+    more += ["--continuation", "1/30"] if case == "coarse" else []
     files, sets = first, {"dt": {"dt": "0.02"}, "pins": {"pins": "0,4"}}.get(case, {})
     if case == "cloth":  # a 5 x 5 sheet with its own targets
         files = {k: str(v) for k, v in write_sheet_and_targets(tmp_path / "five", 5, 5).items()}
@@ -120,3 +122,36 @@ def test_the_tail_s_gradient_is_the_forward_pass_s_derivative(moving):
     _, g_ref = tail.objective_and_gradient(u, "casadi")  # its parameters at t + K dt
     assert np.linalg.norm(g - g_ref) <= 1e-8 * np.linalg.norm(g_ref)
     assert_forward_derivative(tail, u, g @ d, d)
+
+
+def test_a_keyframe_the_kept_frames_miss_fails_the_whole_shot(first, tmp_path, capsys):
+    """The frames after K meet their goal, but RUN (zero forces) misses the wave at frame
+    20, which lies in the kept frames: exit 1, and the message says why."""
+    passive = solve_args(first, "fold", tmp_path / "passive", "--maxiter", "1", "--method",
+                         "lbfgsb", sets={"guess": "none", "rest_band": "0"}.items())
+    assert main(passive) in (1, 3)
+    again = solve_args(first, "fold60", tmp_path / "again", "--resume",
+                       str(tmp_path / "passive"), "--from-frame", "30",
+                       sets={"rest_band": "0"}.items())
+    assert main(again) == 1
+    summary = json.loads((tmp_path / "again" / "summary.json").read_text())
+    assert "meet their goal, the whole shot does not" in summary["message"]
+    assert "MeshKeyframe@20" in summary["message"], summary["message"]
+
+
+@pytest.mark.parametrize("route", ["adjoint", "swapped"])
+def test_the_tail_s_gradient_is_the_whole_shot_s_for_the_frames_after(moving, route):
+    """The tail's gradient (the exact adjoint, the paper's swapped one) is the whole shot's
+    for the controls after K: the shifted backward steps see the right time."""
+    import warnings
+    prob, k = moving, 6
+    u = np.random.default_rng(7).normal(scale=0.05, size=prob.size)
+    whole = prob.simulate(u)
+    tail = tail_problem(prob, k, whole.x[k], whole.v[k],
+                        prob.integrator.carry(prob.model, whole.records[k - 1]))
+    cut = u.size * k // prob.steps
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        g = prob.objective_and_gradient(u, route)[1][cut:]
+        g_tail = tail.objective_and_gradient(u[cut:], route)[1]
+    assert np.linalg.norm(g_tail - g) <= 1e-10 * np.linalg.norm(g)

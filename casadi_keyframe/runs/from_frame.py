@@ -31,10 +31,11 @@ from ..objectives import Objective
 from ..objectives.terms import StateTerm
 from ..optimize.goal import verdict
 from ..optimize.kept import Standing
+from ..optimize.outcome import CONVERGED, FAILED
 from ..problem import ControlProblem
 from ..saved import RESULT, Checkpoint, read_run
 from ..simulate import simulate
-from ..state import Trajectory
+from ..state import SimulationError, Trajectory
 
 OPTION = "--from-frame"
 PIN_TOLERANCE = 1e-9  # m: a pin led as now, to round-off
@@ -96,21 +97,31 @@ def held_start(whole: ControlProblem, source, frame: int) -> HeldStart:
 
 
 def better_start(problem, kept) -> tuple[np.ndarray, str]:
-    """``(controls, which)``: RUN's controls after the frame (``kept``) or, when the problem
-    makes its own start (a guess rule: a controller that tracks the keyframes as they are
-    now), that one on the frames after K if it stands better (the goal met first, then the
-    objective: :class:`~..optimize.kept.Standing`)."""
-    if problem.guess_rule is None:
+    """``(controls, which)``: RUN's controls after the frame (``kept``) or, when they miss
+    the goal and the problem makes its own start (a guess rule: a controller that tracks the
+    keyframes as they are now), that one on the frames after K if it stands better (the goal
+    met first, then the objective: :class:`~..optimize.kept.Standing`; a start whose
+    simulation fails stands last)."""
+    ran = _standing(problem, kept)
+    if problem.guess_rule is None or (ran is not None and ran.met):
         return kept, "RUN's controls"
-    own = problem.initial_controls()
-    standings = []
-    for u in (kept, own):
-        traj = problem.simulate(u, records=False)
-        standings.append(Standing(verdict(problem, traj).met,
-                                  problem.breakdown(u, traj)["objective"]))
-    if standings[1].beats(standings[0]):
+    try:
+        own = problem.initial_controls()
+    except SimulationError:  # the controller's own runs fail: RUN's controls it is
+        return kept, "RUN's controls"
+    mine = _standing(problem, own)
+    if mine is not None and mine.beats(ran):
         return own, "the problem's own start (its guess on the frames after K)"
     return kept, "RUN's controls"
+
+
+def _standing(problem, u) -> Standing | None:
+    """Where the controls ``u`` stand on ``problem`` (None: its simulation fails)."""
+    try:
+        traj = problem.simulate(u, records=False)
+    except SimulationError:
+        return None
+    return Standing(verdict(problem, traj).met, problem.breakdown(u, traj)["objective"])
 
 
 def _check_same(whole, x, dt: float, u, path) -> None:
@@ -206,13 +217,23 @@ def tail_problem(whole: ControlProblem, frame: int, x, v, carried, guess=None) -
 def whole_result(held: HeldStart, result):
     """The tail's ``result`` as a result of the whole shot: RUN's held controls and frames
     0..K before the tail's, the whole problem's breakdown and objective there; the gradient
-    of the held controls is not computed (NaN)."""
+    of the held controls is not computed (NaN).  The tail's goal met, the whole shot's is
+    judged too: a keyframe or a limit RUN's kept frames miss makes it a failed search that
+    says so."""
     u = np.concatenate([held.head, result.x])
     traj = held.spliced(result.trajectory)
     breakdown = held.whole.breakdown(u, traj)
     jac = np.concatenate([np.full(held.head.size, np.nan), result.jac])
+    status, message = result.status, result.message
+    judged = verdict(held.whole, traj)
+    if status == CONVERGED and judged.checked and not judged.met:
+        status = FAILED
+        message = (f"frames {held.frame + 1}.. meet their goal, the whole shot does not "
+                   f"({judged.describe()}): frames 0..{held.frame} are "
+                   f"{held.record['path']}'s; solve from an earlier frame, or the whole shot")
     return dataclasses.replace(result, x=u, fun=breakdown["objective"], jac=jac,
-                               trajectory=traj, breakdown=breakdown)
+                               trajectory=traj, breakdown=breakdown, status=status,
+                               success=status == CONVERGED, message=message)
 
 
 class HeldCheckpoint(Checkpoint):

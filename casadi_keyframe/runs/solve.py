@@ -179,6 +179,13 @@ def _held(spec: SolveRun):
     if not spec.resume:
         raise ValueError(f"--from-frame {spec.from_frame} keeps a run's motion up to that "
                          "frame: give the run with --resume RUN")
+    coarse = [flag for flag, asked in (("--continuation", spec.settings.continuation),
+                                       ("--resolution", spec.settings.resolutions),
+                                       ("--homotopy", spec.settings.homotopy)) if asked]
+    if coarse:
+        raise ValueError(f"--from-frame solves the frames after {spec.from_frame} at the "
+                         f"problem's own dt and mesh, and does not combine with "
+                         f"{' or '.join(coarse)}: drop it")
     held = held_start(spec.problem, spec.resume, spec.from_frame)
     print(f"{spec.problem.name}: frames 0..{held.frame} kept from {held.record['path']}; "
           f"frames {held.frame + 1}..{spec.problem.steps} solved again, from "

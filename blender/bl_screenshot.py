@@ -15,6 +15,8 @@ import bpy
 import addon_utils  # noqa: E402 (importable once bpy is)
 from mathutils import Vector
 
+from bl_workbench import workbench  # noqa: E402 (beside this script)
+
 job = json.loads(Path(sys.argv[sys.argv.index("--") + 1]).read_text())
 out = Path(job["out"])
 bpy.ops.wm.read_factory_settings(use_empty=True)
@@ -54,19 +56,10 @@ for frame, shape in targets.values():  # the target meshes, drawn as wireframes
     wire = shape.modifiers.new("wire", "WIREFRAME")
     wire.thickness, wire.use_replace = 0.004, True
     shape.hide_render = True
-scene.render.engine = "BLENDER_WORKBENCH"
-scene.display.shading.light, scene.display.shading.color_type = "STUDIO", "MATERIAL"
-scene.display.shading.show_shadows = False
-scene.world = bpy.data.worlds.new("bg")
-scene.world.color = (0.92, 0.92, 0.92)
-scene.render.resolution_x, scene.render.resolution_y = 720, 720
-camera = bpy.data.objects.new("camera", bpy.data.cameras.new("camera"))
-scene.collection.objects.link(camera)
+camera = workbench(scene, 720, 720, lens=50)
 camera.location = Vector(job["camera"])
 aim = Vector(job["aim"]) - camera.location
 camera.rotation_euler = aim.to_track_quat("-Z", "Y").to_euler()
-camera.data.lens = 50
-scene.camera = camera
 
 seen = {"misses": scene.casadi_keyframe.misses, "rms": {}}
 for name, frame in job["renders"]:  # a keyframe, or a frame on the way (the wire is off)

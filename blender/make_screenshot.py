@@ -20,14 +20,20 @@ HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
 
 
-def main() -> None:
-    work = Path(tempfile.mkdtemp(prefix="ckf_shot_"))
-    files = write_sheet_and_targets(work / "meshes", 30, 30)
-    addon = work / "casadi_keyframe_blender.zip"
-    with zipfile.ZipFile(addon, "w") as z:
+def addon_zip(work: Path) -> Path:
+    """The add-on as a user installs it, zipped into ``work``."""
+    path = work / "casadi_keyframe_blender.zip"
+    with zipfile.ZipFile(path, "w") as z:
         for f in sorted((HERE / "casadi_keyframe_blender").glob("*")):
             if f.suffix in (".py", ".toml"):
                 z.write(f, f"casadi_keyframe_blender/{f.name}")
+    return path
+
+
+def main() -> None:
+    work = Path(tempfile.mkdtemp(prefix="ckf_shot_"))
+    files = write_sheet_and_targets(work / "meshes", 30, 30)
+    addon = addon_zip(work)
     job = {"addon": str(addon), "out": str(work),
            "executable": str(Path(sys.executable).with_name("casadi-keyframe")),
            "sheet": str(files["sheet"]), "pins": [0, 29],

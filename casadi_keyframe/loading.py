@@ -290,6 +290,8 @@ def _convert(spec: Override, value):
     elif spec.kind == "str":
         if isinstance(value, str):
             return value
+        if isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_)):
+            return str(value)  # a name of digits typed as --set NAME=0 (an index, a group)
     elif spec.kind == "bool":
         if isinstance(value, (bool, np.bool_)):
             return bool(value)

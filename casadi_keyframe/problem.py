@@ -22,7 +22,10 @@ class ControlProblem:
     ``x0, v0`` are ``(particles, dim)``; ``external`` is an optional stored force per step
     ``(steps, particles, dim)`` that is not optimised (the flock's wander, gravity).
     ``view`` says what pictures show beyond the model and keyframes (:mod:`.views`).
-    ``guess`` is an optional starting point for the optimizer (flat controls).  ``source``
+    ``guess`` is an optional starting point for the optimizer: flat controls, or a rule
+    that makes them from a problem (a function of the problem), applied when first asked
+    (:meth:`initial_controls`) and kept as :attr:`guess_rule`, so a problem made from this
+    one (the frames after a kept one) can make its own.  ``source``
     is where the problem came from, when it was built from a problem file: an object whose
     ``build(**overrides)`` builds it again with more overrides
     (:class:`~casadi_keyframe.loading.ProblemSource`, see :meth:`at_resolution`).
@@ -60,7 +63,9 @@ class ControlProblem:
             raise ValueError("the objective has no keyframe term: nothing to aim for")
         self._control_fn = self._compile_control_terms()
         self.view = checked_view(view, scene)
-        self._guess = None if guess is None else self.controls.check(guess).copy()
+        self.guess_rule = guess if callable(guess) else None
+        self._guess = (None if guess is None or self.guess_rule is not None
+                       else self.controls.check(guess).copy())
         self.source = source
         self.inputs = tuple(Path(p).expanduser().resolve() for p in inputs)
         if limits is not None and not isinstance(limits, PhysicalLimits):
@@ -105,7 +110,8 @@ class ControlProblem:
             return term.frame * steps // self.steps
 
         objective = self.objective_terms.retimed(frame_of)
-        guess = None if self._guess is None else self.controls.resample(self._guess, steps)
+        guess = None if not self.has_guess else self.controls.resample(self._made_guess(),
+                                                                        steps)
         return self._rebuilt(steps=steps, dt=self.horizon / steps, objective=objective,
                              external=resample_steps(self.external, steps), guess=guess)
 
@@ -149,8 +155,9 @@ class ControlProblem:
         args = dict(model=self.model, integrator=self.integrator, x0=self.x0, v0=self.v0,
                     steps=steps, dt=self.dt, controls=self.controls.for_steps(steps),
                     objective=self.objective_terms, external=self.external, name=self.name,
-                    view=self.view, guess=self._guess, inputs=self.inputs,
-                    limits=self.limits)
+                    view=self.view, inputs=self.inputs, limits=self.limits)
+        if "guess" not in changes:  # made for this problem: the rule's guess, not the rule
+            args["guess"] = self._made_guess()
         return ControlProblem(**{**args, **changes})
 
     def _steps_for(self, dt: float) -> int:
@@ -171,12 +178,18 @@ class ControlProblem:
     def initial_controls(self) -> np.ndarray:
         """Where the optimizer starts: the problem's ``guess`` if it has one, else the passive
         simulation's controls (zeros); a flat float64 vector."""
-        return self.controls.zeros() if self._guess is None else self._guess.copy()
+        return self.controls.zeros() if not self.has_guess else self._made_guess().copy()
+
+    def _made_guess(self):
+        """The guess (made by its rule the first time), or None."""
+        if self._guess is None and self.guess_rule is not None:
+            self._guess = self.controls.check(self.guess_rule(self)).copy()
+        return self._guess
 
     @property
     def has_guess(self) -> bool:
         """Whether the optimizer starts from a given guess rather than the passive controls."""
-        return self._guess is not None
+        return self._guess is not None or self.guess_rule is not None
 
     def bounds(self):
         return self.controls.bounds()

@@ -239,12 +239,31 @@ def index(entries: list[tuple[str, str, dict | None]]) -> str:
                       + (" (placeholder, reduced size)" if record["overrides"] else ""))
             commit = f"`{record['commit']}`"
         lines.append(f"| [{name}]({name}.md) | {lead} | {result} | {commit} |")
-    lines += ["", '<div class="grid cards" markdown>', ""]
+    lines += [""] + blender_section() + ['<div class="grid cards" markdown>', ""]
     for name, _, _ in entries:
         if (GALLERY / name / "keyframes.png").is_file():
             lines += [f"-   [![{name}]({name}/keyframes.png)]({name}.md)", "",
                       f"    [{name}]({name}.md)", ""]
     return "\n".join(lines + ["</div>", ""])
+
+
+def blender_section() -> list[str]:
+    """The add-on's rigged example as ``blender/make_rig_screenshot.py`` left it (its
+    picture and ``rigged_cape.json``), or nothing where it was never made."""
+    record_path = GALLERY / "rigged_cape.json"
+    if not record_path.is_file():
+        return []
+    record = json.loads(record_path.read_text())
+    return ["## In Blender", "",
+            "The add-on's rigged example (`blender/rigged_cape.py`): a cape sewn at the "
+            "shoulders of a character that walks and turns, its pinned vertices carried by "
+            "the armature, a target pose as a shape key "
+            "([how it is set up](../guides/meshes-and-blender.md#a-cape-on-a-rigged-character)),"
+            f" solved by the add-on in Blender and rendered headless by "
+            f"`{record['command']}` at commit `{record['commit']}`: "
+            f"{record['misses']}; {record['seconds']:.0f} s.", "",
+            "![The rigged cape in Blender: the start, on the way, the keyframe with its "
+            "target in red](rigged_cape.png)", ""]
 
 
 def write_pages() -> list[str]:

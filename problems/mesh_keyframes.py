@@ -4,7 +4,14 @@
 split into triangles with a note).  It hangs from the vertices ``pins`` names (indices, e.g.
 ``pins=0,29``; one index as ``pins=5,``), those of the file's vertex set ``pin_group`` (a
 PLY vertex property, a USD point subset or primvar) and those inside ``pin_box``
-(x0,y0,z0,x1,y1,z1).  ``keyframes`` gives FRAME:FILE pairs: at each frame every particle
+(x0,y0,z0,x1,y1,z1).  The pinned vertices stay put, or move: with ``pin_motion`` (a
+time-sampled mesh of the cloth, same vertices in the same order: USD with time samples, or
+a PC2 cache beside its ``NAME_rest.obj`` at one frame per ``dt``, frames 0..steps at least)
+they follow its positions at every frame, starting at its frame 0; with ``pin_body`` (a
+body of ``bodies``: its index from 0 or its file's name without extension) each rides on
+the body's surface point closest to it at frame 0, its offset along the normal kept.  A
+pinned vertex is in no contact (the body it rides on never pushes it off its path; its free
+neighbours still collide).  ``keyframes`` gives FRAME:FILE pairs: at each frame every particle
 should be on its vertex of the file, which must be the cloth's mesh in another shape (same
 vertices in the same order, same faces); ``align`` compares shapes after the best rigid
 motion.  Metres, z up, gravity along -z; ``mass`` is the cloth's total in kg, ``ground`` (a
@@ -48,8 +55,8 @@ the option's name (exit code 2).  The Blender add-on in ``blender/`` runs this p
 """
 from casadi_keyframe.meshes import check_mesh
 from casadi_keyframe.scenes.mesh_cloths import (bodies_of, colliders_of, mesh_keyframe_problem,
-                                                 parse_keyframes, pinned_of, read_option,
-                                                 refuse)
+                                                 parse_keyframes, pin_body_of, pinned_of,
+                                                 read_option, refuse)
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
 
 ZERO_START_BAND = 0.05  # rest_band's default with guess=none
@@ -75,7 +82,8 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           pin_box: tuple[float, ...] | None = None, steps: int | None = None,
           dt: float = 1 / 60, mass: float = 0.3, control: str = "forces",
           ground: float | None = None, spheres: tuple[float, ...] | None = None,
-          bodies: str | None = None,
+          bodies: str | None = None, pin_motion: str | None = None,
+          pin_body: str | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
           smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "aim",
@@ -96,10 +104,13 @@ def build(cloth: str | None = None, keyframes: str | None = None,
         raise refuse("pins", f"give whole vertex indices, got {pins}")
     pinned = pinned_of(sheet, None if pins is None else [int(p) for p in pins], pin_group,
                        pin_box)
+    meshes = [] if bodies is None else bodies_of(bodies, dt)
     return mesh_keyframe_problem(cloth=sheet, keyframes=targets, steps=steps, dt=dt, mass=mass,
                                  pinned=pinned, control=control,
-                                 colliders=colliders_of(ground, spheres)
-                                 + ([] if bodies is None else bodies_of(bodies, dt)),
+                                 colliders=colliders_of(ground, spheres) + meshes,
+                                 pin_motion=pin_motion,
+                                 pin_body=None if pin_body is None else pin_body_of(pin_body,
+                                                                                    meshes),
                                  weight=weight,
                                  alpha=alpha, align=align, strain_limit=strain_limit,
                                  strain_weight=strain_weight, smoothing=smoothing,

@@ -8,6 +8,7 @@ from fractions import Fraction
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from casadi_keyframe.cli import build_parser
 from casadi_keyframe.cli.values import parse_overrides
@@ -93,3 +94,47 @@ def test_colliders_are_written_as_the_library_reads_bodies(tmp_path):
                                dt="1/30", steps=4, out="r", bodies=[still, moving])
     assert parse_overrides(build_parser().parse_args(cmd[1:]).set)["bodies"] == \
         f"{still},{moving}"
+
+
+def test_pin_motion_written_only_when_a_pin_moves_and_read_as_the_cli_reads_it(tmp_path):
+    from casadi_keyframe.meshes import read_animated
+    square = [(0.0, 0.0, 0.0), (1.0, 0.0, 0.0), (1.0, 1.0, 0.0), (0.0, 1.0, 0.0)]
+    swaying = [[(x + (0.01 * k if i >= 2 else 0.0), y, z) for i, (x, y, z) in enumerate(square)]
+               for k in range(4)]
+    assert not bridge.pins_move(swaying, [0, 1])  # only the free vertices move
+    assert bridge.pins_move(swaying, [2]) and not bridge.pins_move(swaying, [2], 0.05)
+    path = bridge.write_motion(tmp_path, "pin_motion", swaying, [[0, 1, 2, 3]])
+    assert path.name == "pin_motion.pc2" and (tmp_path / "pin_motion_rest.obj").is_file()
+    found = read_animated(path, fps=30)
+    np.testing.assert_allclose(found.frames, swaying, atol=1e-7)
+    np.testing.assert_allclose(found.mesh.vertices, swaying[0], atol=0)
+
+
+def test_resolve_and_pin_motion_command_parses_as_the_cli_reads_it(tmp_path):
+    cmd = bridge.solve_command("ckf", cloth="c.obj", targets=[(40, "t.obj")], pins=[0, 1],
+                               dt="1/24", steps=40, out="r2", pin_motion=tmp_path / "p.pc2",
+                               resume=tmp_path / "r", from_frame=25)
+    args = build_parser().parse_args(cmd[1:])
+    assert parse_overrides(args.set)["pin_motion"] == str(tmp_path / "p.pc2")
+    assert args.resume == str(tmp_path / "r") and args.from_frame == 25
+
+
+def test_time_left_counted_down_from_the_progress_line():
+    line = "mesh_keyframes [lbfgsb] 3/30 iterations > simulating 21/39 steps; 47 s in, " \
+           "at most 7 min 6 s left"
+    assert bridge.time_left(line) == ("at most", 426.0)
+    assert bridge.time_left("x; 2 h 5 min in, about 1 h 5 min left") == ("about", 3900.0)
+    assert bridge.time_left("stage 0: 4 iterations") is None
+    assert bridge.status_text(line, 6.0) == f"at most 7 min 0 s left | {line}"
+    assert bridge.status_text("writing result", 3.0) == "writing result"
+    from casadi_keyframe.progress import format_seconds
+    for s in (0, 45, 89, 90, 200, 3599, 3600, 4000):
+        assert bridge.format_seconds(s) == format_seconds(s)
+
+
+def test_cache_made_local_frame_by_frame():
+    frames = [[(1.0, 0.0, 0.0)], [(2.0, 0.0, 0.0)]]
+    shift = [[[1, 0, 0, -x], [0, 1, 0, 0.0], [0, 0, 1, 0.0], [0, 0, 0, 1.0]] for x in (1.0, 2.0)]
+    assert bridge.to_local(frames, shift) == [[(0.0, 0.0, 0.0)], [(0.0, 0.0, 0.0)]]
+    with pytest.raises(ValueError, match="1 transforms for 2 frames"):
+        bridge.to_local(frames, shift[:1])

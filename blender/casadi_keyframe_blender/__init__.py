@@ -2,43 +2,39 @@
 
 Pick a mesh object, put its pinned vertices in a vertex group (``pins`` by default), give
 it shape keys named ``NAME@FRAME`` (or keyed to 1.0 at a frame; other mesh objects named
-``NAME@FRAME`` count too) and press Solve in the sidebar's "Keyframe Cloth" tab.  The mesh
-objects of a collection named ``colliders`` are bodies the cloth touches, still or animated
-(armatures, modifiers and shape keys as evaluated at each frame).  The add-on
-writes the meshes as OBJ files (world space, metres, z up), runs ``casadi-keyframe solve
-mesh_keyframes`` with the installed library (its path in the add-on's preferences) in a
-subprocess, shows its progress and the misses, and plays the result through a Mesh Cache
-modifier, one cache frame per scene frame from the scene's start (the solver's dt is the
-scene's frame time).  It never imports casadi_keyframe into Blender's Python.
+``NAME@FRAME`` count too) and press Solve in the sidebar's "Keyframe Cloth" tab.  Pinned
+vertices that move with the cloth's rig (parenting, an armature, hooks) carry the cloth:
+their evaluated motion is sent as the pins' motion.  The mesh objects of a collection named
+``colliders`` are bodies the cloth touches, still or animated (armatures, modifiers and
+shape keys as evaluated at each frame).  The add-on writes the meshes as OBJ and PC2 files
+(world space, metres, z up), runs ``casadi-keyframe solve mesh_keyframes`` with the
+installed library (its path in the add-on's preferences) in a subprocess, shows its
+progress and time left in the status bar (Esc stops it keeping its best point), shows the
+misses, and plays the result through a Mesh Cache modifier, one cache frame per scene frame
+from the scene's start (the solver's dt is the scene's frame time).  "Re-solve from Current
+Frame" keeps the last result up to the current frame and solves what follows against the
+scene as it is now.  It never imports casadi_keyframe into Blender's Python.
 """
 from __future__ import annotations
 
-import os
-import queue
-import subprocess
-import tempfile
-import threading
 from pathlib import Path
 
 import bpy
 from bpy.props import FloatProperty, IntProperty, PointerProperty, StringProperty
 
-from . import bridge
+from . import collect, solving
+from .solving import RESULT
 
 bl_info = {
     "name": "casadi_keyframe cloth keyframes",
     "author": "casadi_keyframe",
-    "version": (0, 1, 0),
+    "version": (0, 2, 0),
     "blender": (3, 4, 0),
     "location": "View3D > Sidebar > Keyframe Cloth",
     "description": "Solve a cloth that hits shape keys at frames (casadi-keyframe, in a "
                    "subprocess) and play it back through a Mesh Cache modifier",
     "category": "Physics",
 }
-MODIFIER = "casadi_keyframe"
-COLLIDERS = "colliders"  # the collection whose mesh objects are bodies
-
-
 class CKF_Preferences(bpy.types.AddonPreferences):
     bl_idname = __package__
 
@@ -64,6 +60,9 @@ class CKF_Settings(bpy.types.PropertyGroup):
                            description="Where the meshes and the result go (empty: "
                                        "//casadi_keyframe/OBJECT next to the .blend, or a "
                                        "temporary folder)")
+    options: StringProperty(name="Solver options", default="",
+                            description="More casadi-keyframe solve options, as on its "
+                                        "command line, e.g. --finish land --time-limit 300")
     status: StringProperty(name="Status", default="")
     misses: StringProperty(name="Misses", default="")
 
@@ -72,237 +71,99 @@ def preferences(context):
     return context.preferences.addons[__package__].preferences
 
 
-def world_points(matrix, points):
-    return [tuple(matrix @ p.co) for p in points]
+class Solving:
+    """A solve's operator: the files written and the command made by ``prepare``, the
+    solver run in a subprocess, watched by a timer (progress and time left in the status
+    bar; Esc stops it keeping its best point), its result loaded as the Mesh Cache."""
 
-
-def _fcurves(id_data):
-    """The F-curves animating ``id_data`` (slotted actions of 4.4+, or the old list)."""
-    ad = getattr(id_data, "animation_data", None)
-    if ad is None or ad.action is None:
-        return []
-    try:
-        from bpy_extras import anim_utils
-        bag = anim_utils.action_get_channelbag_for_slot(ad.action, ad.action_slot)
-        return list(bag.fcurves) if bag is not None else []
-    except (ImportError, AttributeError):
-        return list(getattr(ad.action, "fcurves", []))
-
-
-def keyed_frame(keys, block):
-    """The first frame where shape key ``block``'s value is keyed to 1, or None."""
-    path = f'key_blocks["{block.name}"].value'
-    for curve in _fcurves(keys):
-        if curve.data_path == path:
-            full = [k.co[0] for k in curve.keyframe_points if k.co[1] >= 0.999]
-            if full:
-                return int(round(min(full)))
-    return None
-
-
-def collect_targets(obj, scene):
-    """``[(scene frame, name, world points)]`` of the object's target shape keys and of the
-    scene's mesh objects named ``NAME@FRAME``."""
-    found, matrix = [], obj.matrix_world
-    keys = obj.data.shape_keys
-    if keys is not None:
-        for block in keys.key_blocks:
-            if block == keys.reference_key:
-                continue
-            frame = bridge.frame_from_name(block.name)
-            frame = keyed_frame(keys, block) if frame is None else frame
-            if frame is not None:
-                found.append((frame, block.name, world_points(matrix, block.data)))
-    for other in scene.objects:
-        frame = bridge.frame_from_name(other.name)
-        if other is obj or other.type != "MESH" or frame is None:
-            continue
-        if len(other.data.vertices) != len(obj.data.vertices):
-            raise ValueError(f"target object {other.name} has {len(other.data.vertices)} "
-                             f"vertices, {obj.name} {len(obj.data.vertices)}: a target must be "
-                             f"a copy of the cloth in another shape")
-        found.append((frame, other.name, world_points(other.matrix_world, other.data.vertices)))
-    return sorted(found)
-
-
-def collect_bodies(scene, depsgraph, folder, steps: int, cloth=None) -> list:
-    """Write each mesh object of the ``colliders`` collection (but the ``cloth``) as a body
-    file (world space, evaluated at each frame from the scene's start over ``steps`` frames
-    and one more) and return the files."""
-    collection = bpy.data.collections.get(COLLIDERS)
-    objects = [o for o in (collection.all_objects if collection else [])
-               if o.type == "MESH" and o is not cloth]
-    if not objects:
-        return []
-    frames = {o.name: [] for o in objects}
-    polygons = {}
-    current = scene.frame_current
-    try:
-        for frame in range(scene.frame_start, scene.frame_start + steps + 2):
-            scene.frame_set(frame)
-            for o in objects:
-                evaluated = o.evaluated_get(depsgraph)
-                mesh = evaluated.to_mesh()
-                faces = [list(p.vertices) for p in mesh.polygons]
-                if polygons.setdefault(o.name, faces) != faces:
-                    raise ValueError(f"collider {o.name} changes its faces at frame {frame}: "
-                                     f"a body keeps its mesh's topology")
-                frames[o.name].append(world_points(evaluated.matrix_world, mesh.vertices))
-                evaluated.to_mesh_clear()
-    finally:
-        scene.frame_set(current)
-    return [bridge.write_body(folder, f"collider_{bpy.path.clean_name(o.name)}",
-                              frames[o.name], polygons[o.name]) for o in objects]
-
-
-def work_folder(settings, obj) -> Path:
-    if settings.folder:
-        return Path(bpy.path.abspath(settings.folder))
-    if bpy.data.filepath:
-        return Path(bpy.path.abspath(f"//casadi_keyframe/{bpy.path.clean_name(obj.name)}"))
-    return Path(tempfile.mkdtemp(prefix="casadi_keyframe_"))
-
-
-def prepare(context):
-    """Write the cloth and its targets, and return ``(command, out folder)``."""
-    obj, scene = context.active_object, context.scene
-    settings = scene.casadi_keyframe
-    if obj is None or obj.type != "MESH":
-        raise ValueError("select the cloth: a mesh object")
-    keys = obj.data.shape_keys
-    rest = keys.reference_key.data if keys is not None else obj.data.vertices
-    start = scene.frame_start
-    targets = [(f - start, name, pts) for f, name, pts in collect_targets(obj, scene)]
-    if not targets:
-        raise ValueError(f"{obj.name} has no targets: name shape keys NAME@FRAME (or key their "
-                         f"value to 1 at a frame)")
-    early = [f"{name} at frame {f + start}" for f, name, _ in targets if f < 1]
-    if early:
-        raise ValueError(f"targets must come after the scene's start frame {start}: "
-                         f"{', '.join(early)}")
-    group = obj.vertex_groups.get(settings.pins_group)
-    pins = [] if group is None else [v.index for v in obj.data.vertices
-                                     if any(g.group == group.index and g.weight > 0
-                                            for g in v.groups)]
-    folder = work_folder(settings, obj)
-    folder.mkdir(parents=True, exist_ok=True)
-    polygons = [list(p.vertices) for p in obj.data.polygons]
-    cloth = folder / "cloth.obj"
-    cloth.write_text(bridge.obj_text(world_points(obj.matrix_world, rest), polygons,
-                                     f"{obj.name} rest shape, world space"))
-    files = []
-    for frame, name, pts in targets:
-        path = folder / f"target_{frame:04d}.obj"
-        path.write_text(bridge.obj_text(pts, polygons, f"{name}: result frame {frame}"))
-        files.append((frame, path))
-    steps = settings.steps or max(f for f, _ in files)
-    bodies = collect_bodies(scene, context.evaluated_depsgraph_get(), folder, steps, obj)
-    command = bridge.solve_command(
-        preferences(context).executable, cloth=cloth, targets=files, pins=pins,
-        dt=bridge.fps_fraction(scene.render.fps, scene.render.fps_base), steps=steps,
-        out=folder / "result", maxiter=settings.maxiter, bodies=bodies)
-    return command, folder / "result"
-
-
-def finish(context, obj, out: Path, code: int) -> list[str]:
-    """Read the misses, put the cache on ``obj`` and return the lines to show."""
-    scene, settings = context.scene, context.scene.casadi_keyframe
-    if code not in (0, 1, 3, 130, 143) or not (out / "summary.json").is_file():  # see solve --help
-        raise RuntimeError(f"casadi-keyframe failed (exit code {code}): see the console")
-    lines = bridge.describe_misses(bridge.read_misses(out), settings.tolerance,
-                                   scene.frame_start)
-    frames, start, rate = bridge.read_pc2(out / f"{bridge.PROBLEM}.pc2")
-    inverse = [list(row) for row in obj.matrix_world.inverted()]
-    local = bridge.write_pc2(out / f"{bpy.path.clean_name(obj.name)}_local.pc2",
-                             bridge.to_local(frames, inverse), start, rate)
-    mod = obj.modifiers.get(MODIFIER) or obj.modifiers.new(MODIFIER, "MESH_CACHE")
-    mod.cache_format, mod.filepath = "PC2", str(local)
-    mod.frame_start = scene.frame_start
-    mod.time_mode, mod.play_mode, mod.frame_scale = "FRAME", "SCENE", 1.0
-    mod.forward_axis, mod.up_axis = "POS_Y", "POS_Z"
-    scene.frame_end = max(scene.frame_end, scene.frame_start + len(frames) - 1)
-    settings.misses = "; ".join(lines)
-    obj["casadi_keyframe_result"] = str(out)
-    return lines
-
-
-class CKF_OT_solve(bpy.types.Operator):
-    """Solve the cloth onto its target shape keys with casadi-keyframe (in a subprocess)"""
-
-    bl_idname = "casadi_keyframe.solve"
-    bl_label = "Solve Keyframes"
-    bl_options = {"REGISTER"}
+    def prepare(self, context):
+        """``(command, out folder)`` of this solve."""
+        raise NotImplementedError
 
     def execute(self, context):
         try:
-            command, self.out = prepare(context)
+            command, self.out = self.prepare(context)
         except (ValueError, OSError) as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
         self.obj = context.active_object
         print("casadi_keyframe:", " ".join(command))
         try:
-            self.process = subprocess.Popen(command, stdout=subprocess.PIPE,
-                                            stderr=subprocess.STDOUT, text=True, bufsize=1,
-                                            env={**os.environ, "PYTHONUNBUFFERED": "1"})
+            self.run = solving.SolveProcess(command)
         except OSError as err:
             self.report({"ERROR"}, f"cannot run {command[0]}: {err}; set the casadi-keyframe "
                                    f"command in the add-on's preferences")
             return {"CANCELLED"}
-        self.lines, self.pending = queue.Queue(), ""
-        threading.Thread(target=self._read, daemon=True).start()
         if bpy.app.background:  # headless: wait here
-            while self.process.poll() is None or not self.lines.empty():
-                self._drain(context, wait=0.2)
-            return self._done(context)
+            return self._done(context, self.run.wait())
         self.timer = context.window_manager.event_timer_add(0.25, window=context.window)
         context.window_manager.modal_handler_add(self)
         return {"RUNNING_MODAL"}
 
-    def _read(self):
-        for chunk in iter(lambda: self.process.stdout.read(256), ""):
-            self.lines.put(chunk)
-
-    def _drain(self, context, wait=0.0):
-        try:
-            chunk = self.lines.get(timeout=wait) if wait else self.lines.get_nowait()
-        except queue.Empty:
-            return
-        lines, self.pending = bridge.progress_lines(chunk, self.pending)
-        for line in lines:
-            print("casadi-keyframe:", line)
-            context.scene.casadi_keyframe.status = line[:200]
-        if self.pending.strip():
-            context.scene.casadi_keyframe.status = self.pending.strip()[:200]
-
     def modal(self, context, event):
-        if event.type == "ESC":
-            self.process.terminate()  # the solver writes its best result and stops
+        if event.type == "ESC" and event.value == "PRESS":
+            self.run.cancel()  # the solver writes its best point and stops
+            return {"RUNNING_MODAL"}
         if event.type != "TIMER":
             return {"PASS_THROUGH"}
-        while not self.lines.empty():
-            self._drain(context)
+        for line in self.run.drain():
+            print("casadi-keyframe:", line)
+        context.scene.casadi_keyframe.status = self.run.last[:200]
+        context.workspace.status_text_set("casadi-keyframe (Esc stops, keeping the best "
+                                          "point): " + self.run.status())
         if context.area is not None:
             context.area.tag_redraw()
-        context.workspace.status_text_set("casadi-keyframe: "
-                                          + context.scene.casadi_keyframe.status)
-        if self.process.poll() is None:
+        if self.run.running:
             return {"PASS_THROUGH"}
         context.window_manager.event_timer_remove(self.timer)
         context.workspace.status_text_set(None)
-        self._done(context)
-        return {"FINISHED"}
+        return self._done(context, self.run.wait())
 
-    def _done(self, context):
+    def _done(self, context, code: int):
+        context.scene.casadi_keyframe.status = self.run.last[:200]
         try:
-            lines = finish(context, self.obj, self.out, self.process.wait())
+            lines = solving.finish(context, self.obj, self.out, code)
         except (RuntimeError, OSError, ValueError, KeyError) as err:
             self.report({"ERROR"}, str(err))
             return {"CANCELLED"}
+        if self.run.cancelled_at is not None:
+            self.report({"WARNING"}, "stopped: the best point found so far is loaded")
         for line in lines:
             self.report({"INFO"} if line.endswith(")") and "hit" in line else {"WARNING"}, line)
             print("casadi_keyframe:", line)
         return {"FINISHED"}
+
+
+class CKF_OT_solve(Solving, bpy.types.Operator):
+    """Solve the cloth onto its target shape keys with casadi-keyframe (in a subprocess)"""
+
+    bl_idname = "casadi_keyframe.solve"
+    bl_label = "Solve Keyframes"
+    bl_options = {"REGISTER"}
+
+    def prepare(self, context):
+        return collect.prepare(context, preferences(context).executable)
+
+
+class CKF_OT_resolve(Solving, bpy.types.Operator):
+    """Keep the last result up to the current frame and solve the frames after it again,
+    against the scene as it is now (changed keys, colliders, rig)"""
+
+    bl_idname = "casadi_keyframe.resolve"
+    bl_label = "Re-solve from Current Frame"
+    bl_options = {"REGISTER"}
+
+    def prepare(self, context):
+        obj, scene = context.active_object, context.scene
+        last = obj.get(RESULT) if obj is not None else None
+        if not last or not (Path(last) / "result.npz").is_file():
+            raise ValueError("no result to keep: press Solve Keyframes first")
+        frame = scene.frame_current - scene.frame_start
+        if frame < 1:
+            raise ValueError(f"go to a frame after the scene's start ({scene.frame_start}): "
+                             f"the motion up to the current frame is kept")
+        return collect.prepare(context, preferences(context).executable, resume=last,
+                               from_frame=frame)
 
 
 class CKF_OT_import_usd(bpy.types.Operator):
@@ -360,9 +221,14 @@ class CKF_PT_panel(bpy.types.Panel):
 
     def draw(self, context):
         settings, layout = context.scene.casadi_keyframe, self.layout
-        for name in ("pins_group", "tolerance", "maxiter", "steps", "folder"):
+        for name in ("pins_group", "tolerance", "maxiter", "steps", "folder", "options"):
             layout.prop(settings, name)
         layout.operator(CKF_OT_solve.bl_idname)
+        obj = context.active_object
+        row = layout.row()
+        row.enabled = obj is not None and bool(obj.get(RESULT))
+        row.operator(CKF_OT_resolve.bl_idname, text=f"Re-solve from Frame "
+                                                   f"{context.scene.frame_current}")
         layout.operator(CKF_OT_import_usd.bl_idname)
         if settings.status:
             layout.label(text=settings.status[:80])
@@ -370,7 +236,8 @@ class CKF_PT_panel(bpy.types.Panel):
             layout.label(text=line, icon="CHECKMARK" if ": hit" in line else "ERROR")
 
 
-CLASSES = (CKF_Preferences, CKF_Settings, CKF_OT_solve, CKF_OT_import_usd, CKF_PT_panel)
+CLASSES = (CKF_Preferences, CKF_Settings, CKF_OT_solve, CKF_OT_resolve, CKF_OT_import_usd,
+           CKF_PT_panel)
 
 
 def register():

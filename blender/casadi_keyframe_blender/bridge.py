@@ -37,9 +37,25 @@ def write_body(folder, name: str, frames, polygons) -> Path:
         path = folder / f"{name}.obj"
         path.write_text(obj_text(frames[0], polygons, f"collider {name}, world space"))
         return path
+    return write_motion(folder, name, frames, polygons)
+
+
+def write_motion(folder, name: str, frames, polygons) -> Path:
+    """A time-sampled mesh for the solver (a moving collider, or the cloth whose pinned
+    vertices follow it): the point cache ``NAME.pc2``, one sample per scene frame from the
+    start, beside its rest mesh ``NAME_rest.obj`` (the first sample)."""
+    folder = Path(folder)
     (folder / f"{name}_rest.obj").write_text(
-        obj_text(frames[0], polygons, f"collider {name} at the start, world space"))
+        obj_text(frames[0], polygons, f"{name} at the start, world space"))
     return write_pc2(folder / f"{name}.pc2", frames)
+
+
+def pins_move(frames, pins, tolerance: float = 1e-6) -> bool:
+    """Whether any vertex of ``pins`` in ``frames`` (per-frame lists of (x, y, z)) leaves
+    its first place by more than ``tolerance`` metres (float32 files hold about 1e-7 m)."""
+    first = frames[0]
+    return any(max(abs(a - b) for a, b in zip(frame[i], first[i])) > tolerance
+               for frame in frames[1:] for i in pins)
 
 
 def frame_from_name(name: str):
@@ -56,10 +72,14 @@ def fps_fraction(fps: int, fps_base: float) -> str:
 
 
 def solve_command(executable: str, *, cloth, targets, pins, dt: str, steps: int, out,
-                  maxiter: int | None = None, bodies=(), extra=()) -> list[str]:
+                  maxiter: int | None = None, bodies=(), pin_motion=None, resume=None,
+                  from_frame: int | None = None, extra=()) -> list[str]:
     """The ``casadi-keyframe solve mesh_keyframes`` command line: ``targets`` is a list of
-    ``(frame, file)``, ``bodies`` the colliders' mesh files (:func:`write_body`); the result
-    is also exported as a PC2 point cache."""
+    ``(frame, file)``, ``bodies`` the colliders' mesh files (:func:`write_body`),
+    ``pin_motion`` the cloth's own time-sampled mesh that the ``pins`` follow
+    (:func:`write_motion`; None: they stay where they are); ``resume`` a finished run's
+    folder whose motion up to result frame ``from_frame`` is kept (the rest solved again);
+    the result is also exported as a PC2 point cache."""
     keyframes = ",".join(f"{frame}:{path}" for frame, path in sorted(targets))
     args = [str(executable), "solve", PROBLEM, "--set", f"cloth={cloth}", "--set",
             f"keyframes={keyframes}", "--set", f"dt={dt}", "--set", f"steps={int(steps)}"]
@@ -67,6 +87,10 @@ def solve_command(executable: str, *, cloth, targets, pins, dt: str, steps: int,
         args += ["--set", "pins=" + ",".join(str(int(i)) for i in sorted(pins)) + ","]
     if bodies:
         args += ["--set", "bodies=" + ",".join(str(b) for b in bodies)]
+    if pin_motion is not None:
+        args += ["--set", f"pin_motion={pin_motion}"]
+    if resume is not None:
+        args += ["--resume", str(resume), "--from-frame", str(int(from_frame))]
     if maxiter:
         args += ["--maxiter", str(int(maxiter))]
     return args + ["--out", str(out), "--export", "pc2", "--no-animation", "--no-viewer",
@@ -79,6 +103,40 @@ def progress_lines(chunk: str, pending: str = "") -> tuple[list[str], str]:
     text = pending + chunk
     parts = re.split(r"[\r\n]", text)
     return [p.strip() for p in parts[:-1] if p.strip()], parts[-1]
+
+
+_LEFT = re.compile(r"(?P<kind>about|at most) (?P<time>\d+ (?:h|min|s)(?: \d+ (?:h|min|s))*) left")
+_UNITS = {"h": 3600, "min": 60, "s": 1}
+
+
+def time_left(line: str):
+    """``("about" or "at most", seconds)`` from a progress line's ``..., about 1 min 20 s
+    left`` (see ``casadi_keyframe.progress.status``), or None when it names none."""
+    match = _LEFT.search(line)
+    if not match:
+        return None
+    parts = match["time"].split()
+    return match["kind"], float(sum(int(n) * _UNITS[u] for n, u in zip(parts[::2], parts[1::2])))
+
+
+def format_seconds(seconds: float) -> str:
+    """``"45 s"``, ``"3 min 20 s"``, ``"1 h 5 min"`` (as the library's progress lines)."""
+    seconds = max(float(seconds), 0.0)
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{int(seconds // 60)} min {int(seconds % 60)} s"
+    return f"{int(seconds // 3600)} h {int(seconds % 3600 // 60)} min"
+
+
+def status_text(line: str, age: float) -> str:
+    """The status bar's text for the solver's last progress ``line``, shown ``age``
+    seconds after it came (the solver writes one every few seconds into a pipe): its time
+    left counted down meanwhile and put first, then the line."""
+    left = time_left(line)
+    if left is None:
+        return line
+    return f"{left[0]} {format_seconds(left[1] - age)} left | {line}"
 
 
 def read_misses(out) -> list[dict]:
@@ -121,8 +179,12 @@ def write_pc2(path, frames, start: float = 0.0, rate: float = 1.0) -> Path:
 
 
 def to_local(frames, world_to_local):
-    """Every point of ``frames`` through the 4x4 matrix ``world_to_local`` (row lists): a
-    world-space cache made to play on an object with a transform."""
-    m = world_to_local
+    """Every point of ``frames`` through the 4x4 matrix ``world_to_local`` (row lists; or
+    one such matrix per frame, for an object that moves): a world-space cache made to play
+    on an object with a transform."""
+    per_frame = (world_to_local if isinstance(world_to_local[0][0], (list, tuple))
+                 else [world_to_local] * len(frames))
+    if len(per_frame) < len(frames):
+        raise ValueError(f"{len(per_frame)} transforms for {len(frames)} frames")
     return [[tuple(m[r][0] * x + m[r][1] * y + m[r][2] * z + m[r][3] for r in range(3))
-             for x, y, z in frame] for frame in frames]
+             for x, y, z in frame] for frame, m in zip(frames, per_frame)]

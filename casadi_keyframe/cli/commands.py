@@ -65,6 +65,9 @@ def cmd_solve(args) -> int:
     from ..export import check_library
 
     started = now()  # --time-limit counts from here: the build and the start are the run's
+    if args.from_frame is not None and args.resume is None:
+        raise ValueError(f"--from-frame {args.from_frame} keeps a run's motion up to that "
+                         "frame: give the run with --resume RUN")
     for fmt in args.export or ():
         check_library(fmt)  # before the solve, not after it
     module = load_module(args.problem)
@@ -80,6 +83,7 @@ def cmd_solve(args) -> int:
              "stop": args.stop, "finish": args.finish}
     with locked(out) if out is not None else contextlib.nullcontext():  # refused before the build
         spec = solve_run(module, args.problem, overrides, out, given=given, resume=args.resume,
+                         from_frame=args.from_frame,
                          quiet=args.quiet, animation=not args.no_animation,
                          exports=tuple(args.export or ()), viewer=not args.no_viewer,
                          started=started, typed=typed_options(args),
@@ -102,7 +106,7 @@ def typed_options(args) -> tuple:
                         ("--scheduler", args.scheduler), ("--homotopy", args.homotopy),
                         ("--stop", args.stop), ("--finish", args.finish),
                         ("--time-limit", args.time_limit), ("--export", args.export),
-                        ("--draw-limit", args.draw_limit)):
+                        ("--draw-limit", args.draw_limit), ("--from-frame", args.from_frame)):
         for item in value if isinstance(value, list) else [value]:
             if item is not None:
                 typed.append((flag, f"{item:g}" if isinstance(item, float) else str(item)))

@@ -137,6 +137,16 @@ def solve_parser(sub) -> None:
     s.add_argument("--resume", metavar="DIR_OR_NPZ",
                    help="start from a run's controls: a results folder (the newer of its "
                         "checkpoint.npz and result.npz) or either file; same problem and --set")
+    s.add_argument("--from-frame", type=at_least(int, 0), metavar="K",
+                   help="with --resume RUN: keep RUN's motion up to frame K exactly (its "
+                        "controls before K held, its state at K the start) and solve only "
+                        "frames K+1.., against the problem as it is now (changed keyframes, "
+                        "colliders: other --set values are fine), warm-started from RUN's "
+                        "controls after K (or, where they miss and it stands better, the "
+                        "problem's own start on those frames); the result is the whole "
+                        "shot, judged whole.  RUN is its folder's "
+                        "result.npz; K from the first keyframe to before the last; the cloth, "
+                        "dt, the controls and the pins cannot change")
     s.set_defaults(func=cmd_solve)
 
 

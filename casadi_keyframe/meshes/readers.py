@@ -209,8 +209,35 @@ def usd_frames(path) -> tuple[np.ndarray, np.ndarray] | None:
     if len(codes) < 2:
         return None
     codes = sorted(codes)
+    _check_topology(path, prim, codes)
     frames = np.array([_usd_points(stage, prim, code)[0] for code in codes])
     return (np.asarray(codes) - codes[0]) / stage.GetTimeCodesPerSecond(), frames
+
+
+def _check_topology(path, prim, codes) -> None:
+    """Refuse (MeshError) a mesh whose points' count or faces change over ``codes``: a
+    point cache needs one topology (a rig that adds or removes geometry over time)."""
+    from pxr import UsdGeom
+    mesh = UsdGeom.Mesh(prim)
+
+    def topology(code):
+        return (len(mesh.GetPointsAttr().Get(code) or []),
+                tuple(mesh.GetFaceVertexCountsAttr().Get(code) or []),
+                tuple(mesh.GetFaceVertexIndicesAttr().Get(code) or []))
+
+    codes = sorted(set(codes) | set(mesh.GetFaceVertexCountsAttr().GetTimeSamples())
+                   | set(mesh.GetFaceVertexIndicesAttr().GetTimeSamples()))
+    first = topology(codes[0])
+    for code in codes[1:]:
+        now = topology(code)
+        if now != first:
+            what = ("points" if now[0] != first[0] else "faces")
+            raise MeshError(f"{path}: the mesh's topology changes over time: at time code "
+                            f"{code:g} its {what} differ from those at {codes[0]:g} ({now[0]} "
+                            f"points, {len(now[1])} faces; first {first[0]} points, "
+                            f"{len(first[1])} faces): export a mesh whose vertices and faces "
+                            "stay the same at every frame (apply modifiers that add or remove "
+                            "geometry, or bake a point cache of a fixed mesh)")
 
 
 def _opens(path: Path) -> bool:

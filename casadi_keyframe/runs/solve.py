@@ -26,6 +26,7 @@ from ..saved.lock import locked
 from ..state import SimulationError
 from ..optimize.outcome import LIMIT
 from .exits import exit_code, guarded, stopped
+from .from_frame import held_start, whole_result
 from .outputs import draw, write_outputs
 from .report import command_line, hint, left_on_disk, report, typed_sets
 
@@ -44,6 +45,7 @@ class SolveRun:
     problem_arg: str = ""  # the problem as typed (a name or a path), for the hints
     overrides: dict = field(default_factory=dict)
     resume: str | None = None
+    from_frame: int | None = None  # with resume: keep its motion up to this frame (.from_frame)
     quiet: bool = False
     animation: bool = True
     exports: tuple = ()  # export formats written beside the pictures (see .export)
@@ -91,16 +93,18 @@ def _reported(spec, caught, done) -> int:
 
 
 def _solve(spec: SolveRun, caught, done) -> int:
-    prob, out = spec.problem, spec.out
+    out = spec.out
     deadline = Deadline(spec.started, spec.settings.time_limit)
-    u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
+    held = _held(spec)
+    prob, u0, resumed = _start_of(spec, held)
     origin = ("resumed" if resumed else "given" if u0 is not None
               else "guess" if prob.has_guess else "passive")
     start_controls = prob.initial_controls() if u0 is None else u0
     try:
         with limited(deadline), progress.task(f"{prob.name}: the start ({origin})"):
             start_trajectory = prob.simulate(start_controls, records=False)
-        start = prob.breakdown(start_controls, start_trajectory)
+        start = (prob.breakdown(start_controls, start_trajectory) if held is None else
+                 held.breakdown(start_controls, start_trajectory))  # the whole shot's
     except SimulationError as err:
         raise SimulationError(f"{prob.name}: the simulation fails at the starting controls "
                               f"({origin}): {err}", err.step) from None
@@ -118,8 +122,12 @@ def _solve(spec: SolveRun, caught, done) -> int:
             "overrides": spec.overrides, "method": spec.settings.method,
             "gradient": spec.settings.gradient.name, **input_record(prob)}
     done.started = True
-    result = _search(spec, u0, Checkpoint(out / CHECKPOINT, **meta), resumed=resumed,
-                     deadline=deadline, start_run=start_trajectory)
+    checkpoint = (Checkpoint if held is None else held.checkpoint)(out / CHECKPOINT, **meta)
+    result = _search(spec, prob, u0, checkpoint, resumed=resumed, deadline=deadline,
+                     start_run=start_trajectory)
+    if held is not None:
+        result, prob = whole_result(held, result), spec.problem
+        start_trajectory = held.spliced(start_trajectory)
     signum = caught.signum if result.status == INTERRUPTED else None
     extra = {"problem_file": spec.problem_file, **input_record(prob),
              **({"resumed_from": {k: v for k, v in resumed.items() if k != "meta"}}
@@ -157,14 +165,46 @@ def _warn_inside(prob, physical) -> None:
               f"that the cloth starts outside it", file=sys.stderr)
 
 
-def _search(spec: SolveRun, u0, checkpoint, resumed: dict | None = None, *, deadline=None,
-            start_run=None):
-    """The search ``spec`` asks for from ``u0`` (whose run is ``start_run``) until the
-    run's ``deadline``, its settings passed whole; a resumed one goes on from its
-    checkpoint's metadata (the problem's own mesh, the rounds' round and multipliers)."""
+def _start_of(spec: SolveRun, held) -> tuple:
+    """``(problem, u0, resumed)``: the problem searched (the frames after a ``held`` one),
+    the controls it starts from (None: its own start) and where they came from."""
+    if held is not None:
+        return held.problem, held.u0, held.record
+    u0, resumed = resume_controls(spec) if spec.resume else (spec.u0, {})
+    return spec.problem, u0, resumed
+
+
+def _held(spec: SolveRun):
+    """The shot ``spec`` re-solves from a frame (:func:`.from_frame.held_start`), said in a
+    line, or None for a whole-shot solve."""
+    if spec.from_frame is None:
+        return None
+    if not spec.resume:
+        raise ValueError(f"--from-frame {spec.from_frame} keeps a run's motion up to that "
+                         "frame: give the run with --resume RUN")
+    coarse = [flag for flag, asked in (("--continuation", spec.settings.continuation),
+                                       ("--resolution", spec.settings.resolutions),
+                                       ("--homotopy", spec.settings.homotopy)) if asked]
+    if coarse:
+        raise ValueError(f"--from-frame solves the frames after {spec.from_frame} at the "
+                         f"problem's own dt and mesh, and does not combine with "
+                         f"{' or '.join(coarse)}: drop it")
+    held = held_start(spec.problem, spec.resume, spec.from_frame)
+    print(f"{spec.problem.name}: frames 0..{held.frame} kept from {held.record['path']}; "
+          f"frames {held.frame + 1}..{spec.problem.steps} solved again, from "
+          f"{held.record['start']}")
+    return held
+
+
+def _search(spec: SolveRun, prob, u0, checkpoint, resumed: dict | None = None, *,
+            deadline=None, start_run=None):
+    """The search ``spec`` asks for on ``prob`` (its problem, or the frames after a held
+    one) from ``u0`` (whose run is ``start_run``) until the run's ``deadline``, its settings
+    passed whole; a resumed one goes on from its checkpoint's metadata (the problem's own
+    mesh, the rounds' round and multipliers)."""
     from ..optimize.search import solve
 
-    return solve(spec.problem, spec.settings, u0=u0, quiet=spec.quiet, checkpoint=checkpoint,
+    return solve(prob, spec.settings, u0=u0, quiet=spec.quiet, checkpoint=checkpoint,
                  resume=resumed.get("meta") if resumed else None, deadline=deadline,
                  start_run=start_run)
 

@@ -2,10 +2,12 @@
 option that gave it (what ``problems/mesh_keyframes.py`` builds from its overrides).
 
 The option names in messages are the problem file's: ``cloth``, ``keyframes``, ``pins``,
-``pin_group``, ``pin_box``, ``steps``, ``spheres``, ``bodies``.
+``pin_group``, ``pin_box``, ``pin_motion``, ``pin_body``, ``steps``, ``spheres``,
+``bodies``.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -15,13 +17,14 @@ from .. import progress
 from ..loading import OverrideError
 from ..objectives import MeshKeyframe
 from ..meshes import Mesh, MeshError, PinBox, pin_indices, read_mesh
-from ..models import ClothModel, ClothParams
+from ..models import Attachment, ClothModel, ClothParams
 from ..models.contact.colliders import Plane, Sphere
 from ..objectives import Smoothness, StrainLimit
 from ..views import ClothView
 from .body_meshes import read_body
 from .cape_tracking import tracking_forces
 from .cloths import cloth_problem
+from .pin_paths import RiddenPath, sampled_pins, start_gap_note
 from ..objectives.paths import keyframe_path
 
 PROBLEM = "mesh_keyframes"
@@ -149,6 +152,56 @@ def bodies_of(files, dt: float) -> list:
     return out
 
 
+def pin_body_of(value, bodies: list):
+    """The body of ``bodies`` (the ``bodies`` option's, in its order) that ``pin_body``
+    names: its index from 0, or its file's name without the extension."""
+    stems = [Path(b.source).stem if getattr(b, "source", None) else "" for b in bodies]
+    if not bodies:
+        raise refuse("pin_body", "names a body of the bodies option, which gives none: add "
+                                 "bodies=FILE (the body the pins ride on)")
+    text = str(value).strip()
+    if text.lstrip("-").isdigit():
+        k = int(text)
+        if not 0 <= k < len(bodies):
+            raise refuse("pin_body", f"{k} is no body: bodies gives {len(bodies)}, indices "
+                                     f"0..{len(bodies) - 1} ({', '.join(stems)})")
+        return bodies[k]
+    if stems.count(text) != 1:
+        found = "two bodies have that name: give its index" if text in stems else "no body"
+        raise refuse("pin_body", f"{text!r}: {found}; give an index 0..{len(bodies) - 1} or "
+                                 f"one of {', '.join(stems)}")
+    return bodies[stems.index(text)]
+
+
+def moving_pins(cloth: Mesh, pinned, steps: int, dt: float, pin_motion=None,
+                pin_body=None) -> Attachment | None:
+    """The :class:`~..models.Attachment` that leads the ``pinned`` vertices along
+    ``pin_motion`` (a time-sampled mesh file of the cloth: :func:`~.pin_paths.sampled_pins`)
+    or on ``pin_body`` (a MeshBody: :class:`~.pin_paths.RiddenPath`); None when neither is
+    given (the pins stay put).  Its notes (frames cut, a start away from the cloth's file)
+    are printed."""
+    if pin_motion is not None and pin_body is not None:
+        raise refuse("pin_body", "and pin_motion both move the pins: give one (pin_motion: "
+                                 "the pins follow a file; pin_body: they ride on a body)")
+    option = "pin_motion" if pin_motion is not None else "pin_body"
+    if pin_motion is None and pin_body is None:
+        return None
+    if len(pinned) == 0:
+        raise refuse(option, "moves the pinned vertices, and none is pinned: name them with "
+                             "pins, pin_group or pin_box")
+    notes = []
+    if pin_motion is not None:
+        try:
+            path, notes = sampled_pins(pin_motion, cloth.n, pinned, steps, dt)
+        except (MeshError, ImportError, ValueError) as err:
+            raise refuse("pin_motion", str(err)) from None
+    else:
+        path = RiddenPath(pin_body, cloth.vertices[pinned])
+    for note in notes + start_gap_note(path(0.0), cloth.vertices, pinned, option):
+        progress.note(note)
+    return Attachment(pinned, path)
+
+
 def wrinkled(model, depth: float) -> np.ndarray:
     """The cloth's rest positions moved ``depth`` metres along each vertex's normal times
     ``sin(pi a) sin(pi b)``, (a, b) the vertex's place in the mesh's two widest directions
@@ -171,7 +224,7 @@ def wrinkled(model, depth: float) -> np.ndarray:
     span = centred @ axes.T
     ab = (span - span.min(0)) / np.maximum(np.ptp(span, axis=0), 1e-300)
     bump = depth * np.sin(np.pi * ab[:, 0]) * np.sin(np.pi * ab[:, 1])
-    bump[model.pinned] = 0.0
+    bump[~model.free_mask()[::3]] = 0.0
     return x + bump[:, None] * at_vertex
 
 
@@ -198,6 +251,18 @@ def tracking_guess(prob, land: bool = True, aim: int = 0) -> np.ndarray:
     return _tracked(prob, terms, aims)
 
 
+@dataclass(frozen=True)
+class TrackingGuess:
+    """:func:`tracking_guess` as a problem's guess rule: made when the search first asks,
+    for whichever problem asks (the whole shot, or the frames after a kept one)."""
+
+    land: bool = True
+    aim: int = 0
+
+    def __call__(self, prob) -> np.ndarray:
+        return tracking_guess(prob, land=self.land, aim=self.aim)
+
+
 def _tracked(prob, terms, aims) -> np.ndarray:
     """The PD controller's forces along the path through ``aims``, as ``prob``'s controls."""
     forces = tracking_forces(prob, keyframe_path(prob.x0, terms, prob.steps, aims))
@@ -206,17 +271,22 @@ def _tracked(prob, terms, aims) -> np.ndarray:
 
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
-                          smoothing=None, wrinkle=0.0, guess="aim", rest_band=0.0):
+                          smoothing=None, wrinkle=0.0, guess="aim", rest_band=0.0,
+                          pin_motion=None, pin_body=None):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
     strain limit and a small control cost; with ``guess`` "land", "track" or "aim"
     (per-step forces) the search starts from :func:`tracking_guess` with its landings,
     without, or aimed by :data:`AIM_RUNS` learning runs, with "none" from zero forces;
-    ``rest_band`` the springs' rest band in the step (:class:`~..models.ClothParams`)."""
-    model = ClothModel.from_file(cloth, pinned=pinned, mass=mass, colliders=colliders,
-                                 params=ClothParams(rest_band=rest_band))
+    ``rest_band`` the springs' rest band in the step (:class:`~..models.ClothParams`);
+    ``pin_motion`` or ``pin_body``: the pinned vertices move (:func:`moving_pins`), start
+    where their path starts and at the velocity of its first step."""
     steps = max(f for f, _ in keyframes) if steps is None else steps
+    moving = moving_pins(cloth, pinned, steps, dt, pin_motion, pin_body)
+    model = ClothModel.from_file(cloth, pinned=pinned if moving is None else (), mass=mass,
+                                 colliders=colliders, params=ClothParams(rest_band=rest_band),
+                                 attachments=() if moving is None else (moving,))
     terms = targets_of(model, keyframes, steps, weight=weight, align=align, cloth=cloth)
     free = np.flatnonzero(model.free_mask()[::3])
     if free.size == 0:
@@ -224,12 +294,17 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     controls = (StepForces(agents=free, smoothing=smoothing) if control == "forces"
                 else InitialVelocity(agents=free, smoothing=smoothing))
     objective = sum(terms, Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
-    prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective,
-                         x0=wrinkled(model, wrinkle), name=PROBLEM, controls=controls,
+    x0, v0 = wrinkled(model, wrinkle), np.zeros((model.n, 3))
+    if moving is not None:
+        x0[pinned] = moving.positions(0.0)
+        v0[pinned] = (moving.positions(dt) - x0[pinned]) / dt
+    prob = cloth_problem(model=model, steps=steps, dt=dt, objective=objective, x0=x0, v0=v0,
+                         name=PROBLEM, controls=controls,
                          view=ClothView(camera=(15, -30)),
                          inputs=[m.source for m in (cloth, *(t.mesh for t in terms), *colliders)
-                                 if getattr(m, "source", None) is not None])
+                                 if getattr(m, "source", None) is not None]
+                         + ([] if pin_motion is None else [pin_motion]))
     if guess == "none" or control != "forces":
         return prob
-    return prob.with_guess(tracking_guess(prob, land=guess == "land",
-                                          aim=AIM_RUNS if guess == "aim" else 0))
+    return prob.with_guess(TrackingGuess(land=guess == "land",
+                                         aim=AIM_RUNS if guess == "aim" else 0))

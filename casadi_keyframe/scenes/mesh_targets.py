@@ -55,3 +55,34 @@ def write_sheet_and_targets(folder, rows: int = 30, cols: int = 30, size: float 
     return {name: write_obj(folder / f"{name}.obj", x, quads,
                             comment=f"{name}: {rows} x {cols} hanging sheet, metres, z up")
             for name, x in shapes.items()}
+
+
+def carried(vertices, frames: int, shift=(0.5, 0.0, 0.0)) -> np.ndarray:
+    """``(frames + 1, v, 3)``: ``vertices`` carried by ``shift`` (m) over ``frames`` frames
+    along a smoothstep (at rest at both ends): the time-sampled mesh a ``pin_motion`` reads."""
+    s = np.linspace(0.0, 1.0, frames + 1)
+    ramp = s * s * (3 - 2 * s)
+    return np.asarray(vertices, float)[None] + ramp[:, None, None] * np.asarray(shift, float)
+
+
+def write_carried_sheet(folder, rows: int = 12, cols: int = 12, frames: int = 60,
+                        shift=(0.5, 0.0, 0.0), dt: float = 1 / 60) -> dict:
+    """A hanging sheet (``sheet.obj``), its motion carried by ``shift`` over ``frames``
+    frames (``carried.pc2`` beside ``carried_rest.obj``, one sample per ``dt``: what
+    ``pin_motion`` takes) and the wave carried as far (``wave_carried.obj``, whose top row is
+    where the motion leaves the sheet's); returns their paths by name."""
+    from ..export.pc2 import write_pc2
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    vertices, quads = hanging_sheet(rows, cols)
+    motion = carried(vertices, frames, shift)
+    note = f"{rows} x {cols} hanging sheet, metres, z up"
+    out = {"sheet": write_obj(folder / "sheet.obj", vertices, quads, comment=f"sheet: {note}"),
+           "rest": write_obj(folder / "carried_rest.obj", vertices, quads,
+                             comment=f"rest mesh for carried.pc2 ({1 / dt:.6g} frames per "
+                                     "second)"),
+           "wave": write_obj(folder / "wave_carried.obj", wave(vertices) + motion[-1] - vertices,
+                             quads, comment=f"the wave carried by {tuple(shift)} m: {note}")}
+    out["motion"] = write_pc2(folder / "carried.pc2", motion)
+    return out

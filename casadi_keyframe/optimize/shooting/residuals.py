@@ -16,7 +16,7 @@ import numpy as np
 
 from ...simulate import tangent
 from ..residual.linearization import Linearization, TermResiduals
-from .segments import Shifted
+from ...integrators.shifted import Shifted
 from .workers import Serial
 
 

@@ -3,10 +3,11 @@ shooting (:mod:`.form`) evaluates, in this process or in workers (:mod:`.workers
 
 A segment runs the library's own steps through the public loops
 (:func:`~casadi_keyframe.simulate.simulate` and :func:`~casadi_keyframe.simulate.backward`)
-with the step numbers shifted to where it starts (:class:`Shifted`), so forces, colliders
-and attachments see the right time; its forward pass keeps the step records (and the
-factorisations the integrator keeps in them) for its backward pass, which reuses them, so
-one evaluation costs one forward and one backward sweep per segment.
+with the step numbers shifted to where it starts
+(:class:`~...integrators.shifted.Shifted`), so forces, colliders and attachments see the
+right time; its forward pass keeps the step records (and the factorisations the integrator
+keeps in them) for its backward pass, which reuses them, so one evaluation costs one
+forward and one backward sweep per segment.
 
 A step may carry decisions to the next beyond the state (held contacts that pulled are
 released, springs taken taut stay taut: the integrator's ``carry``).  A segment starts
@@ -19,6 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from ...simulate import backward, simulate
+from ...integrators.shifted import Shifted
 from ...state import State
 
 
@@ -33,34 +35,6 @@ def boundaries(steps: int, segments: int) -> list[tuple[int, int]]:
                          f"most {steps}")
     edges = np.linspace(0, steps, segments + 1).round().astype(int)
     return [(int(a), int(b)) for a, b in zip(edges[:-1], edges[1:])]
-
-
-class Shifted:
-    """An integrator whose step ``n`` is the wrapped one's step ``first + n``: a segment
-    that starts at frame ``first`` simulated by the public loops, which count from 0."""
-
-    def __init__(self, integrator, first: int, carried=None):
-        self.integrator, self.first, self.carried = integrator, int(first), carried
-        self.name = integrator.name
-
-    def init(self, model):
-        work = self.integrator.init(model)
-        self.integrator.resume(work, self.carried)
-        return work
-
-    def release(self, trajectory) -> None:
-        self.integrator.release(trajectory)
-
-    def step(self, model, state, external, n, dt, work=None):
-        return self.integrator.step(model, state, external, n + self.first, dt, work)
-
-    def step_vjp(self, model, start, end, record, n, dt, cotangent, work=None):
-        return self.integrator.step_vjp(model, start, end, record, n + self.first, dt,
-                                        cotangent, work)
-
-    def step_jvp(self, model, start, end, record, n, dt, tangent, d_external, work=None):
-        return self.integrator.step_jvp(model, start, end, record, n + self.first, dt,
-                                        tangent, d_external, work)
 
 
 class SegmentRunner:

@@ -4,7 +4,7 @@ control acceleration per particle), iterations, CPU seconds, peak memory and how
 result's run is from the plan it replays.
 
     .venv/bin/python benchmarks/transcription.py [--maxiter 40] [--only aim,blend,rest,zero]
-        [--known 10]
+        [--known 10] [--solver sqp|ipopt]
 
 Starts: "aim" the aimed PD controller's motion (the problem's default guess), "blend" the
 positions blended between the keyframes' targets, "rest" the start state held still, "zero"
@@ -96,6 +96,8 @@ def main():
     p.add_argument("--maxiter", type=int, default=40)
     p.add_argument("--only", default=",".join(CASES))
     p.add_argument("--known", type=int, default=0)
+    p.add_argument("--solver", default="sqp", choices=("sqp", "ipopt"),
+                   help="the transcription's solver option")
     args = p.parse_args()
     print("| case | misses | stretch | rms / peak m/s^2 | iterations | CPU s | outcome |")
     print("|---|---|---|---|---|---|---|")
@@ -108,7 +110,7 @@ def main():
         print(row(f"{name}: the start", prob, u0, 0, 0), flush=True)
         t = time.process_time()
         result = ck.solve(prob, method="transcription", maxiter=args.maxiter,
-                          options={"start": start}, quiet=True)
+                          options={"start": start, "solver": args.solver}, quiet=True)
         seconds = time.process_time() - t
         print(row(f"{name}: transcription", prob, result.x, seconds, result.nit,
                   result.message), flush=True)
@@ -118,7 +120,8 @@ def main():
               flush=True)
         t = time.process_time()
         result = ck.solve(prob, method="transcription", maxiter=args.maxiter,
-                          options={"start": "rest"}, quiet=True)
+                          options={"start": "rest", "solver": args.solver},
+                          quiet=True)
         seconds = time.process_time() - t
         print(row(f"known {seed}: from rest ({searched(prob, result.x)})", prob, result.x,
                   seconds, result.nit, result.message), flush=True)

@@ -26,6 +26,8 @@ Bookkeeping:
 Wings:
 
 * :mod:`.methods`: :data:`METHODS`, one file per method, and the contract a method keeps;
+* :mod:`.ipopt_callbacks`: the Callbacks that feed IPOPT numbers (the controls' and the
+  positions' searches);
 * :mod:`.residual`: the residual family, one linearization, descents and step-size rules;
 * :mod:`.shooting`: multiple shooting, a stage of :func:`solve` (``shooting=K``);
 * :mod:`.finish`: the last stage, with the keyframes held (:func:`lower_effort`,

@@ -26,6 +26,7 @@ import numpy as np
 from ...interrupts import Interrupted, OutOfTime, catching
 from ..goal import GoalReached
 from ..outcome import ipopt_outcome
+from ..ipopt_callbacks import IterationHook, NumericFunction
 from .base import LibraryOptions
 
 
@@ -97,110 +98,19 @@ class IpoptOptions(LibraryOptions):
         return check_options(options)
 
 
-class _Function(ca.Callback):
-    """A function of the ``n`` unknowns for IPOPT: ``value(x)`` shaped ``out``, with the
-    Callback :class:`_Jacobian` of ``jacobian(x)`` on the sparsity ``pattern``.  The
-    objective is one (its gradient from the chosen route), the equality constraints
-    another (:func:`search`)."""
-
-    def __init__(self, name, n, out, value, pattern, jacobian):
-        ca.Callback.__init__(self)
-        self.n, self.out, self.value = n, out, value
-        self.pattern, self.jacobian = pattern, jacobian
-        self.construct(name, {"enable_fd": False})
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, 1)
-
-    def get_sparsity_out(self, i):
-        return self.out
-
-    def eval(self, arg):
-        return [self.value(np.asarray(arg[0]).ravel())]
-
-    def has_jacobian(self):
-        return True
-
-    def get_jacobian(self, name, inames, onames, opts):
-        self._jac = _Jacobian(name, self.n, self.out, self.pattern, self.jacobian)
-        return self._jac  # IPOPT needs it kept alive
-
-
-class _Jacobian(ca.Callback):
-    def __init__(self, name, n, out, pattern, jacobian):
-        ca.Callback.__init__(self)
-        self.n, self.out, self.pattern, self.jacobian = n, out, pattern, jacobian
-        self.construct(name, {"enable_fd": False})
-
-    def get_n_in(self):
-        return 2
-
-    def get_sparsity_in(self, i):
-        return ca.Sparsity.dense(self.n, 1) if i == 0 else self.out
-
-    def get_sparsity_out(self, i):
-        return self.pattern
-
-    def eval(self, arg):
-        return [self.jacobian(np.asarray(arg[0]).ravel())]
-
-
-def _objective(ev, n) -> _Function:
+def _objective(ev, n) -> NumericFunction:
     """phi(x) from the evaluator ``ev``, its Jacobian ``ev``'s gradient."""
-    return _Function("phi", n, ca.Sparsity.dense(1, 1), lambda x: ev(x)[0],
+    return NumericFunction("phi", n, ca.Sparsity.dense(1, 1), lambda x: ev(x)[0],
                      ca.Sparsity.dense(1, n), lambda x: ev(x)[1].reshape(1, -1))
 
 
-def _constraints(con, n) -> _Function:
+def _constraints(con, n) -> NumericFunction:
     """``con.values(x)`` (``con.size`` of them, held at 0), its Jacobian ``con.jacobian(x)``
     (a scipy sparse matrix) read on ``con.pattern``."""
     rows, cols = con.pattern.get_triplet()
-    return _Function("g", n, ca.Sparsity.dense(con.size, 1), con.values, con.pattern,
+    return NumericFunction("g", n, ca.Sparsity.dense(con.size, 1), con.values, con.pattern,
                      lambda x: ca.DM(con.pattern,
                                      np.asarray(con.jacobian(x)[rows, cols]).ravel()))
-
-
-class IterationHook(ca.Callback):
-    """IPOPT's per-iteration hook for ``n`` unknowns and ``m`` constraints: calls
-    ``on_iteration(x)`` with the iterate after each iteration and returns 1, which stops
-    IPOPT, on Ctrl-C or when the goal is met."""
-
-    def __init__(self, n, on_iteration, *, m: int = 0):
-        ca.Callback.__init__(self)
-        self.n, self.m, self.on_iteration = n, m, on_iteration
-        self.count, self.interrupted, self.timed_out = 0, None, False
-        self.reached = None  # the GoalReached that stopped it
-        self.construct("iteration", {})
-
-    def get_n_in(self):
-        return ca.nlpsol_n_out()
-
-    def get_n_out(self):
-        return 1
-
-    def get_name_in(self, i):
-        return ca.nlpsol_out(i)
-
-    def get_sparsity_in(self, i):
-        size = {"x": self.n, "lam_x": self.n, "f": 1, "g": self.m, "lam_g": self.m,
-                "lam_p": 0}[ca.nlpsol_out(i)]
-        return ca.Sparsity.dense(size, 1) if size else ca.Sparsity(0, 0)
-
-    def eval(self, arg):
-        try:
-            self.count += 1
-            if self.count > 1:  # IPOPT reports iteration 0, the start, first
-                self.on_iteration(np.asarray(arg[0]).ravel())
-        except KeyboardInterrupt as err:
-            self.interrupted = getattr(err, "signum", signal.SIGINT)
-            return [1]
-        except OutOfTime:
-            self.timed_out = True
-            return [1]
-        except GoalReached as reached:  # IPOPT stops on 1; the search hears of it below
-            self.reached = reached
-            return [1]
-        return [0]
 
 
 def ipopt_options(maxiter, tol, options, deadline) -> dict:

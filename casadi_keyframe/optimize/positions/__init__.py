@@ -8,6 +8,9 @@ constraints.
 * :mod:`.strain`: the problem's strain limit as a penalty in the positions;
 * :mod:`.sqp`: the search, a sequential quadratic programme on the effort's Gauss-Newton
   matrix, and :mod:`.restore`: its correction for the stiff springs;
+* :mod:`.interior`: the same problem by IPOPT (``solver=ipopt``), with :mod:`.stretch` (the
+  physical stretch limit as constraints) and :mod:`.curvature` (the effort's exact
+  Hessian, ``hessian=exact``);
 * :mod:`.replay`: controls that move the simulation along planned positions;
 * :mod:`.method`: the search as the method ``"transcription"`` of ``METHODS``.
 """

@@ -18,17 +18,22 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...interrupts import check
+from ...interrupts import OutOfTime, check
 from ...objectives.paths import keyframe_path
+from ...state import SimulationError
 from ..finish.constraint import control_hessian
 from ..options import TypedOptions, real
-from ..outcome import CONVERGED, FAILED, LIMIT
+from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
 from .goal import MARGIN, goal_constraints
+from .interior import PositionNLP, search
 from .replay import replay_controls
 from .sqp import PositionSQP
-from .transcription import Transcription
+from .stretch import StretchLimit
+from .transcription import Transcription, TranscriptionError
 
 STARTS = ("controls", "rest", "blend")
+SOLVERS = ("sqp", "ipopt")
+HESSIANS = ("gauss-newton", "exact")
 
 
 @dataclass(frozen=True)
@@ -36,17 +41,25 @@ class TranscriptionOptions(TypedOptions):
     """``start``: where the positions start (module docstring); ``margin``: the share of
     each keyframe's tolerance held; ``settle``: converged once the goal holds and the
     control cost has changed by less than this share over the last kept steps (the search's
-    ``tol`` is the gradient methods' and far finer than a trust region settles to)."""
+    ``tol`` is the gradient methods' and far finer than a trust region settles to);
+    ``solver``: "sqp" (:mod:`.sqp`) or "ipopt" (:mod:`.interior`: the same effort, the
+    physical stretch limit held at every spring and frame as well; ``settle`` is then
+    IPOPT's ``tol``); ``hessian``: IPOPT's Hessian of the effort, its Gauss-Newton matrix
+    or the exact one (:mod:`.curvature`)."""
 
     label: ClassVar[str] = "the transcription"
     CHECKS: ClassVar[dict] = {
         "start": (f"one of {', '.join(STARTS)}", lambda v: v in STARTS),
         "margin": ("a number in (0, 1]", lambda v: real(v) and 0 < v <= 1),
-        "settle": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1)}
+        "settle": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1),
+        "solver": (f"one of {', '.join(SOLVERS)}", lambda v: v in SOLVERS),
+        "hessian": (f"one of {', '.join(HESSIANS)}", lambda v: v in HESSIANS)}
 
     start: str = "controls"
     margin: float = MARGIN
     settle: float = 1e-3
+    solver: str = "sqp"
+    hessian: str = "gauss-newton"
 
 
 def start_positions(problem, start: str, u0) -> np.ndarray:
@@ -64,9 +77,11 @@ def start_positions(problem, start: str, u0) -> np.ndarray:
 def run(problem, ev, u0, call):
     """One search in positions (module docstring); ``(status, message)``."""
     options = call.options
+    if options.hessian != "gauss-newton" and options.solver != "ipopt":
+        raise TranscriptionError(f"hessian={options.hessian} is IPOPT's: give solver=ipopt "
+                                 "too (the SQP's matrix is the Gauss-Newton one)")
     tr = Transcription(problem)
     constraints = goal_constraints(tr, options.margin)
-    solver = PositionSQP(tr, constraints, control_hessian(problem))
     start = options.start
     given = u0 is not None and not np.array_equal(np.asarray(u0), problem.initial_controls())
     if given:  # controls handed in (--resume, u0=) are where this search goes on from
@@ -74,12 +89,19 @@ def run(problem, ev, u0, call):
     z0 = tr.unknowns(start_positions(problem, start, u0))
     replayed = []
 
+    def offer(z):
+        replayed.append(replay_controls(problem, tr.frames(z), check))
+        ev.offer(replayed[-1].u)
+
+    if options.solver == "ipopt":
+        return _interior(problem, tr, constraints, z0, call, offer, replayed)
+
     def kept(report, point):
         if report.kept:
-            replayed.append(replay_controls(problem, tr.frames(point.z), check))
-            ev.offer(replayed[-1].u)
+            offer(point.z)
         call.on_iteration()
 
+    solver = PositionSQP(tr, constraints, control_hessian(problem))
     outcome, _ = solver.run(z0, maxiter=call.maxiter, tol=options.settle, on_iteration=kept,
                             should_stop=lambda: (check() or False) or call.deadline.passed())
     said = f"{outcome.iterations} iterations in positions" + (
@@ -95,3 +117,43 @@ def run(problem, ev, u0, call):
     if outcome.reason == "stalled":
         return FAILED, f"no step lowers the merit any further ({said})"
     return LIMIT, f"maxiter reached ({said})"
+
+
+def _interior(problem, tr, constraints, z0, call, offer, replayed):
+    """The search by IPOPT (:mod:`.interior`); ``(status, message)``."""
+    if problem.limits is None or getattr(problem.model, "springs", None) is None:
+        raise TranscriptionError(
+            f"{problem.name}: solver=ipopt holds a cloth's springs within the physical "
+            "stretch limit, and this problem has none: use solver=sqp")
+    nlp = PositionNLP(tr, constraints, control_hessian(problem),
+                      StretchLimit(tr, problem.limits.stretch),
+                      exact=call.options.hessian == "exact")
+
+    offered = []
+
+    def each(z):
+        try:  # an interior iterate may be a plan the simulation refuses (a torn cloth)
+            offer(z)
+            offered.append(z)
+        except SimulationError:
+            pass
+        check()
+        if call.deadline.passed():
+            raise OutOfTime(call.deadline)
+        call.on_iteration()
+
+    status, z, iterations = search(nlp, z0, maxiter=call.maxiter, tol=call.options.settle,
+                                   deadline=call.deadline, on_iteration=each)
+    if not offered or not np.array_equal(offered[-1], z):
+        try:
+            offer(z)
+            offered.append(z)
+        except SimulationError as err:
+            replayed.append(None)
+            refused = str(err)
+    said = f"{iterations} IPOPT iterations in positions; " + (
+        f"its last point replayed within {1e3 * replayed[-1].deviation:.1e} mm (frame "
+        f"{replayed[-1].frame})" if replayed[-1] is not None else
+        f"its last point is a plan the simulation refuses ({refused})")
+    result, message = ipopt_outcome(status, maxiter=call.maxiter)
+    return result, f"{message} ({said})"

@@ -89,7 +89,7 @@ class Transcription:
         self.x_before = problem.x0 - self.dt * problem.v0  # so that v_0 = (x_0 - this) / dt
         self.scene = np.stack([model.scene_parameters(k * self.dt) for k in range(self.N)],
                               axis=1) if model.scene_parameters(0.0).size else np.zeros((0, self.N))
-        self._step = Buffered(_step_function(model, self.dt).map(self.N))
+        self._step = Buffered(inverse_step_function(model, self.dt).map(self.N))
         self.times = np.arange(self.N) * self.dt
         self._jacobian = None  # its pattern, made at the first call
 
@@ -253,7 +253,7 @@ class Buffered:
         return [r.copy() for r in self.out]
 
 
-def _step_function(model, dt: float) -> ca.Function:
+def inverse_step_function(model, dt: float) -> ca.Function:
     """The inverse step ``(X_{n-1}, X_n, X_{n+1}, S) -> e_n`` (each ``3 x n``; S the scene
     at t_n)."""
     n = model.n

@@ -44,7 +44,7 @@ from .strain import StrainPenalty
 
 ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
 MU_START, MU_MIN, MU_MAX = 1e3, 1e-10, 1e12  # damping, in the metric D
-THETA_START, THETA_MIN = 1.0, 1e-3  # the share of the goal's violation a step removes
+THETA_START, THETA_MIN, THETA_MAX = 1.0, 1e-3, 1.0  # the share of the goal's violation a step removes
 SETTLED = 3  # kept steps over which the effort must have settled
 POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themselves
 
@@ -95,39 +95,53 @@ class Outcome:
 
 
 class Factor:
-    """Sparse Cholesky (CHOLMOD through cvxopt, its analysis kept while the pattern holds;
-    SuperLU without cvxopt) of a symmetric positive definite matrix."""
+    """Sparse Cholesky of a symmetric positive definite matrix given whole (CHOLMOD through
+    cvxopt, its analysis and the place of its lower triangle kept while the pattern holds;
+    SuperLU without cvxopt).  The ordering is the unknowns' own, frame after frame: the
+    step's matrix is banded in time, and its factor is smaller in that order than in
+    CHOLMOD's fill-reducing one (``benchmarks/transcription.py --orderings`` measures both)."""
 
-    def __init__(self):
+    def __init__(self, natural: bool = True):
+        self.natural = natural
         self._pattern = None
         self._symbolic = None
         self._matrix = None
+        self._lower = None  # where the lower triangle's entries sit in the matrix's data
 
-    def __call__(self, B: sp.csc_matrix):
-        B = sp.csc_matrix(B)
-        B.sort_indices()
+    def __call__(self, B):
+        B = sp.csr_matrix(B)
+        B.sum_duplicates()  # canonical: sorted, no duplicates (free when it already is)
         if cholmod is None:
-            lu = splu(B)
+            lu = splu(B.tocsc())
             return lambda rhs: lu.solve(np.asarray(rhs, float))
-        lower = sp.tril(B, format="csc")
-        lower.sort_indices()
-        key = (lower.indptr.tobytes(), lower.indices.tobytes())
+        key = (B.indptr.tobytes(), B.indices.tobytes())
         if key != self._pattern:
-            col = np.repeat(np.arange(lower.shape[1]), np.diff(lower.indptr))
-            self._matrix = spmatrix(matrix(lower.data), matrix(lower.indices.astype(np.int64)),
-                                    matrix(col.astype(np.int64)), lower.shape)
-            self._symbolic, self._pattern = cholmod.symbolic(self._matrix, uplo="L"), key
-        else:
-            self._matrix.V = matrix(lower.data)
+            self._analyse(B)
+            self._pattern = key
+        self._matrix.V = matrix(B.data[self._lower])
         cholmod.numeric(self._matrix, self._symbolic)
-        factor = self._symbolic
+        factor, n = self._symbolic, B.shape[0]
 
         def solve(rhs):
-            b = matrix(np.asarray(rhs, float).reshape(B.shape[0], -1))
+            b = matrix(np.asarray(rhs, float).reshape(n, -1))
             cholmod.solve(factor, b)
             return np.asarray(b).reshape(np.shape(rhs))
 
         return solve
+
+    def _analyse(self, B) -> None:
+        """The analysis of ``B``'s pattern: a symmetric matrix's upper triangle by rows is
+        its lower triangle by columns, loaded in CHOLMOD's order (read from a probe)."""
+        n = B.shape[0]
+        row = np.repeat(np.arange(n), np.diff(B.indptr))
+        upper = np.flatnonzero(B.indices >= row)
+        probe = spmatrix(matrix(np.arange(upper.size, dtype=float)),
+                         matrix(B.indices[upper].astype(np.int64)),
+                         matrix(row[upper].astype(np.int64)), (n, n))
+        self._lower = upper[np.asarray(probe.V, dtype=np.intp).ravel()]
+        self._matrix = probe
+        order = {"p": matrix(np.arange(n, dtype=np.int64))} if self.natural else {}
+        self._symbolic = cholmod.symbolic(probe, uplo="L", **order)
 
 
 class PositionSQP:
@@ -191,7 +205,7 @@ class PositionSQP:
             if kept:
                 x, lam = self.point(trial.z), lam_new
                 if ratio > 0.5:
-                    mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, 1.0)
+                    mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, THETA_MAX)
             else:
                 mu = min((16.0 if ratio < -1.0 else 4.0) * mu + MU_MIN, MU_MAX)
                 if trial.violation() > 0.5 * (x.violation() + np.maximum(self._linear, 0).sum()):
@@ -216,14 +230,18 @@ class PositionSQP:
     def _step(self, x: Point, lam, mu, theta):
         """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
         violated constraints asked to fall by the share ``theta``."""
-        JQ = self.Q @ x.J
-        H = (x.J.T @ JQ + x.Jr.T @ x.Jr).tocsc()
+        G = x.J.T @ (self.Q @ x.J)  # the one product of the state's size
+        small = x.Jr.T @ x.Jr
         for l, C in zip(lam, self.C):
             if l > 0:
-                H = H + l * C
+                small = small + l * C
+
+        def H(v):  # the model's matrix times v
+            return G @ v + small @ v
+
         while True:  # a matrix that does not factor (round-off): more damping
             try:
-                solve = self.factor((H + mu * self.metric + self._pattern(x)).tocsc())
+                solve = self.factor(G + (self._pattern(x) + (small + mu * self.metric)))
                 break
             except ArithmeticError:
                 mu = max(4.0 * mu, 1e-8)
@@ -238,7 +256,7 @@ class PositionSQP:
         self._solve, self._linear = solve, linear  # for the trial's correction
         self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
         sigma = self._penalty(A, x.gradient)
-        model = -(x.gradient @ step + 0.5 * step @ (H @ step))
+        model = -(x.gradient @ step + 0.5 * step @ H(step))
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
 

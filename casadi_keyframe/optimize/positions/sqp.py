@@ -99,7 +99,7 @@ class Factor:
     cvxopt, its analysis and the place of its lower triangle kept while the pattern holds;
     SuperLU without cvxopt).  The ordering is the unknowns' own, frame after frame: the
     step's matrix is banded in time, and its factor is smaller in that order than in
-    CHOLMOD's fill-reducing one (``benchmarks/transcription.py --orderings`` measures both)."""
+    CHOLMOD's fill-reducing one (``benchmarks/sqp_factor.py`` measures both)."""
 
     def __init__(self, natural: bool = True):
         self.natural = natural

@@ -19,9 +19,15 @@ springs (:mod:`.restore`) and, where it breaks a keyframe's bound beyond the lin
 (the misses are quadratic in the positions), by a second-order correction on the same
 factor; a plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a
 share of what the model predicts (``sigma`` at least twice the multipliers, the QP's and
-their least-squares estimate).  Then ``mu`` halves and ``theta`` doubles; else ``mu`` grows
+their least-squares estimate).  Then ``mu`` halves and ``theta`` doubles, up to
+:data:`THETA_MAX`; else ``mu`` grows
 (fourfold, sixteenfold when the merit rose) and ``theta`` halves if the goal's own model
-failed.  It ends when the constraints hold and the effort has changed by less than ``tol``
+failed.  ``theta`` never exceeds :data:`THETA_MAX` < 1, so the goal is approached over several
+steps, each trading it against the effort: a step that removes the whole violation at once
+commits the motion to the first way the linear model finds to meet the goal (from a sheet
+held still: held up against gravity all along and folded in the last frames), a local
+optimum of far more effort than the motions a gradual approach finds.  It ends when the constraints hold (to :data:`HELD` of their bounds) and the effort has
+changed by less than ``tol``
 (relative) over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or
 when no step is kept at the largest damping.
 """
@@ -44,8 +50,10 @@ from .strain import StrainPenalty
 
 ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
 MU_START, MU_MIN, MU_MAX = 1e3, 1e-10, 1e12  # damping, in the metric D
-THETA_START, THETA_MIN, THETA_MAX = 1.0, 1e-3, 1.0  # the share of the goal's violation a step removes
+THETA_MAX, THETA_MIN = 0.5, 1e-3  # the share of the goal's violation a step removes
 SETTLED = 3  # kept steps over which the effort must have settled
+HELD = 1e-3  # a constraint within this share of its bound beyond it counts as held: with
+# THETA_MAX < 1 a step asks for a share of a violation, which then shrinks but never ends
 POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themselves
 
 
@@ -151,6 +159,7 @@ class PositionSQP:
         self.tr, self.constraints = tr, constraints
         self.Q = sp.csr_matrix(Q)
         self.C = [c.hessian() for c in constraints]
+        self.held = HELD * np.array([abs(c.bound) for c in constraints])
         self.factor = Factor()
         self.evaluations = 0
         self.sigma = 0.0  # the merit's penalty weight, never lowered
@@ -178,7 +187,7 @@ class PositionSQP:
         ``should_stop()`` checked before each, True to end the search)."""
         x = self.point(z0)
         lam = np.zeros(len(self.constraints))
-        mu, theta, history, efforts = MU_START, THETA_START, [], [x.effort]
+        mu, theta, history, efforts = MU_START, THETA_MAX, [], [x.effort]
         reason, it = "maxiter", 0
         for it in range(1, maxiter + 1):
             if should_stop is not None and should_stop():
@@ -218,7 +227,7 @@ class PositionSQP:
                 on_iteration(report, x)
             if kept:
                 efforts.append(x.effort)
-            if (kept and x.violation() == 0 and len(efforts) > SETTLED
+            if (kept and np.all(x.c <= self.held) and len(efforts) > SETTLED
                     and np.ptp(efforts[-SETTLED - 1:]) <= tol * max(abs(x.effort), 1e-300)):
                 reason = "converged"
                 break

@@ -4,32 +4,34 @@ effort's Gauss-Newton matrix, in a trust region.
 At an iterate z, with the controls ``u(z)`` (:class:`~.transcription.Transcription`), their
 Jacobian ``J`` and the control terms' constant Hessian ``Q``, each step solves
 
-    minimise  g^T p + 1/2 p^T (J^T Q J + sum_k lambda_k C_k + mu D) p
+    minimise  g^T p + 1/2 p^T (J^T Q J + J_r^T J_r + sum_k lambda_k C_k + mu D) p
     subject to c_k + a_k^T p <= (1 - theta) c_k if c_k > 0, else 0   (the goal, :mod:`.goal`)
 
-(``g = J^T Q u``: the effort's gradient; ``C_k`` the constraints' constant Hessians and
+(``g = J^T Q u + s J_r^T r``: the effort's gradient, its strain penalty's part (residuals
+``r``, :mod:`.strain`) weighed by ``s = theta`` until the goal holds, then by 1; ``C_k`` the
+constraints' constant Hessians and
 ``lambda_k`` their last multipliers; ``D`` :func:`damping_metric`, weighed as the control
 cost weighs a force, so ``mu`` is a pure number): one sparse Cholesky factorisation, one
-solve per constraint and a tiny active-set problem for the multipliers.  ``mu`` and
-``theta`` (the share of a violated constraint one step removes) make a trust region: the
-linear model of the forces holds only for small moves where the cloth buckles or turns (a
-buckling sheet's positions move far for forces that change little to first order, the
-controls' sensitivity seen from the other side).  The trial is corrected for the stiff
-springs (:mod:`.restore`) and, where it breaks a keyframe's bound beyond the linear model
-(the misses are quadratic in the positions), by a second-order correction on the same
-factor; a plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a
-share of what the model predicts (``sigma`` at least twice the multipliers, the QP's and
-their least-squares estimate).  Then ``mu`` halves and ``theta`` doubles, up to
-:data:`THETA_MAX`; else ``mu`` grows
-(fourfold, sixteenfold when the merit rose) and ``theta`` halves if the goal's own model
-failed.  ``theta`` never exceeds :data:`THETA_MAX` < 1, so the goal is approached over several
-steps, each trading it against the effort: a step that removes the whole violation at once
-commits the motion to the first way the linear model finds to meet the goal (from a sheet
-held still: held up against gravity all along and folded in the last frames), a local
-optimum of far more effort than the motions a gradual approach finds.  It ends when the constraints hold (to :data:`HELD` of their bounds) and the effort has
-changed by less than ``tol``
-(relative) over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or
-when no step is kept at the largest damping.
+solve per constraint and a tiny active-set problem for the multipliers. ``mu`` and ``theta``
+(the share of a violated constraint one step removes) make a trust region: the linear model
+of the forces holds only for small moves where the cloth buckles or turns (a buckling
+sheet's positions move far for forces that change little to first order, the controls'
+sensitivity seen from the other side). The trial is corrected for the stiff springs
+(:mod:`.restore`) and, where it breaks a keyframe's bound beyond the linear model (the
+misses are quadratic in the positions), by a second-order correction on the same factor; a
+plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact
+l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a share of what the model predicts
+(``sigma`` at least twice the multipliers, the QP's and their least-squares estimate). Then
+``mu`` halves and ``theta`` doubles, up to :data:`THETA_MAX`; else ``mu`` grows (fourfold,
+sixteenfold when the merit rose) and ``theta`` halves if the goal's own model failed.
+``theta`` never exceeds :data:`THETA_MAX` < 1, so the goal is approached over several steps,
+each trading it against the effort: a step that removes the whole violation at once commits
+the motion to the first way the linear model finds to meet the goal (from a sheet held
+still: held up against gravity all along and folded in the last frames), a local optimum of
+far more effort than the motions a gradual approach finds. It ends when the constraints hold
+(to :data:`HELD` of their bounds) and the effort has changed by less than ``tol`` (relative)
+over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or when no
+step is kept at the largest damping.
 """
 from __future__ import annotations
 
@@ -69,6 +71,7 @@ class Point:
     c: np.ndarray
     J: object = None
     Jr: object = None  # the strain penalty's residuals' Jacobian
+    r: object = None  # the strain penalty's residuals
 
     def violation(self) -> float:
         return float(np.sum(np.maximum(self.c, 0.0)))
@@ -180,7 +183,7 @@ class PositionSQP:
         J = self.tr.control_jacobian(z) if jacobian else None
         gradient = None if J is None else J.T @ grad_u + Jr.T @ r
         c = np.array([k.value(z) for k in self.constraints])
-        return Point(z, u, effort, gradient, c, J, Jr)
+        return Point(z, u, effort, gradient, c, J, Jr, r)
 
     def run(self, z0, *, maxiter: int, tol: float, on_iteration=None, should_stop=None):
         """From ``z0``: the :class:`Outcome` (``on_iteration(Progress, point)`` after each,
@@ -256,7 +259,11 @@ class PositionSQP:
                 mu = max(4.0 * mu, 1e-8)
         self.mu_used = mu
         A = self._gradients(x.z)
-        p0 = -solve(x.gradient)
+        # the strain penalty's excess too is asked to fall by the share theta while the
+        # goal is not held (a zero-force start stretches the sheet far past the limit),
+        # then by its own gradient, whose steps end at the true optimum
+        share = 1.0 if np.all(x.c <= self.held) else theta
+        p0 = -solve(x.gradient - (1.0 - share) * (x.Jr.T @ x.r))
         W = solve(A)
         # c + a^T p <= c - theta c where violated (a share of it removed), <= 0 elsewhere
         aim = np.where(x.c > 0, theta * x.c, x.c)

@@ -242,18 +242,19 @@ class PositionSQP:
     def _step(self, x: Point, lam, mu, theta):
         """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
         violated constraints asked to fall by the share ``theta``."""
-        G = x.J.T @ (self.Q @ x.J)  # the one product of the state's size
-        small = x.Jr.T @ x.Jr
+        # every operand by rows (a mix converts the large ones at every operation)
+        G = x.J.T.tocsr() @ (self.Q @ x.J)  # the one product of the state's size
+        curvature = x.Jr.T.tocsr() @ x.Jr
         for l, C in zip(lam, self.C):
             if l > 0:
-                small = small + l * C
+                curvature = curvature + l * C
 
-        def H(v):  # the model's matrix times v
-            return G @ v + small @ v
+        def H(v):  # the model's matrix (without the damping) times v
+            return G @ v + curvature @ v
 
         while True:  # a matrix that does not factor (round-off): more damping
             try:
-                solve = self.factor(G + (self._pattern(x) + (small + mu * self.metric)))
+                solve = self.factor(G + (self._pattern(x) + (curvature + mu * self.metric)))
                 break
             except ArithmeticError:
                 mu = max(4.0 * mu, 1e-8)

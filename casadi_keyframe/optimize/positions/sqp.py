@@ -39,6 +39,7 @@ except ImportError:  # SuperLU instead (slower, same answer)
 from scipy.sparse.linalg import splu
 
 from ...state import SimulationError
+from .linear_solve import LinearChoice, iterative_system
 from .restore import LengthRestoration
 from .strain import StrainPenalty
 
@@ -133,8 +134,10 @@ class Factor:
 class PositionSQP:
     """The module docstring's search on a transcription ``tr`` under ``constraints``."""
 
-    def __init__(self, tr, constraints, Q: sp.spmatrix):
+    def __init__(self, tr, constraints, Q: sp.spmatrix, linear: LinearChoice | None = None):
         self.tr, self.constraints = tr, constraints
+        self.linear = linear or LinearChoice()
+        self.solves = None  # the last iteration's iterative solves (None: direct)
         self.Q = sp.csr_matrix(Q)
         self.C = [c.hessian() for c in constraints]
         self.factor = Factor()
@@ -144,7 +147,8 @@ class PositionSQP:
         self.strain = StrainPenalty(tr)
         self._fill = None
         self.mu_used = None
-        self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
+        self.weight = float(np.mean(Q.diagonal()))
+        self.metric = damping_metric(tr, self.weight)
 
     def point(self, z, jacobian: bool = True) -> Point:
         """The iterate at ``z`` (with the Jacobians when asked): its effort is the control
@@ -216,17 +220,7 @@ class PositionSQP:
     def _step(self, x: Point, lam, mu, theta):
         """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
         violated constraints asked to fall by the share ``theta``."""
-        JQ = self.Q @ x.J
-        H = (x.J.T @ JQ + x.Jr.T @ x.Jr).tocsc()
-        for l, C in zip(lam, self.C):
-            if l > 0:
-                H = H + l * C
-        while True:  # a matrix that does not factor (round-off): more damping
-            try:
-                solve = self.factor((H + mu * self.metric + self._pattern(x)).tocsc())
-                break
-            except ArithmeticError:
-                mu = max(4.0 * mu, 1e-8)
+        solve, curvature, mu = self._system(x, lam, mu)
         self.mu_used = mu
         A = self._gradients(x.z)
         p0 = -solve(x.gradient)
@@ -238,9 +232,30 @@ class PositionSQP:
         self._solve, self._linear = solve, linear  # for the trial's correction
         self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
         sigma = self._penalty(A, x.gradient)
-        model = -(x.gradient @ step + 0.5 * step @ (H @ step))
+        model = -(x.gradient @ step + 0.5 * step @ curvature(step))
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
+
+    def _system(self, x: Point, lam, mu):
+        """``(solve, curvature, mu)``: the step's matrix at ``x`` factored (or, for large
+        sheets, solved by conjugate gradients without forming it, :mod:`.linear_solve`), the
+        model's matrix (without the damping) times a vector, and the damping used (raised
+        while the matrix does not factor)."""
+        while True:  # a matrix that does not factor (round-off): more damping
+            try:
+                if self.linear.iterative(self.tr.size):
+                    system = iterative_system(self, x, lam, mu, self.linear)
+                    self.solves = system.solves
+                    return system.solve, system.curvature, mu
+                JQ = self.Q @ x.J
+                H = (x.J.T @ JQ + x.Jr.T @ x.Jr).tocsc()
+                for l, C in zip(lam, self.C):
+                    if l > 0:
+                        H = H + l * C
+                solve = self.factor((H + mu * self.metric + self._pattern(x)).tocsc())
+                return solve, (lambda p: H @ p), mu
+            except ArithmeticError:
+                mu = max(4.0 * mu, 1e-8)
 
     def _pattern(self, x: Point) -> sp.csr_matrix:
         """Every place the step's matrix can ever hold a value, each at a value far below

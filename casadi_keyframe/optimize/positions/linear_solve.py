@@ -3,18 +3,24 @@ r"""The SQP's step system solved without forming it, for large sheets (:mod:`.sq
 The step's matrix ``B = J^T Q J + Jr^T Jr + sum_k lambda_k C_k + mu D`` is applied as an
 operator (:class:`StepOperator`: ``J`` the control Jacobian the transcription assembles,
 one sparse matrix of a fixed pattern) and solved by preconditioned conjugate gradients
-(:func:`conjugate_gradients`, every right-hand side at once, each stopped on its relative
-residual), so no product of Jacobians is formed and the memory stays that of ``J``.
+(:func:`conjugate_gradients`, every right-hand side at once), so no product of Jacobians
+is formed and the memory stays that of ``J``.  A solve stops on its relative residual or,
+earlier, once the quadratic model has stopped falling (an inexact step in a trust region:
+every conjugate gradient iterate lowers the model, and the SQP predicts its decrease from
+the step it takes).
 
-The preconditioner (:class:`StepPreconditioner`) is the per-step matrix the library already
-factors: with every free component controlled, ``J`` (its rows on the free components) is
-square and block lower triangular in time, step n's block in frame n+1 being the
-linearized step's own matrix ``A_n / dt^2``.  So ``L^T Q L`` with ``L = J + beta S``
-(``S`` the inertial forces' part of ``J``, :func:`~.sqp.damping_metric`'s, shifted so that
-``(1 + beta)^2`` is the damping's share of the inertial terms) matches the effort's
-Gauss-Newton matrix and the damping's inertial part; ``L`` is inverted by block forward
-substitution with one sparse LU per step, each the size of one frame.  Where the
-components are not all controlled it falls back to the diagonal of ``B`` (Jacobi).
+Preconditioners (``preconditioner``):
+
+* ``"frames"`` (the default): block Jacobi in time, each frame's diagonal block of ``B``
+  (one frame's size, sparse) formed and factored (:class:`FrameBlocks`);
+* ``"steps"``: the per-step matrices the library factors.  With every free component
+  controlled, ``J`` is square and block lower triangular in time, step n's block in frame
+  n+1 the linearized step's own matrix ``A_n / dt^2``; ``(L^T Q L)^-1`` with ``L = J +
+  beta G`` (``G^T G`` the damping metric's inertial part, :func:`_lower_root`) is applied
+  by block substitution, one sparse LU per step (:class:`StepPreconditioner`).  Exact for
+  the rest state, but the substitution simulates the linearized motion, which grows where
+  the sheet buckles: on a moved sheet it is useless (docs/search_notes.md);
+* ``"jacobi"`` (the diagonal) and ``"none"``, for comparison.
 
 :class:`LinearChoice` picks the direct factor (:class:`~.sqp.Factor`) or this solve by the
 number of unknowns (``linear="auto"``) or as asked.
@@ -32,7 +38,7 @@ from ... import progress
 from ...interrupts import check
 
 LINEAR = ("auto", "direct", "iterative")
-AUTO_SIZE = 40_000  # unknowns above which linear="auto" solves iteratively (benchmarks/)
+AUTO_SIZE = 60_000  # unknowns above which linear="auto" solves iteratively (docs/search_notes.md)
 CG_TOL = 1e-6  # relative residual at which conjugate gradients stop
 CG_MAXITER = 400  # conjugate gradient iterations per solve at most
 CG_SETTLE = 1e-3  # stop once the model falls by less than this share over WINDOW iterations
@@ -101,7 +107,7 @@ class StepOperator:
 
 
 class StepPreconditioner:
-    """The module docstring's ``(L^T Q L)^-1`` for a transcription ``tr`` whose control
+    """The module docstring's ``"steps"``, ``(L^T Q L)^-1`` for a transcription ``tr`` whose control
     Hessian is ``Q`` and whose damping metric weighs a force by ``weight``: :meth:`update`
     at each iterate (``J``, ``mu``), then called on residuals ``(size,)`` or ``(size, k)``."""
 
@@ -118,23 +124,16 @@ class StepPreconditioner:
         q = np.asarray(sp.csr_matrix(Q).diagonal())[self.rows] if self.usable else None
         self.q = q
         self.weight = weight
-        self.mode = "exact"
-        self.floor = 0.0
         scale = np.repeat(tr.problem.model.masses, 3)[tr.free_flat] / tr.dt ** 2
         self.S = sp.kron(_lower_root(metric, tr.N, tr.nf, weight * scale[0] ** 2),
                          sp.diags(scale)).tocsr()
-        T = sp.diags([np.ones(tr.N - 1) * -2, np.ones(tr.N - 2)], [-1, -2], shape=(tr.N,) * 2)
-        self.inertia = sp.kron(T, sp.diags(scale)).tocsr()  # the mass stencil off the diagonal
-        self.diagonal = sp.kron(sp.eye(tr.N), np.ones((tr.nf, tr.nf))).tocsr()
         self.blocks = self.lower = self.upper = None
 
     def update(self, J, mu: float) -> None:
-        """Factor the per-step blocks of ``L = J_d + beta S`` at this iterate (``J_d``:
-        ``J``'s per-step blocks on the diagonal, the inertial stencil below it)."""
-        beta = max(np.sqrt(mu * self.weight / float(np.mean(self.q))), self.floor)
-        Jd = sp.csr_matrix(J)[self.rows]
-        Jd = Jd.multiply(self.diagonal) if self.mode == "stable" else Jd
-        L = (sp.csr_matrix(Jd) + (self.inertia if self.mode == "stable" else 0) + beta * self.S).tocsr()
+        """Factor the per-step blocks of ``L = J + beta G`` at this iterate (``beta^2 G^T
+        G`` the damping's part of ``B`` over ``Q``'s scale)."""
+        beta = np.sqrt(mu * self.weight / float(np.mean(self.q)))
+        L = (sp.csr_matrix(J)[self.rows] + beta * self.S).tocsr()
         nf, N = self.nf, self.N
         self.blocks, self.lower, self.upper = [], [], []
         LT = L.T.tocsr()

@@ -7,14 +7,16 @@ process's peak memory.
 
     .venv/bin/python benchmarks/transcription_linear.py CASE [--linear iterative]
         [--maxiter 40] [--preconditioner steps|jacobi|none] [--cpu-limit 600]
-    .venv/bin/python benchmarks/transcription_linear.py --solves CASE  # one iterate's solves
+    .venv/bin/python benchmarks/transcription_linear.py CASE --solves [--after 2]
+        [--preconditioner frames,steps,jacobi,none]
 
 CASE: ``mesh12`` (``mesh_keyframes`` 12 x 12), ``walkthrough`` (the README's 30 x 30 sheet,
-``benchmarks/search.py``'s overrides), ``cape`` (``cape_blend``); every case from the rest
+``benchmarks/search.py``'s overrides), ``walkthroughK`` (its wave and fold on a K x K sheet),
+``cape`` (``cape_blend``); every case from the rest
 state held still, ``guess=none``, ``rest_band=0.05`` on the sheets.  ``--solves`` times one
-iterate's system (the gradient and the keyframes' columns) at several dampings, for each
-preconditioner and the direct factorisation, and prints where they cross.  One BLAS
-thread; CPU time from ``time.process_time``.
+iterate's system (the gradient and the keyframes' columns) at several dampings, the direct
+factorisation against each preconditioner.  One BLAS thread; CPU time from
+``time.process_time``.
 """
 from __future__ import annotations
 
@@ -40,6 +42,7 @@ from casadi_keyframe.optimize.positions.method import start_positions  # noqa: E
 from casadi_keyframe.optimize.positions.replay import replay_controls  # noqa: E402
 from casadi_keyframe.optimize.positions.sqp import PositionSQP  # noqa: E402
 from casadi_keyframe.optimize.positions.transcription import Transcription  # noqa: E402
+from casadi_keyframe.scenes.mesh_targets import write_sheet_and_targets  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).parent))
 from search import walkthrough  # noqa: E402
@@ -52,6 +55,14 @@ def load(case: str):
         folder = Path(tempfile.gettempdir()) / "casadi_keyframe_walkthrough"
         return ck.load_problem("mesh_keyframes", **walkthrough(folder), guess="none",
                                rest_band=0.05)
+    if case.startswith("walkthrough"):  # walkthroughK: the same wave and fold on K x K
+        rows = int(case[len("walkthrough"):])
+        folder = Path(tempfile.gettempdir()) / f"casadi_keyframe_walkthrough{rows}"
+        if not (folder / "sheet.obj").is_file():
+            write_sheet_and_targets(folder, rows, rows)
+        return ck.load_problem("mesh_keyframes", cloth=str(folder / "sheet.obj"),
+                               pins=(0, rows - 1), guess="none", rest_band=0.05,
+                               keyframes=f"40:{folder / 'wave.obj'},80:{folder / 'fold.obj'}")
     if case == "cape":
         return ck.load_problem("cape_blend")
     raise SystemExit(f"unknown case {case!r}: mesh12, walkthrough or cape")
@@ -75,9 +86,7 @@ def search(prob, args):
 
     def each(report, point):
         now = time.process_time()
-        cg = "-" if solver.solves is None else (
-            f"{'+'.join(map(str, solver.solves.iterations))} "
-            f"(setup {solver.solves.setup:.1f} s)")
+        cg = "-" if solver.solves is None else "+".join(map(str, solver.solves.iterations))
         misses = "/".join(f"{1e3 * m:.1f}" for m in report.misses)
         print(f"| {report.iteration} | {report.effort:.4g} | {report.violation:.2e} | "
               f"{misses} | {report.mu:.1e} | {'yes' if report.kept else 'no'} | {cg} | "
@@ -100,18 +109,30 @@ def search(prob, args):
 
 
 def solves(prob, args):
-    """One iterate's system (the rest state) at several dampings: each preconditioner's
-    conjugate gradient iterations and seconds against the direct factorisation."""
+    """The system of the direct search's iteration ``--after`` (from rest; 1: the rest state
+    itself) at several dampings: each preconditioner's conjugate gradient iterations (to
+    the residual ``CG_TOL`` or the model's settling), seconds, and the share of the exact
+    step's model decrease its step achieves, against the direct factorisation."""
     tr = Transcription(prob)
     solver = PositionSQP(tr, goal_constraints(tr), control_hessian(prob),
                          LinearChoice("direct"))
-    x = solver.point(tr.unknowns(start_positions(prob, "rest", None)))
+    seen, system_of = [], solver._system
+    solver._system = lambda x, lam, mu: seen.append((x, np.array(lam))) or system_of(x, lam, mu)
+    solver.run(tr.unknowns(start_positions(prob, "rest", None)), maxiter=args.after, tol=0.0)
+    solver._system = system_of
+    x, lam = seen[-1]
     rhs = np.column_stack([x.gradient, solver._gradients(x.z)])
-    lam = np.zeros(len(solver.C))
-    print(f"{prob.name}: {tr.size} unknowns, {rhs.shape[1]} right-hand sides")
-    print("| mu | solve | setup s | CG iterations | solve s | relative residual |")
-    print("|---|---|---|---|---|---|")
-    for mu in (1e3, 1.0, 1e-3, 1e-6):
+    print(f"{prob.name}: {tr.size} unknowns, iteration {args.after}'s point, {rhs.shape[1]} "
+          "right-hand sides")
+    print("| mu | solve | setup s | CG iterations | solve s | relative residual | model |")
+    print("|---|---|---|---|---|---|---|")
+    for mu in (1e3, 1.0, 1e-2):
+        t = time.process_time()
+        solve, _, _ = system_of(x, lam, mu)
+        t1 = time.process_time()
+        exact = solve(rhs)
+        print(f"| {mu:g} | direct | {t1 - t:.2f} | - | {time.process_time() - t1:.2f} "
+              "| - | 1 |", flush=True)
         for pre in args.preconditioner.split(","):
             choice = LinearChoice("iterative", preconditioner=pre)
             t = time.process_time()
@@ -119,16 +140,11 @@ def solves(prob, args):
             t1 = time.process_time()
             X = system.solve(rhs)
             t2 = time.process_time()
-            res = np.linalg.norm(system.operator(X) - rhs, axis=0) / np.linalg.norm(rhs, axis=0)
+            B, g = system.operator, rhs[:, 0]
+            res = np.linalg.norm(B(X) - rhs, axis=0) / np.linalg.norm(rhs, axis=0)
+            model = [float(g @ p - 0.5 * p @ B(p)) for p in (X[:, 0], exact[:, 0])]
             print(f"| {mu:g} | {pre} | {t1 - t:.2f} | {system.solves.iterations[0]} | "
-                  f"{t2 - t1:.2f} | {res.max():.1e} |", flush=True)
-        if args.direct:
-            t = time.process_time()
-            solve, _, _ = solver._system(x, lam, mu)
-            t1 = time.process_time()
-            solve(rhs)
-            print(f"| {mu:g} | direct | {t1 - t:.2f} | - | {time.process_time() - t1:.2f} "
-                  "| - |", flush=True)
+                  f"{t2 - t1:.2f} | {res.max():.1e} | {model[0] / model[1]:.4f} |", flush=True)
     print(f"\npeak memory {peak_mb():.0f} MB")
 
 
@@ -140,7 +156,8 @@ def main():
     p.add_argument("--maxiter", type=int, default=40)
     p.add_argument("--cpu-limit", type=float, default=600.0)
     p.add_argument("--solves", action="store_true", help="one iterate's solves only")
-    p.add_argument("--direct", action="store_true", help="with --solves: the direct one too")
+    p.add_argument("--after", type=int, default=2,
+                   help="with --solves: the direct search's iteration whose system is solved")
     args = p.parse_args()
     prob = load(args.case)
     (solves if args.solves else search)(prob, args)

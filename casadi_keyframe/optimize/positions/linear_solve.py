@@ -27,7 +27,6 @@ number of unknowns (``linear="auto"``) or as asked.
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -208,19 +207,18 @@ class FrameBlocks:
 @dataclass
 class Solves:
     """What the iterative solves of one SQP iteration did: conjugate gradient iterations
-    (per call, the most over its right-hand sides), seconds building the preconditioner."""
+    per call (the most over its right-hand sides)."""
 
     iterations: list
-    setup: float = 0.0
 
 
 class IterativeSystem:
     """The step's system at one iterate, solved by :func:`conjugate_gradients`:
     ``solve(rhs)``, ``curvature(p)`` (the model's matrix times ``p``) and ``solves``."""
 
-    def __init__(self, operator: StepOperator, precondition, choice: LinearChoice, setup):
+    def __init__(self, operator: StepOperator, precondition, choice: LinearChoice):
         self.operator, self.precondition, self.choice = operator, precondition, choice
-        self.solves = Solves([], setup)
+        self.solves = Solves([])
 
     def solve(self, rhs) -> np.ndarray:
         x, its = conjugate_gradients(self.operator, np.asarray(rhs, float), self.precondition,
@@ -236,7 +234,6 @@ class IterativeSystem:
 def iterative_system(sqp, x, lam, mu: float, choice: LinearChoice) -> IterativeSystem:
     """The step's system of :class:`~.sqp.PositionSQP` ``sqp`` at its point ``x``."""
     operator = StepOperator(x.J, sqp.Q, x.Jr, zip(lam, sqp.C), mu, sqp.metric)
-    t = time.process_time()
     kind = choice.preconditioner
     if kind == "steps":
         if getattr(sqp, "_preconditioner", None) is None:
@@ -253,7 +250,7 @@ def iterative_system(sqp, x, lam, mu: float, choice: LinearChoice) -> IterativeS
         pre = _scaled(1.0 / d)
     elif kind == "none":
         pre = None
-    return IterativeSystem(operator, pre, choice, time.process_time() - t)
+    return IterativeSystem(operator, pre, choice)
 
 
 def _scaled(inverse):

@@ -27,6 +27,7 @@ from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
 from .goal import MARGIN, goal_constraints
 from .interior import PositionNLP, search
 from .replay import replay_controls
+from .linear_solve import LINEAR, LinearChoice
 from .sqp import PositionSQP
 from .stretch import StretchLimit
 from .transcription import Transcription, TranscriptionError
@@ -45,7 +46,9 @@ class TranscriptionOptions(TypedOptions):
     ``solver``: "sqp" (:mod:`.sqp`) or "ipopt" (:mod:`.interior`: the same effort, the
     physical stretch limit held at every spring and frame as well; ``settle`` is then
     IPOPT's ``tol``); ``hessian``: IPOPT's Hessian of the effort, its Gauss-Newton matrix
-    or the exact one (:mod:`.curvature`)."""
+    or the exact one (:mod:`.curvature`); ``linear``: the SQP's step solved by a sparse
+    factorisation ("direct"), by preconditioned conjugate gradients without forming its
+    matrix ("iterative", :mod:`.linear_solve`) or by the number of unknowns ("auto")."""
 
     label: ClassVar[str] = "the transcription"
     CHECKS: ClassVar[dict] = {
@@ -53,13 +56,15 @@ class TranscriptionOptions(TypedOptions):
         "margin": ("a number in (0, 1]", lambda v: real(v) and 0 < v <= 1),
         "settle": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1),
         "solver": (f"one of {', '.join(SOLVERS)}", lambda v: v in SOLVERS),
-        "hessian": (f"one of {', '.join(HESSIANS)}", lambda v: v in HESSIANS)}
+        "hessian": (f"one of {', '.join(HESSIANS)}", lambda v: v in HESSIANS),
+        "linear": (f"one of {', '.join(LINEAR)}", lambda v: v in LINEAR)}
 
     start: str = "controls"
     margin: float = MARGIN
     settle: float = 1e-3
     solver: str = "sqp"
     hessian: str = "gauss-newton"
+    linear: str = "auto"
 
 
 def start_positions(problem, start: str, u0) -> np.ndarray:
@@ -101,7 +106,8 @@ def run(problem, ev, u0, call):
             offer(point.z)
         call.on_iteration()
 
-    solver = PositionSQP(tr, constraints, control_hessian(problem))
+    solver = PositionSQP(tr, constraints, control_hessian(problem),
+                         LinearChoice(options.linear))
     outcome, _ = solver.run(z0, maxiter=call.maxiter, tol=options.settle, on_iteration=kept,
                             should_stop=lambda: (check() or False) or call.deadline.passed())
     said = f"{outcome.iterations} iterations in positions" + (

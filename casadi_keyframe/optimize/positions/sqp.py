@@ -23,7 +23,9 @@ plan the model's own checks refuse (a torn cloth) is never kept; it is kept when
 l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a share of what the model predicts
 (``sigma`` at least twice the multipliers, the QP's and their least-squares estimate). Then
 ``mu`` halves and ``theta`` doubles, up to :data:`THETA_MAX`; else ``mu`` grows (fourfold,
-sixteenfold when the merit rose) and ``theta`` halves if the goal's own model failed.
+sixteenfold when the merit rose) and ``theta`` halves if the goal's own model failed or the
+merit rose by more than the model's decrease (the goal's demand keeps a step long whatever
+``mu``).
 ``theta`` never exceeds :data:`THETA_MAX` < 1, so the goal is approached over several steps,
 each trading it against the effort: a step that removes the whole violation at once commits
 the motion to the first way the linear model finds to meet the goal (from a sheet held
@@ -47,6 +49,7 @@ except ImportError:  # SuperLU instead (slower, same answer)
 from scipy.sparse.linalg import splu
 
 from ...state import SimulationError
+from .linear_solve import LinearChoice, iterative_system
 from .restore import LengthRestoration
 from .strain import StrainPenalty
 
@@ -158,8 +161,10 @@ class Factor:
 class PositionSQP:
     """The module docstring's search on a transcription ``tr`` under ``constraints``."""
 
-    def __init__(self, tr, constraints, Q: sp.spmatrix):
+    def __init__(self, tr, constraints, Q: sp.spmatrix, linear: LinearChoice | None = None):
         self.tr, self.constraints = tr, constraints
+        self.linear = linear or LinearChoice()
+        self.solves = None  # the last iteration's iterative solves (None: direct)
         self.Q = sp.csr_matrix(Q)
         self.C = [c.hessian() for c in constraints]
         self.held = HELD * np.array([abs(c.bound) for c in constraints])
@@ -170,7 +175,8 @@ class PositionSQP:
         self.strain = StrainPenalty(tr)
         self._fill = None
         self.mu_used = None
-        self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
+        self.weight = float(np.mean(Q.diagonal()))
+        self.metric = damping_metric(tr, self.weight)
 
     def point(self, z, jacobian: bool = True) -> Point:
         """The iterate at ``z`` (with the Jacobians when asked): its effort is the control
@@ -220,8 +226,11 @@ class PositionSQP:
                     mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, THETA_MAX)
             else:
                 mu = min((16.0 if ratio < -1.0 else 4.0) * mu + MU_MIN, MU_MAX)
-                if trial.violation() > 0.5 * (x.violation() + np.maximum(self._linear, 0).sum()):
-                    theta = max(theta / 2.0, THETA_MIN)  # the goal's model failed too
+                failed = trial.violation() > 0.5 * (x.violation()
+                                                    + np.maximum(self._linear, 0).sum())
+                if failed or ratio < -1.0:  # the goal's model failed too, or the merit
+                    # rose beyond the model: a step the goal's demand keeps long whatever mu
+                    theta = max(theta / 2.0, THETA_MIN)
             report = Progress(it, x.effort, x.violation(),
                               [k.miss(x.z) for k in self.constraints], mu,
                               float(np.linalg.norm(step)), kept, theta, ratio)
@@ -242,22 +251,7 @@ class PositionSQP:
     def _step(self, x: Point, lam, mu, theta):
         """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
         violated constraints asked to fall by the share ``theta``."""
-        # every operand by rows (a mix converts the large ones at every operation)
-        G = x.J.T.tocsr() @ (self.Q @ x.J)  # the one product of the state's size
-        curvature = x.Jr.T.tocsr() @ x.Jr
-        for l, C in zip(lam, self.C):
-            if l > 0:
-                curvature = curvature + l * C
-
-        def H(v):  # the model's matrix (without the damping) times v
-            return G @ v + curvature @ v
-
-        while True:  # a matrix that does not factor (round-off): more damping
-            try:
-                solve = self.factor(G + (self._pattern(x) + (curvature + mu * self.metric)))
-                break
-            except ArithmeticError:
-                mu = max(4.0 * mu, 1e-8)
+        solve, curvature, mu = self._system(x, lam, mu)
         self.mu_used = mu
         A = self._gradients(x.z)
         # the strain penalty's excess too is asked to fall by the share theta while the
@@ -273,9 +267,31 @@ class PositionSQP:
         self._solve, self._linear = solve, linear  # for the trial's correction
         self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
         sigma = self._penalty(A, x.gradient)
-        model = -(x.gradient @ step + 0.5 * step @ H(step))
+        model = -(x.gradient @ step + 0.5 * step @ curvature(step))
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
+
+    def _system(self, x: Point, lam, mu):
+        """``(solve, curvature, mu)``: the step's matrix at ``x`` factored (or, for large
+        sheets, solved by conjugate gradients without forming it, :mod:`.linear_solve`), the
+        model's matrix (without the damping) times a vector, and the damping used (raised
+        while the matrix does not factor)."""
+        while True:  # a matrix that does not factor (round-off): more damping
+            try:
+                if self.linear.iterative(self.tr.size):
+                    system = iterative_system(self, x, lam, mu, self.linear)
+                    self.solves = system.solves
+                    return system.solve, system.curvature, mu
+                # every operand by rows (a mix converts the large ones at every operation)
+                G = x.J.T.tocsr() @ (self.Q @ x.J)  # the one product of the state's size
+                curvature = x.Jr.T.tocsr() @ x.Jr
+                for l, C in zip(lam, self.C):
+                    if l > 0:
+                        curvature = curvature + l * C
+                solve = self.factor(G + (self._pattern(x) + (curvature + mu * self.metric)))
+                return solve, (lambda p: G @ p + curvature @ p), mu
+            except ArithmeticError:
+                mu = max(4.0 * mu, 1e-8)
 
     def _pattern(self, x: Point) -> sp.csr_matrix:
         """Every place the step's matrix can ever hold a value, each at a value far below

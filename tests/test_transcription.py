@@ -279,3 +279,11 @@ def test_approaching_the_goal_over_several_steps_finds_a_motion_of_less_effort(m
     gradual = search()
     monkeypatch.setattr(sqp, "THETA_MAX", 1.0)
     assert gradual < 0.8 * search()
+
+
+def test_contact_that_holds_particles_on_a_body_is_refused_with_what_to_give_instead():
+    """The step's hold is a decision the inverse step cannot write: refused by name (it
+    crashed inside CasADi before), with the penalty law or the problem's own solve offered."""
+    prob = ck.load_problem("mesh_keyframes", spheres=(0.5, -0.3, -0.6, 0.1), guess="none")
+    with pytest.raises(TranscriptionError, match="collision='penalty'"):
+        Transcription(prob)

@@ -36,7 +36,8 @@ class TranscriptionError(ValueError):
 def check_transcribable(problem) -> None:
     """Refuse a problem the transcription cannot write in closed form (TranscriptionError
     naming what and how to solve it instead): per-step forces on every free particle, the
-    linearized backward Euler step, a model whose families write their step."""
+    linearized backward Euler step, a model whose families write their step and hold no
+    particle on a body."""
     name = problem.name
     if not isinstance(problem.integrator, LinearizedBackwardEuler):
         raise TranscriptionError(
@@ -61,6 +62,12 @@ def check_transcribable(problem) -> None:
     if not hasattr(model, "symbolic_step"):
         raise TranscriptionError(f"{name}: {type(model).__name__} does not write its step "
                                  "symbolically: solve it with method='lbfgsb'")
+    if any(getattr(f, "holds", False) for f in getattr(model, "families", ())):
+        raise TranscriptionError(
+            f"{name}: its contact holds particles on a body (collision 'guarded' or "
+            "'constraint'), a decision of the step the inverse step cannot write in "
+            "positions: give collision='penalty' (the paper's penalty springs, which it "
+            "writes), or solve it without --method (the problem's own SOLVE)")
 
 
 class Transcription:

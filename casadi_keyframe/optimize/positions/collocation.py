@@ -27,6 +27,8 @@ from .stretch import StretchLimit
 from .transcription import TranscriptionError
 
 DEFECT_TOLERANCE = 1e-9  # m: IPOPT's constr_viol_tol on the steps' defects
+METIS = 5  # MUMPS's ordering (its automatic choice is far slower on these systems)
+MU_INIT = 1e-6  # IPOPT's first barrier parameter: the effort is small beside its default
 
 
 def _pad(M, width) -> sp.csr_matrix:
@@ -95,7 +97,8 @@ class DefectNLP(PositionNLP):
         return {"lbx": np.concatenate([-free, lower]), "ubx": np.concatenate([free, upper])}
 
     def ipopt_options(self, w0) -> dict:
-        options = {"constr_viol_tol": DEFECT_TOLERANCE}
+        options = {"constr_viol_tol": DEFECT_TOLERANCE, "mumps_pivot_order": METIS,
+                   "mu_init": MU_INIT}
         if self.limited_memory:
             options["hessian_approximation"] = "limited-memory"
         return options

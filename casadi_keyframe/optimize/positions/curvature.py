@@ -55,7 +55,7 @@ class EffortCurvature:
         w = np.zeros((tr.N, tr.n, 3))
         w[:, self._controlled] = np.reshape(grad_u, (tr.N, self._controlled.size, 3))
         x = tr.frames(z)
-        (values,) = self._hessian(*tr._stacked(x), tr.scene, w)
+        (values,) = self._hessian(*tr._stacked(x), tr.scene_columns(), w)
         k = self._keep
         forces = sp.csr_matrix((values[k], (self._rows[k], self._cols[k])),
                                shape=(tr.size, tr.size))

@@ -220,7 +220,7 @@ class DefectCurvature:
         W = np.zeros((d.N, 3 * d.n))
         W[:, d.free_flat] = (d.scale * np.asarray(lam, float)).reshape(d.N, d.nf)
         x = d.frames(z)
-        (values,) = self._hessian(*d._stacked(x), d.scene, W)
+        (values,) = self._hessian(*d._stacked(x), d.scene_columns(), W)
         values = values.reshape(d.N, self._nnz)
         later = values[1:].ravel()
         k = self._keep

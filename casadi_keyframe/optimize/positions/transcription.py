@@ -146,12 +146,17 @@ class Transcription:
         before = np.concatenate([self.x_before[None], x[:-2]], axis=0)
         return [np.ascontiguousarray(a) for a in (before, x[:-1], x[1:])]
 
+    def scene_columns(self) -> np.ndarray:
+        """The scene of every step as the mapped step reads it: ``(N, k)``, C order (one
+        column of CasADi's ``k x N`` per step)."""
+        return np.ascontiguousarray(self.scene.T)
+
     # -- forces -----------------------------------------------------------------------------
     def forces(self, z) -> np.ndarray:
         """Every step's external force ``(N, n, 3)`` that moves the particles along ``z``
         (stored forces and controls together; constrained components' are meaningless)."""
         x = self.frames(z)
-        (E,) = self._step(*self._stacked(x), self.scene)
+        (E,) = self._step(*self._stacked(x), self.scene_columns())
         return E.reshape(self.N, self.n, 3)
 
     def controls(self, z) -> np.ndarray:

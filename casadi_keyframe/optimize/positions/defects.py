@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ...controls import InitialVelocity, StepForces
+from .curvature import weighted_step_hessian
 from .interior import _ones
 from .transcription import (Buffered, Transcription, TranscriptionError, check_steps,
                             full_forces, inverse_step_function)
@@ -179,15 +180,9 @@ class DefectCurvature:
     def __init__(self, d: StepDefects):
         self.d = d
         n, N = d.n, d.N
-        step = inverse_step_function(d.problem.model, d.dt).expand()
-        frames = [ca.SX.sym(name, 3, n) for name in ("before", "now", "next")]
-        scene = ca.SX.sym("scene", d.scene.shape[0])
-        weights = ca.SX.sym("w", 3, n)
-        stacked = ca.vertcat(*(ca.vec(f) for f in frames))
-        H = ca.hessian(ca.dot(weights, step(*frames, scene)), stacked)[0]
-        self._hessian = Buffered(ca.Function("curvature", [*frames, scene, weights],
-                                             [H]).map(N))
-        rows, cols = (np.asarray(ix) for ix in H.sparsity().get_triplet())
+        fn, triplets = weighted_step_hessian(d)
+        self._hessian = Buffered(fn.map(N))
+        rows, cols = (np.asarray(ix) for ix in triplets)
         self._local = rows, cols
         self._nnz = rows.size
         column = np.full(3 * n, -1)

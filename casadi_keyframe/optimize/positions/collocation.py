@@ -21,7 +21,7 @@ from ..finish.constraint import control_hessian
 from ..outcome import ipopt_outcome
 from .defects import StepDefects
 from .goal import goal_constraints
-from .interior import PositionNLP, _ones, search
+from .interior import PositionNLP, ones_pattern, search
 from .strain import StrainPenalty
 from .stretch import StretchLimit
 from .transcription import TranscriptionError
@@ -116,7 +116,7 @@ class DefectNLP(PositionNLP):
         goals = _pad(sp.vstack([sp.csr_matrix((abs(g.R).sum(axis=0).A1 > 0).astype(float))
                                 for g in self.goals]), width)
         stretch = [] if self.stretch is None else [
-            _pad(_ones(self.stretch.jacobian(np.ones(self.d.size))), width)]
+            _pad(ones_pattern(self.stretch.jacobian(np.ones(self.d.size))), width)]
         return sp.vstack([goals, *stretch, self.d.jacobian_pattern()])
 
     # -- the Hessian of the Lagrangian -------------------------------------------------------
@@ -135,10 +135,10 @@ class DefectNLP(PositionNLP):
     def _hessian_pattern(self):
         width = self.d.width
         S = self.strain.pattern()
-        H = sp.block_diag([S.T @ S, _ones(self.Q)]).tocsr() + sum(_ones(C) for C in self.C)
+        H = sp.block_diag([S.T @ S, ones_pattern(self.Q)]).tocsr() + sum(ones_pattern(C) for C in self.C)
         if self.stretch is not None:
-            H = H + _square(_ones(self.stretch.hessian(np.ones(self.stretch.size))), width)
-        return sp.triu(_ones(H + self.d.curvature_pattern()))
+            H = H + _square(ones_pattern(self.stretch.hessian(np.ones(self.stretch.size))), width)
+        return sp.triu(ones_pattern(H + self.d.curvature_pattern()))
 
     def start(self) -> np.ndarray:
         """A point at which the patterns are read (any point gives them)."""

@@ -23,7 +23,7 @@ import scipy.sparse as sp
 
 from ...controls import InitialVelocity, StepForces
 from .curvature import weighted_step_hessian
-from .interior import _ones
+from .interior import ones_pattern
 from .transcription import (Buffered, Transcription, TranscriptionError, check_steps,
                             full_forces, inverse_step_function)
 
@@ -146,8 +146,8 @@ class StepDefects(Transcription):
         behind = sp.csr_matrix((np.ones(pattern.nnz()), pattern.get_triplet()),
                                shape=pattern.shape)[self.free_flat]
         first = sp.vstack([behind, sp.csr_matrix((self.rows - self.nf, 3 * self.n))])
-        Ju = _ones(self._B_free) + first @ _ones(self.V)
-        return _ones(sp.hstack([Jz, Ju]))
+        Ju = ones_pattern(self._B_free) + first @ ones_pattern(self.V)
+        return ones_pattern(sp.hstack([Jz, Ju]))
 
     def curvature(self, w, lam) -> sp.csr_matrix:
         """``sum_k lam_k d^2 d_k / dw^2`` (``width x width``)."""
@@ -231,5 +231,5 @@ class DefectCurvature:
                           shape=(d.width,) * 2)
         rows, cols = self._local
         H0 = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(9 * d.n,) * 2)
-        P = _ones(self._first)
-        return _ones(H + P.T @ H0 @ P)
+        P = ones_pattern(self._first)
+        return ones_pattern(H + P.T @ H0 @ P)

@@ -37,7 +37,7 @@ def _sparsity(M) -> ca.Sparsity:
     return ca.Sparsity(M.shape[0], M.shape[1], M.indptr.tolist(), M.indices.tolist())
 
 
-def _ones(M) -> sp.csr_matrix:
+def ones_pattern(M) -> sp.csr_matrix:
     """Every stored entry of ``M`` as 1 (its pattern)."""
     M = sp.csr_matrix(M, copy=True)
     M.data[:] = 1.0
@@ -113,7 +113,7 @@ class PositionNLP:
     def _jacobian_pattern(self):
         goals = sp.vstack([sp.csr_matrix((abs(g.R).sum(axis=0).A1 > 0).astype(float))
                            for g in self.goals])
-        stretch = _ones(self.stretch.jacobian(np.ones(self.tr.size)))
+        stretch = ones_pattern(self.stretch.jacobian(np.ones(self.tr.size)))
         return sp.vstack([goals, stretch])
 
     # -- the Hessian of the Lagrangian ----------------------------------------------------
@@ -129,17 +129,17 @@ class PositionNLP:
         return self._on(sp.triu(H), "_hessian_fill", self._hessian_pattern)
 
     def _hessian_pattern(self):
-        J = _ones(self.tr.control_jacobian(self.tr.unknowns(self.tr.base)))
+        J = ones_pattern(self.tr.control_jacobian(self.tr.unknowns(self.tr.base)))
         S = self.strain.pattern()
-        H = (J.T @ _ones(self.Q) @ J + S.T @ S + sum(_ones(C) for C in self.C)
-             + _ones(self.stretch.hessian(np.ones(self.stretch.size))))
-        return sp.triu(_ones(H))
+        H = (J.T @ ones_pattern(self.Q) @ J + S.T @ S + sum(ones_pattern(C) for C in self.C)
+             + ones_pattern(self.stretch.hessian(np.ones(self.stretch.size))))
+        return sp.triu(ones_pattern(H))
 
     def _on(self, M, name, pattern):
         """``M`` on its fixed pattern (made once by ``pattern()``): csc, every place of the
         pattern stored (a value far below round-off fills the places ``M`` leaves out)."""
         if getattr(self, name) is None:
-            setattr(self, name, (1e-300 * _ones(pattern())).tocsc())
+            setattr(self, name, (1e-300 * ones_pattern(pattern())).tocsc())
         fill = getattr(self, name)
         out = (M + fill).tocsc()
         out.sort_indices()

@@ -24,17 +24,18 @@ from ...state import SimulationError
 from ..finish.constraint import control_hessian
 from ..options import TypedOptions, real
 from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
+from .collocation import run_defects
 from .goal import MARGIN, goal_constraints
 from .interior import PositionNLP, search
 from .replay import replay_controls
 from .linear_solve import LINEAR, LinearChoice
 from .sqp import PositionSQP
 from .stretch import StretchLimit
-from .transcription import Transcription, TranscriptionError
+from .transcription import Transcription, TranscriptionError, full_forces
 
 STARTS = ("controls", "rest", "blend")
 SOLVERS = ("sqp", "ipopt")
-HESSIANS = ("gauss-newton", "exact")
+HESSIANS = ("gauss-newton", "exact", "limited-memory")
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,8 @@ def start_positions(problem, start: str, u0) -> np.ndarray:
 
 def run(problem, ev, u0, call):
     """One search in positions (module docstring); ``(status, message)``."""
+    if not full_forces(problem):  # fewer controls: the states stay unknowns beside them
+        return run_defects(problem, ev, u0, call, start_positions)
     options = call.options
     if options.hessian != "gauss-newton" and options.solver != "ipopt":
         raise TranscriptionError(f"hessian={options.hessian} is IPOPT's: give solver=ipopt "
@@ -134,6 +137,7 @@ def _interior(problem, tr, constraints, z0, call, offer, replayed):
     nlp = PositionNLP(tr, constraints, control_hessian(problem),
                       StretchLimit(tr, problem.limits.stretch),
                       exact=call.options.hessian == "exact")
+    nlp.limited_memory = call.options.hessian == "limited-memory"
 
     offered = []
 

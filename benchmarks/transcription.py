@@ -4,7 +4,7 @@ control acceleration per particle), iterations, CPU seconds, peak memory and how
 result's run is from the plan it replays.
 
     .venv/bin/python benchmarks/transcription.py [--maxiter 40] [--only aim,blend,rest,zero]
-        [--known 10] [--solver sqp|ipopt]
+        [--known 10 [--known-from K]] [--solver sqp|ipopt]
 
 Starts: "aim" the aimed PD controller's motion (the problem's default guess), "blend" the
 positions blended between the keyframes' targets, "rest" the start state held still, "zero"
@@ -13,15 +13,17 @@ the zero-force start (``rest_band=0.05``), one BLAS thread, CPU time from
 ``time.process_time``.
 
 ``--known N``: N problems whose targets are reachable by construction, each the 12 x 12
-sheet's frames 40 and 80 under random forces smooth in time and over the sheet (rms 6 m/s^2,
-seeds 0..N-1), solved from the rest state; each row against the forces that made it (their
-control cost and strain penalty, the search's objective; rms and peak).  These problems
-have no strain penalty: the sheet hanging from two corners stretches to 1.37-1.39 under
-these forces as under none, past the walkthrough's strain limit (1.2) and its physical
-limit (1.3), so with the penalty the search must lift the sheet the forces let sag, and
-its cost says nothing about reaching targets that are reachable by construction.
+sheet's frames 40 and 80 under random forces smooth in time and over the sheet (rms 6 m/s^2)
+with the sheet's weight held (a constant ``m g`` up on every free particle: the walkthrough's
+sheet hanging from two corners stretches to 1.385 under gravity alone, past its physical
+limit 1.3), the first N seeds whose run stays within the physical limit; solved from the
+rest state, each row against the forces that made it by control cost, rms and peak.  These
+problems have no strain penalty (their runs stretch past the walkthrough's strain limit 1.2
+but not past the physical limit): the search minimises the control cost alone, the measure
+it is compared by, and the problem's judge still refuses a result past the physical limit.
 """
 import argparse
+import itertools
 import os
 import resource
 import time
@@ -66,7 +68,8 @@ def searched(prob, u) -> str:
 def known_targets(seed: int):
     """``(problem, forces)``: the mesh walkthrough's 12 x 12 sheet with its keyframes at
     frames 40 and 80 of its run under ``forces``, random and smooth in time and over the
-    sheet (rms acceleration ``KNOWN_RMS``)."""
+    sheet (rms acceleration ``KNOWN_RMS``) plus the sheet's weight held; None when that run
+    stretches a spring past the physical limit."""
     base = ck.load_problem("mesh_keyframes", guess="none", rest_band=0.05)
     rng = np.random.default_rng(seed)
     idx = base.controls.idx
@@ -79,7 +82,10 @@ def known_targets(seed: int):
         wave = np.sin(2 * np.pi * rng.uniform(0.3, 1.5) * t + rng.uniform(0, 2 * np.pi))
         acc += wave[:, None, None] * space[None, :, None] * rng.standard_normal(3)
     acc *= KNOWN_RMS / np.sqrt(np.mean(np.sum(acc ** 2, axis=2)))
+    acc -= np.asarray(base.model.params.gravity)  # the weight held
     forces = (acc * base.model.masses[idx][None, :, None]).ravel()
+    if base.breakdown(forces)["physical"]["max_stretch"] > base.limits.stretch:
+        return None
     x = base.simulate(forces, records=False).x
     vertices, quads = hanging_sheet(ROWS, ROWS)
     problem = mesh_keyframe_problem(
@@ -91,11 +97,24 @@ def known_targets(seed: int):
     return problem, forces
 
 
+def reachable(count: int):
+    """The first ``count`` seeds' :func:`known_targets` within the physical limit."""
+    seed = 0
+    while count > 0:
+        made = known_targets(seed)
+        if made is not None:
+            count -= 1
+            yield seed, made
+        seed += 1
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--maxiter", type=int, default=40)
     p.add_argument("--only", default=",".join(CASES))
     p.add_argument("--known", type=int, default=0)
+    p.add_argument("--known-from", type=int, default=0,
+                   help="skip this many of the reachable targets (to split a run)")
     p.add_argument("--solver", default="sqp", choices=("sqp", "ipopt"),
                    help="the transcription's solver option")
     args = p.parse_args()
@@ -114,8 +133,8 @@ def main():
         seconds = time.process_time() - t
         print(row(f"{name}: transcription", prob, result.x, seconds, result.nit,
                   result.message), flush=True)
-    for seed in range(args.known):
-        prob, forces = known_targets(seed)
+    for seed, (prob, forces) in itertools.islice(reachable(args.known_from + args.known),
+                                                 args.known_from, None):
         print(row(f"known {seed}: the forces ({searched(prob, forces)})", prob, forces, 0, 0),
               flush=True)
         t = time.process_time()

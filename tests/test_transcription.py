@@ -247,3 +247,43 @@ def test_a_resumed_search_goes_on_from_the_given_controls_whatever_its_start():
                      u0=first.x, quiet=True)
     assert "from the given controls' motion (not start=rest)" in again.message
     assert prob.control_cost(again.x)[0] <= prob.control_cost(first.x)[0]
+
+
+def test_approaching_the_goal_over_several_steps_finds_a_motion_of_less_effort(monkeypatch):
+    """From a sheet held still, a search whose every step may remove the whole violation
+    commits to the first motion its linear model finds (the sheet held up and folded late);
+    the default share (at most half a violation per step) ends, converged, at less effort."""
+    from casadi_keyframe.meshes import check_mesh
+    from casadi_keyframe.optimize.finish.constraint import control_hessian
+    from casadi_keyframe.optimize.positions import sqp
+    from casadi_keyframe.optimize.positions.method import start_positions
+    from casadi_keyframe.scenes.mesh_cloths import mesh_keyframe_problem
+    from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
+
+    v, q = hanging_sheet(5, 5)
+    prob = mesh_keyframe_problem(
+        cloth=check_mesh(v, q), keyframes=[(40, check_mesh(wave(v), q)),
+                                           (80, check_mesh(fold(v), q))],
+        steps=None, dt=1 / 60, mass=0.3, pinned=[0, 4], control="forces", colliders=[],
+        weight=100.0, alpha=1e-4, align=False, strain_limit=1.2, strain_weight=1e3,
+        guess="none", rest_band=0.05)
+    tr = Transcription(prob)
+    z0 = tr.unknowns(start_positions(prob, "rest", None))
+
+    def search():
+        solver = sqp.PositionSQP(tr, goal_constraints(tr), control_hessian(prob))
+        outcome, point = solver.run(z0, maxiter=80, tol=1e-3)
+        assert outcome.reason == "converged" and np.all(point.c <= solver.held)
+        return prob.control_cost(point.u)[0]
+
+    gradual = search()
+    monkeypatch.setattr(sqp, "THETA_MAX", 1.0)
+    assert gradual < 0.8 * search()
+
+
+def test_contact_that_holds_particles_on_a_body_is_refused_with_what_to_give_instead():
+    """The step's hold is a decision the inverse step cannot write: refused by name (it
+    crashed inside CasADi before), with the penalty law or the problem's own solve offered."""
+    prob = ck.load_problem("mesh_keyframes", spheres=(0.5, -0.3, -0.6, 0.1), guess="none")
+    with pytest.raises(TranscriptionError, match="collision='penalty'"):
+        Transcription(prob)

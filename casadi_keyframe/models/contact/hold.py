@@ -404,7 +404,7 @@ class BodyHold(Interaction):
         return FamilyBlocks()
 
     def symbolic_step(self, X, V, W, Q, S, dt, decisions=None):
-        return ca.SX.zeros(3, X.shape[1])
+        return type(X).zeros(3, X.shape[1])  # the hold acts through the step's filter
 
     def step_jacobian(self, x, v, w, q, times, dt):
         return None

@@ -11,6 +11,9 @@ constraints.
 * :mod:`.interior`: the same problem by IPOPT (``solver=ipopt``), with :mod:`.stretch` (the
   physical stretch limit as constraints) and :mod:`.curvature` (the effort's exact
   Hessian, ``hessian=exact``);
+* :mod:`.defects` and :mod:`.collocation`: where the controls are fewer than a force per
+  free particle (initial velocities, forces on some particles), the positions and the
+  controls as unknowns with every step an equality constraint, by IPOPT;
 * :mod:`.replay`: controls that move the simulation along planned positions;
 * :mod:`.method`: the search as the method ``"transcription"`` of ``METHODS``.
 """

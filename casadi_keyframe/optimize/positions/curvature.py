@@ -18,6 +18,21 @@ import scipy.sparse as sp
 from .transcription import Buffered, inverse_step_function
 
 
+def weighted_step_hessian(tr):
+    """``(fn, (rows, cols))``: ``fn(X_{n-1}, X_n, X_{n+1}, S, W)`` the Hessian of
+    ``<W, e_n>`` in the three frames stacked (``9n`` square, sparse; ``e_n`` the inverse step
+    of :mod:`.transcription`) and its pattern's triplets."""
+    n = tr.n
+    step = inverse_step_function(tr.problem.model, tr.dt).expand()
+    frames = [ca.SX.sym(name, 3, n) for name in ("before", "now", "next")]
+    scene = ca.SX.sym("scene", tr.scene.shape[0])
+    weights = ca.SX.sym("w", 3, n)
+    stacked = ca.vertcat(*(ca.vec(f) for f in frames))
+    H = ca.hessian(ca.dot(weights, step(*frames, scene)), stacked)[0]
+    rows, cols = H.sparsity().get_triplet()
+    return ca.Function("curvature", [*frames, scene, weights], [H]), (rows, cols)
+
+
 class EffortCurvature:
     """The second-order part of the effort (module docstring) on a transcription ``tr``
     with the strain penalty ``strain`` (a :class:`~.strain.StrainPenalty`)."""
@@ -25,15 +40,8 @@ class EffortCurvature:
     def __init__(self, tr, strain):
         self.tr, self.strain = tr, strain
         n, N = tr.n, tr.N
-        step = inverse_step_function(tr.problem.model, tr.dt).expand()
-        frames = [ca.SX.sym(name, 3, n) for name in ("before", "now", "next")]
-        scene = ca.SX.sym("scene", tr.scene.shape[0])
-        weights = ca.SX.sym("w", 3, n)
-        stacked = ca.vertcat(*(ca.vec(f) for f in frames))
-        H = ca.hessian(ca.dot(weights, step(*frames, scene)), stacked)[0]
-        fn = ca.Function("curvature", [*frames, scene, weights], [H])
+        fn, (rows, cols) = weighted_step_hessian(tr)
         self._hessian = Buffered(fn.map(N))
-        rows, cols = H.sparsity().get_triplet()
         column = np.full(3 * n, -1)
         column[tr.free_flat] = np.arange(tr.nf)
         steps = np.arange(N)[:, None]
@@ -55,7 +63,7 @@ class EffortCurvature:
         w = np.zeros((tr.N, tr.n, 3))
         w[:, self._controlled] = np.reshape(grad_u, (tr.N, self._controlled.size, 3))
         x = tr.frames(z)
-        (values,) = self._hessian(*tr._stacked(x), tr.scene, w)
+        (values,) = self._hessian(*tr._stacked(x), tr.scene_columns(), w)
         k = self._keep
         forces = sp.csr_matrix((values[k], (self._rows[k], self._cols[k])),
                                shape=(tr.size, tr.size))

@@ -37,7 +37,7 @@ def _sparsity(M) -> ca.Sparsity:
     return ca.Sparsity(M.shape[0], M.shape[1], M.indptr.tolist(), M.indices.tolist())
 
 
-def _ones(M) -> sp.csr_matrix:
+def ones_pattern(M) -> sp.csr_matrix:
     """Every stored entry of ``M`` as 1 (its pattern)."""
     M = sp.csr_matrix(M, copy=True)
     M.data[:] = 1.0
@@ -58,6 +58,26 @@ class PositionNLP:
         self.m = len(goals) + stretch.size
         self._key, self._point = None, None
         self._jacobian_fill = self._hessian_fill = None
+
+    limited_memory = False  # True: IPOPT builds the Hessian (no hess_lag)
+
+    @property
+    def size(self) -> int:
+        """The number of unknowns."""
+        return self.tr.size
+
+    def lower(self):
+        """The bounds the values are held above."""
+        return -np.inf
+
+    def variable_bounds(self) -> dict:
+        """IPOPT's ``lbx``, ``ubx`` (none: the positions are free)."""
+        return {}
+
+    def ipopt_options(self, z0) -> dict:
+        """IPOPT's options of this problem: the effort scaled to 1 at the start."""
+        return {"obj_scaling_factor": 1.0 / max(abs(self.point(np.asarray(z0, float))["effort"]),
+                                                1e-12)}
 
     # -- the effort ---------------------------------------------------------------------
     def point(self, z) -> dict:
@@ -93,7 +113,7 @@ class PositionNLP:
     def _jacobian_pattern(self):
         goals = sp.vstack([sp.csr_matrix((abs(g.R).sum(axis=0).A1 > 0).astype(float))
                            for g in self.goals])
-        stretch = _ones(self.stretch.jacobian(np.ones(self.tr.size)))
+        stretch = ones_pattern(self.stretch.jacobian(np.ones(self.tr.size)))
         return sp.vstack([goals, stretch])
 
     # -- the Hessian of the Lagrangian ----------------------------------------------------
@@ -109,17 +129,17 @@ class PositionNLP:
         return self._on(sp.triu(H), "_hessian_fill", self._hessian_pattern)
 
     def _hessian_pattern(self):
-        J = _ones(self.tr.control_jacobian(self.tr.unknowns(self.tr.base)))
+        J = ones_pattern(self.tr.control_jacobian(self.tr.unknowns(self.tr.base)))
         S = self.strain.pattern()
-        H = (J.T @ _ones(self.Q) @ J + S.T @ S + sum(_ones(C) for C in self.C)
-             + _ones(self.stretch.hessian(np.ones(self.stretch.size))))
-        return sp.triu(_ones(H))
+        H = (J.T @ ones_pattern(self.Q) @ J + S.T @ S + sum(ones_pattern(C) for C in self.C)
+             + ones_pattern(self.stretch.hessian(np.ones(self.stretch.size))))
+        return sp.triu(ones_pattern(H))
 
     def _on(self, M, name, pattern):
         """``M`` on its fixed pattern (made once by ``pattern()``): csc, every place of the
         pattern stored (a value far below round-off fills the places ``M`` leaves out)."""
         if getattr(self, name) is None:
-            setattr(self, name, (1e-300 * _ones(pattern())).tocsc())
+            setattr(self, name, (1e-300 * ones_pattern(pattern())).tocsc())
         fill = getattr(self, name)
         out = (M + fill).tocsc()
         out.sort_indices()
@@ -128,9 +148,13 @@ class PositionNLP:
                                f"pattern {fill.nnz}): the pattern misses a term")
         return out
 
+    def start(self) -> np.ndarray:
+        """A point at which the patterns are read (the passive motion: any point gives them)."""
+        return self.tr.unknowns(self.tr.base)
+
     def patterns(self) -> tuple[ca.Sparsity, ca.Sparsity]:
         """The Jacobian's and the Hessian's CasADi sparsity."""
-        z = self.tr.unknowns(self.tr.base)  # the passive motion: any point gives them
+        z = self.start()
         return (_sparsity(self.jacobian(z)),
                 _sparsity(self.hessian(z, 1.0, np.ones(self.m))))
 
@@ -163,17 +187,22 @@ class _Numeric(ca.Callback):
 
 
 def _derivatives(nlp: PositionNLP) -> dict:
-    """IPOPT's ``grad_f``, ``jac_g`` and ``hess_lag`` for ``nlp`` (nlpsol's options)."""
-    n, m = nlp.tr.size, nlp.m
-    jac_pattern, hess_pattern = nlp.patterns()
+    """IPOPT's ``grad_f``, ``jac_g`` and ``hess_lag`` for ``nlp`` (nlpsol's options; no
+    ``hess_lag`` where IPOPT builds a limited-memory one)."""
+    n, m = nlp.size, nlp.m
     x, p, one = ca.Sparsity.dense(n, 1), ca.Sparsity(0, 0), ca.Sparsity.dense(1, 1)
-    return {
+    jac_pattern, hess_pattern = (_sparsity(nlp.jacobian(nlp.start())), None) \
+        if nlp.limited_memory else nlp.patterns()
+    derivatives = {
         "grad_f": _Numeric("grad_f", [x, p], [one, x],
                            lambda z, _: (nlp.point(z)["effort"], nlp.point(z)["gradient"])),
         "jac_g": _Numeric("jac_g", [x, p], [ca.Sparsity.dense(m, 1), jac_pattern],
-                          lambda z, _: (nlp.values(z), nlp.jacobian(z).data)),
-        "hess_lag": _Numeric("hess_lag", [x, p, one, ca.Sparsity.dense(m, 1)], [hess_pattern],
-                             lambda z, _, sigma, lam: (nlp.hessian(z, sigma[0], lam).data,))}
+                          lambda z, _: (nlp.values(z), nlp.jacobian(z).data))}
+    if hess_pattern is not None:
+        derivatives["hess_lag"] = _Numeric(
+            "hess_lag", [x, p, one, ca.Sparsity.dense(m, 1)], [hess_pattern],
+            lambda z, _, sigma, lam: (nlp.hessian(z, sigma[0], lam).data,))
+    return derivatives
 
 
 def search(nlp: PositionNLP, z0, *, maxiter: int, tol: float, deadline, on_iteration):
@@ -181,7 +210,7 @@ def search(nlp: PositionNLP, z0, *, maxiter: int, tol: float, deadline, on_itera
     ``(IPOPT's return status, its last z, iterations)``; an interrupt raises
     :class:`~casadi_keyframe.interrupts.Interrupted`, the deadline
     :class:`~casadi_keyframe.interrupts.OutOfTime`."""
-    n = nlp.tr.size
+    n = nlp.size
     derivatives = _derivatives(nlp)
     jac_pattern = derivatives["jac_g"].sparsity_out(1)
     f = NumericFunction("effort", n, ca.Sparsity.dense(1, 1),
@@ -190,9 +219,8 @@ def search(nlp: PositionNLP, z0, *, maxiter: int, tol: float, deadline, on_itera
     g = NumericFunction("goal", n, ca.Sparsity.dense(nlp.m, 1), nlp.values, jac_pattern,
                         lambda z: ca.DM(jac_pattern, nlp.jacobian(z).data))
     hook = IterationHook(n, on_iteration, m=nlp.m)
-    scale = 1.0 / max(abs(nlp.point(np.asarray(z0, float))["effort"]), 1e-12)
     options = {"max_iter": maxiter, "tol": tol, "print_level": 0, "sb": "yes",
-               "obj_scaling_factor": scale}
+               **nlp.ipopt_options(z0)}
     if deadline.limit is not None:
         options["max_wall_time"] = max(deadline.left(), 1e-3)
     X = ca.MX.sym("z", n)
@@ -201,7 +229,7 @@ def search(nlp: PositionNLP, z0, *, maxiter: int, tol: float, deadline, on_itera
                         "iteration_callback": hook, "error_on_fail": False})
     solver._keep = (f, g, *derivatives.values(), hook)  # Callbacks must outlive the solver
     with catching(signal.SIGINT) as caught:
-        out = solver(x0=z0, lbg=-np.inf, ubg=nlp.upper())
+        out = solver(x0=z0, lbg=nlp.lower(), ubg=nlp.upper(), **nlp.variable_bounds())
     signum = caught.signum or hook.interrupted
     if signum:
         raise Interrupted(signum)

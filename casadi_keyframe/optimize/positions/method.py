@@ -24,16 +24,18 @@ from ...state import SimulationError
 from ..finish.constraint import control_hessian
 from ..options import TypedOptions, real
 from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
+from .collocation import run_defects
 from .goal import MARGIN, goal_constraints
 from .interior import PositionNLP, search
 from .replay import replay_controls
+from .linear_solve import LINEAR, LinearChoice
 from .sqp import PositionSQP
 from .stretch import StretchLimit
-from .transcription import Transcription, TranscriptionError
+from .transcription import Transcription, TranscriptionError, full_forces
 
 STARTS = ("controls", "rest", "blend")
 SOLVERS = ("sqp", "ipopt")
-HESSIANS = ("gauss-newton", "exact")
+HESSIANS = ("gauss-newton", "exact", "limited-memory")
 
 
 @dataclass(frozen=True)
@@ -45,7 +47,9 @@ class TranscriptionOptions(TypedOptions):
     ``solver``: "sqp" (:mod:`.sqp`) or "ipopt" (:mod:`.interior`: the same effort, the
     physical stretch limit held at every spring and frame as well; ``settle`` is then
     IPOPT's ``tol``); ``hessian``: IPOPT's Hessian of the effort, its Gauss-Newton matrix
-    or the exact one (:mod:`.curvature`)."""
+    or the exact one (:mod:`.curvature`); ``linear``: the SQP's step solved by a sparse
+    factorisation ("direct"), by preconditioned conjugate gradients without forming its
+    matrix ("iterative", :mod:`.linear_solve`) or by the number of unknowns ("auto")."""
 
     label: ClassVar[str] = "the transcription"
     CHECKS: ClassVar[dict] = {
@@ -53,13 +57,15 @@ class TranscriptionOptions(TypedOptions):
         "margin": ("a number in (0, 1]", lambda v: real(v) and 0 < v <= 1),
         "settle": ("a number in (0, 1)", lambda v: real(v) and 0 < v < 1),
         "solver": (f"one of {', '.join(SOLVERS)}", lambda v: v in SOLVERS),
-        "hessian": (f"one of {', '.join(HESSIANS)}", lambda v: v in HESSIANS)}
+        "hessian": (f"one of {', '.join(HESSIANS)}", lambda v: v in HESSIANS),
+        "linear": (f"one of {', '.join(LINEAR)}", lambda v: v in LINEAR)}
 
     start: str = "controls"
     margin: float = MARGIN
     settle: float = 1e-3
     solver: str = "sqp"
     hessian: str = "gauss-newton"
+    linear: str = "auto"
 
 
 def start_positions(problem, start: str, u0) -> np.ndarray:
@@ -76,6 +82,8 @@ def start_positions(problem, start: str, u0) -> np.ndarray:
 
 def run(problem, ev, u0, call):
     """One search in positions (module docstring); ``(status, message)``."""
+    if not full_forces(problem):  # fewer controls: the states stay unknowns beside them
+        return run_defects(problem, ev, u0, call, start_positions)
     options = call.options
     if options.hessian != "gauss-newton" and options.solver != "ipopt":
         raise TranscriptionError(f"hessian={options.hessian} is IPOPT's: give solver=ipopt "
@@ -101,7 +109,8 @@ def run(problem, ev, u0, call):
             offer(point.z)
         call.on_iteration()
 
-    solver = PositionSQP(tr, constraints, control_hessian(problem))
+    solver = PositionSQP(tr, constraints, control_hessian(problem),
+                         LinearChoice(options.linear))
     outcome, _ = solver.run(z0, maxiter=call.maxiter, tol=options.settle, on_iteration=kept,
                             should_stop=lambda: (check() or False) or call.deadline.passed())
     said = f"{outcome.iterations} iterations in positions" + (
@@ -128,6 +137,7 @@ def _interior(problem, tr, constraints, z0, call, offer, replayed):
     nlp = PositionNLP(tr, constraints, control_hessian(problem),
                       StretchLimit(tr, problem.limits.stretch),
                       exact=call.options.hessian == "exact")
+    nlp.limited_memory = call.options.hessian == "limited-memory"
 
     offered = []
 

@@ -4,26 +4,36 @@ effort's Gauss-Newton matrix, in a trust region.
 At an iterate z, with the controls ``u(z)`` (:class:`~.transcription.Transcription`), their
 Jacobian ``J`` and the control terms' constant Hessian ``Q``, each step solves
 
-    minimise  g^T p + 1/2 p^T (J^T Q J + sum_k lambda_k C_k + mu D) p
+    minimise  g^T p + 1/2 p^T (J^T Q J + J_r^T J_r + sum_k lambda_k C_k + mu D) p
     subject to c_k + a_k^T p <= (1 - theta) c_k if c_k > 0, else 0   (the goal, :mod:`.goal`)
 
-(``g = J^T Q u``: the effort's gradient; ``C_k`` the constraints' constant Hessians and
+(``g = J^T Q u + s J_r^T r``: the effort's gradient, its strain penalty's part (residuals
+``r``, :mod:`.strain`) weighed by ``s = theta`` until the goal holds, then by 1; ``C_k`` the
+constraints' constant Hessians and
 ``lambda_k`` their last multipliers; ``D`` :func:`damping_metric`, weighed as the control
 cost weighs a force, so ``mu`` is a pure number): one sparse Cholesky factorisation, one
-solve per constraint and a tiny active-set problem for the multipliers.  ``mu`` and
-``theta`` (the share of a violated constraint one step removes) make a trust region: the
-linear model of the forces holds only for small moves where the cloth buckles or turns (a
-buckling sheet's positions move far for forces that change little to first order, the
-controls' sensitivity seen from the other side).  The trial is corrected for the stiff
-springs (:mod:`.restore`) and, where it breaks a keyframe's bound beyond the linear model
-(the misses are quadratic in the positions), by a second-order correction on the same
-factor; a plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a
-share of what the model predicts (``sigma`` at least twice the multipliers, the QP's and
-their least-squares estimate).  Then ``mu`` halves and ``theta`` doubles; else ``mu`` grows
-(fourfold, sixteenfold when the merit rose) and ``theta`` halves if the goal's own model
-failed.  It ends when the constraints hold and the effort has changed by less than ``tol``
-(relative) over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or
-when no step is kept at the largest damping.
+solve per constraint and a tiny active-set problem for the multipliers. ``mu`` and ``theta``
+(the share of a violated constraint one step removes) make a trust region: the linear model
+of the forces holds only for small moves where the cloth buckles or turns (a buckling
+sheet's positions move far for forces that change little to first order, the controls'
+sensitivity seen from the other side). The trial is corrected for the stiff springs
+(:mod:`.restore`) and, where it breaks a keyframe's bound beyond the linear model (the
+misses are quadratic in the positions), by a second-order correction on the same factor; a
+plan the model's own checks refuse (a torn cloth) is never kept; it is kept when the exact
+l1 merit ``effort + sigma sum max(c_k, 0)`` falls by a share of what the model predicts
+(``sigma`` at least twice the multipliers, the QP's and their least-squares estimate). Then
+``mu`` halves and ``theta`` doubles, up to :data:`THETA_MAX`; else ``mu`` grows (fourfold,
+sixteenfold when the merit rose) and ``theta`` halves if the goal's own model failed or the
+merit rose by more than the model's decrease (the goal's demand keeps a step long whatever
+``mu``).
+``theta`` never exceeds :data:`THETA_MAX` < 1, so the goal is approached over several steps,
+each trading it against the effort: a step that removes the whole violation at once commits
+the motion to the first way the linear model finds to meet the goal (from a sheet held
+still: held up against gravity all along and folded in the last frames), a local optimum of
+far more effort than the motions a gradual approach finds. It ends when the constraints hold
+(to :data:`HELD` of their bounds) and the effort has changed by less than ``tol`` (relative)
+over the last :data:`SETTLED` kept steps, at ``maxiter``, when asked to stop, or when no
+step is kept at the largest damping.
 """
 from __future__ import annotations
 
@@ -39,13 +49,16 @@ except ImportError:  # SuperLU instead (slower, same answer)
 from scipy.sparse.linalg import splu
 
 from ...state import SimulationError
+from .linear_solve import LinearChoice, iterative_system
 from .restore import LengthRestoration
 from .strain import StrainPenalty
 
 ACCEPT = 0.1  # the share of the merit's predicted decrease a kept step must achieve
 MU_START, MU_MIN, MU_MAX = 1e3, 1e-10, 1e12  # damping, in the metric D
-THETA_START, THETA_MIN = 1.0, 1e-3  # the share of the goal's violation a step removes
+THETA_MAX, THETA_MIN = 0.5, 1e-3  # the share of the goal's violation a step removes
 SETTLED = 3  # kept steps over which the effort must have settled
+HELD = 1e-3  # a constraint within this share of its bound beyond it counts as held: with
+# THETA_MAX < 1 a step asks for a share of a violation, which then shrinks but never ends
 POSITION_SHARE = 0.01  # of the damping metric's weight on the positions themselves
 
 
@@ -61,6 +74,7 @@ class Point:
     c: np.ndarray
     J: object = None
     Jr: object = None  # the strain penalty's residuals' Jacobian
+    r: object = None  # the strain penalty's residuals
 
     def violation(self) -> float:
         return float(np.sum(np.maximum(self.c, 0.0)))
@@ -95,48 +109,65 @@ class Outcome:
 
 
 class Factor:
-    """Sparse Cholesky (CHOLMOD through cvxopt, its analysis kept while the pattern holds;
-    SuperLU without cvxopt) of a symmetric positive definite matrix."""
+    """Sparse Cholesky of a symmetric positive definite matrix given whole (CHOLMOD through
+    cvxopt, its analysis and the place of its lower triangle kept while the pattern holds;
+    SuperLU without cvxopt).  The ordering is the unknowns' own, frame after frame: the
+    step's matrix is banded in time, and its factor is smaller in that order than in
+    CHOLMOD's fill-reducing one (``benchmarks/sqp_factor.py`` measures both)."""
 
-    def __init__(self):
+    def __init__(self, natural: bool = True):
+        self.natural = natural
         self._pattern = None
         self._symbolic = None
         self._matrix = None
+        self._lower = None  # where the lower triangle's entries sit in the matrix's data
 
-    def __call__(self, B: sp.csc_matrix):
-        B = sp.csc_matrix(B)
-        B.sort_indices()
+    def __call__(self, B):
+        B = sp.csr_matrix(B)
+        B.sum_duplicates()  # canonical: sorted, no duplicates (free when it already is)
         if cholmod is None:
-            lu = splu(B)
+            lu = splu(B.tocsc())
             return lambda rhs: lu.solve(np.asarray(rhs, float))
-        lower = sp.tril(B, format="csc")
-        lower.sort_indices()
-        key = (lower.indptr.tobytes(), lower.indices.tobytes())
+        key = (B.indptr.tobytes(), B.indices.tobytes())
         if key != self._pattern:
-            col = np.repeat(np.arange(lower.shape[1]), np.diff(lower.indptr))
-            self._matrix = spmatrix(matrix(lower.data), matrix(lower.indices.astype(np.int64)),
-                                    matrix(col.astype(np.int64)), lower.shape)
-            self._symbolic, self._pattern = cholmod.symbolic(self._matrix, uplo="L"), key
-        else:
-            self._matrix.V = matrix(lower.data)
+            self._analyse(B)
+            self._pattern = key
+        self._matrix.V = matrix(B.data[self._lower])
         cholmod.numeric(self._matrix, self._symbolic)
-        factor = self._symbolic
+        factor, n = self._symbolic, B.shape[0]
 
         def solve(rhs):
-            b = matrix(np.asarray(rhs, float).reshape(B.shape[0], -1))
+            b = matrix(np.asarray(rhs, float).reshape(n, -1))
             cholmod.solve(factor, b)
             return np.asarray(b).reshape(np.shape(rhs))
 
         return solve
 
+    def _analyse(self, B) -> None:
+        """The analysis of ``B``'s pattern: a symmetric matrix's upper triangle by rows is
+        its lower triangle by columns, loaded in CHOLMOD's order (read from a probe)."""
+        n = B.shape[0]
+        row = np.repeat(np.arange(n), np.diff(B.indptr))
+        upper = np.flatnonzero(B.indices >= row)
+        probe = spmatrix(matrix(np.arange(upper.size, dtype=float)),
+                         matrix(B.indices[upper].astype(np.int64)),
+                         matrix(row[upper].astype(np.int64)), (n, n))
+        self._lower = upper[np.asarray(probe.V, dtype=np.intp).ravel()]
+        self._matrix = probe
+        order = {"p": matrix(np.arange(n, dtype=np.int64))} if self.natural else {}
+        self._symbolic = cholmod.symbolic(probe, uplo="L", **order)
+
 
 class PositionSQP:
     """The module docstring's search on a transcription ``tr`` under ``constraints``."""
 
-    def __init__(self, tr, constraints, Q: sp.spmatrix):
+    def __init__(self, tr, constraints, Q: sp.spmatrix, linear: LinearChoice | None = None):
         self.tr, self.constraints = tr, constraints
+        self.linear = linear or LinearChoice()
+        self.solves = None  # the last iteration's iterative solves (None: direct)
         self.Q = sp.csr_matrix(Q)
         self.C = [c.hessian() for c in constraints]
+        self.held = HELD * np.array([abs(c.bound) for c in constraints])
         self.factor = Factor()
         self.evaluations = 0
         self.sigma = 0.0  # the merit's penalty weight, never lowered
@@ -144,7 +175,8 @@ class PositionSQP:
         self.strain = StrainPenalty(tr)
         self._fill = None
         self.mu_used = None
-        self.metric = damping_metric(tr, float(np.mean(Q.diagonal())))
+        self.weight = float(np.mean(Q.diagonal()))
+        self.metric = damping_metric(tr, self.weight)
 
     def point(self, z, jacobian: bool = True) -> Point:
         """The iterate at ``z`` (with the Jacobians when asked): its effort is the control
@@ -157,14 +189,14 @@ class PositionSQP:
         J = self.tr.control_jacobian(z) if jacobian else None
         gradient = None if J is None else J.T @ grad_u + Jr.T @ r
         c = np.array([k.value(z) for k in self.constraints])
-        return Point(z, u, effort, gradient, c, J, Jr)
+        return Point(z, u, effort, gradient, c, J, Jr, r)
 
     def run(self, z0, *, maxiter: int, tol: float, on_iteration=None, should_stop=None):
         """From ``z0``: the :class:`Outcome` (``on_iteration(Progress, point)`` after each,
         ``should_stop()`` checked before each, True to end the search)."""
         x = self.point(z0)
         lam = np.zeros(len(self.constraints))
-        mu, theta, history, efforts = MU_START, THETA_START, [], [x.effort]
+        mu, theta, history, efforts = MU_START, THETA_MAX, [], [x.effort]
         reason, it = "maxiter", 0
         for it in range(1, maxiter + 1):
             if should_stop is not None and should_stop():
@@ -191,11 +223,14 @@ class PositionSQP:
             if kept:
                 x, lam = self.point(trial.z), lam_new
                 if ratio > 0.5:
-                    mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, 1.0)
+                    mu, theta = max(mu / 2.0, MU_MIN), min(2.0 * theta, THETA_MAX)
             else:
                 mu = min((16.0 if ratio < -1.0 else 4.0) * mu + MU_MIN, MU_MAX)
-                if trial.violation() > 0.5 * (x.violation() + np.maximum(self._linear, 0).sum()):
-                    theta = max(theta / 2.0, THETA_MIN)  # the goal's model failed too
+                failed = trial.violation() > 0.5 * (x.violation()
+                                                    + np.maximum(self._linear, 0).sum())
+                if failed or ratio < -1.0:  # the goal's model failed too, or the merit
+                    # rose beyond the model: a step the goal's demand keeps long whatever mu
+                    theta = max(theta / 2.0, THETA_MIN)
             report = Progress(it, x.effort, x.violation(),
                               [k.miss(x.z) for k in self.constraints], mu,
                               float(np.linalg.norm(step)), kept, theta, ratio)
@@ -204,7 +239,7 @@ class PositionSQP:
                 on_iteration(report, x)
             if kept:
                 efforts.append(x.effort)
-            if (kept and x.violation() == 0 and len(efforts) > SETTLED
+            if (kept and np.all(x.c <= self.held) and len(efforts) > SETTLED
                     and np.ptp(efforts[-SETTLED - 1:]) <= tol * max(abs(x.effort), 1e-300)):
                 reason = "converged"
                 break
@@ -216,20 +251,14 @@ class PositionSQP:
     def _step(self, x: Point, lam, mu, theta):
         """``(step, multipliers, predicted merit decrease, sigma)`` of the QP at ``x``, the
         violated constraints asked to fall by the share ``theta``."""
-        JQ = self.Q @ x.J
-        H = (x.J.T @ JQ + x.Jr.T @ x.Jr).tocsc()
-        for l, C in zip(lam, self.C):
-            if l > 0:
-                H = H + l * C
-        while True:  # a matrix that does not factor (round-off): more damping
-            try:
-                solve = self.factor((H + mu * self.metric + self._pattern(x)).tocsc())
-                break
-            except ArithmeticError:
-                mu = max(4.0 * mu, 1e-8)
+        solve, curvature, mu = self._system(x, lam, mu)
         self.mu_used = mu
         A = self._gradients(x.z)
-        p0 = -solve(x.gradient)
+        # the strain penalty's excess too is asked to fall by the share theta while the
+        # goal is not held (a zero-force start stretches the sheet far past the limit),
+        # then by its own gradient, whose steps end at the true optimum
+        share = 1.0 if np.all(x.c <= self.held) else theta
+        p0 = -solve(x.gradient - (1.0 - share) * (x.Jr.T @ x.r))
         W = solve(A)
         # c + a^T p <= c - theta c where violated (a share of it removed), <= 0 elsewhere
         aim = np.where(x.c > 0, theta * x.c, x.c)
@@ -238,9 +267,31 @@ class PositionSQP:
         self._solve, self._linear = solve, linear  # for the trial's correction
         self.sigma = max(self.sigma, 2.0 * lam_a.max(initial=0.0))
         sigma = self._penalty(A, x.gradient)
-        model = -(x.gradient @ step + 0.5 * step @ (H @ step))
+        model = -(x.gradient @ step + 0.5 * step @ curvature(step))
         predicted = model + sigma * (np.maximum(x.c, 0).sum() - np.maximum(linear, 0).sum())
         return step, lam_a, predicted, sigma
+
+    def _system(self, x: Point, lam, mu):
+        """``(solve, curvature, mu)``: the step's matrix at ``x`` factored (or, for large
+        sheets, solved by conjugate gradients without forming it, :mod:`.linear_solve`), the
+        model's matrix (without the damping) times a vector, and the damping used (raised
+        while the matrix does not factor)."""
+        while True:  # a matrix that does not factor (round-off): more damping
+            try:
+                if self.linear.iterative(self.tr.size):
+                    system = iterative_system(self, x, lam, mu, self.linear)
+                    self.solves = system.solves
+                    return system.solve, system.curvature, mu
+                # every operand by rows (a mix converts the large ones at every operation)
+                G = x.J.T.tocsr() @ (self.Q @ x.J)  # the one product of the state's size
+                curvature = x.Jr.T.tocsr() @ x.Jr
+                for l, C in zip(lam, self.C):
+                    if l > 0:
+                        curvature = curvature + l * C
+                solve = self.factor(G + (self._pattern(x) + (curvature + mu * self.metric)))
+                return solve, (lambda p: G @ p + curvature @ p), mu
+            except ArithmeticError:
+                mu = max(4.0 * mu, 1e-8)
 
     def _pattern(self, x: Point) -> sp.csr_matrix:
         """Every place the step's matrix can ever hold a value, each at a value far below

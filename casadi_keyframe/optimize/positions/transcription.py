@@ -33,34 +33,60 @@ class TranscriptionError(ValueError):
     which and what to solve it with instead)."""
 
 
-def check_transcribable(problem) -> None:
-    """Refuse a problem the transcription cannot write in closed form (TranscriptionError
-    naming what and how to solve it instead): per-step forces on every free particle, the
-    linearized backward Euler step, a model whose families write their step."""
+def check_steps(problem) -> None:
+    """Refuse a problem whose step the transcription cannot write (TranscriptionError naming
+    what and how to solve it instead): the linearized backward Euler step, a model whose
+    families write their step and hold no particle on a body."""
     name = problem.name
     if not isinstance(problem.integrator, LinearizedBackwardEuler):
         raise TranscriptionError(
             f"{name}: the transcription inverts the linearized backward Euler step; this "
             f"problem steps with {type(problem.integrator).__name__}: solve it with "
             "method='lbfgsb' (or any other method of METHODS)")
-    if not isinstance(problem.controls, StepForces):
+    if not hasattr(problem.model, "symbolic_step"):
+        raise TranscriptionError(f"{name}: {type(problem.model).__name__} does not write its "
+                                 "step symbolically: solve it with method='lbfgsb'")
+    if any(getattr(f, "holds", False) for f in getattr(problem.model, "families", ())):
         raise TranscriptionError(
-            f"{name}: the transcription needs per-step forces on every free particle (the "
-            f"forces follow from the positions); this problem's controls are "
-            f"{problem.controls.label}: solve it with method='lbfgsb', or with multiple "
-            "shooting (shooting=K)")
+            f"{name}: its contact holds particles on a body (collision 'guarded' or "
+            "'constraint'), a decision of the step the inverse step cannot write in "
+            "positions: give collision='penalty' (the paper's penalty springs, which it "
+            "writes), or solve it without --method (the problem's own SOLVE)")
+
+
+def full_forces(problem) -> bool:
+    """Whether the controls are per-step forces on every free particle, so the forces
+    follow from the positions in closed form (:class:`Transcription`); otherwise the states
+    stay unknowns beside the controls (:mod:`.defects`)."""
+    return isinstance(problem.controls, StepForces) and not _unpushed(problem).size
+
+
+def _unpushed(problem) -> np.ndarray:
+    """The free particles that per-step forces ``problem.controls`` leave without one."""
     model = problem.model
     free = model.free_mask().reshape(model.n, model.dim).any(axis=1)
-    missing = np.setdiff1d(np.flatnonzero(free), problem.controls.idx)
+    return np.setdiff1d(np.flatnonzero(free), problem.controls.idx)
+
+
+def check_transcribable(problem) -> None:
+    """Refuse a problem the transcription cannot write in closed form (TranscriptionError
+    naming what and how to solve it instead): per-step forces on every free particle, the
+    linearized backward Euler step, a model whose families write their step."""
+    check_steps(problem)
+    name = problem.name
+    if not isinstance(problem.controls, StepForces):
+        raise TranscriptionError(
+            f"{name}: the closed-form transcription needs per-step forces on every free "
+            f"particle (the forces follow from the positions); this problem's controls are "
+            f"{problem.controls.label}: method='transcription' keeps the states as unknowns "
+            "for it (defects.StepDefects), or solve it with method='lbfgsb'")
+    missing = _unpushed(problem)
     if missing.size:
         raise TranscriptionError(
-            f"{name}: the transcription needs a force on every free particle; "
+            f"{name}: the closed-form transcription needs a force on every free particle; "
             f"{missing.size} free particles (e.g. {missing[:5].tolist()}) have none: "
-            "control every free particle (StepForces() without agents), or solve it with "
-            "method='lbfgsb'")
-    if not hasattr(model, "symbolic_step"):
-        raise TranscriptionError(f"{name}: {type(model).__name__} does not write its step "
-                                 "symbolically: solve it with method='lbfgsb'")
+            "method='transcription' keeps the states as unknowns for it "
+            "(defects.StepDefects), or control every free particle")
 
 
 class Transcription:
@@ -75,7 +101,7 @@ class Transcription:
     """
 
     def __init__(self, problem):
-        check_transcribable(problem)
+        self.check(problem)
         self.problem = problem
         model = problem.model
         self.n, self.N, self.dt = model.n, problem.steps, problem.dt
@@ -91,7 +117,16 @@ class Transcription:
                               axis=1) if model.scene_parameters(0.0).size else np.zeros((0, self.N))
         self._step = Buffered(inverse_step_function(model, self.dt).map(self.N))
         self.times = np.arange(self.N) * self.dt
+        self.v_start = problem.v0  # v_0, whose step ``x_before`` is behind x_0
         self._jacobian = None  # its pattern, made at the first call
+
+    check = staticmethod(check_transcribable)
+
+    def row_components(self) -> np.ndarray:
+        """The components (``3 p + d``) whose force rows :meth:`control_jacobian` gives, in
+        order: the controlled particles'."""
+        idx = self.problem.controls.idx
+        return (idx[:, None] * 3 + np.arange(3)).ravel()
 
     # -- positions --------------------------------------------------------------------------
     def frames(self, z) -> np.ndarray:
@@ -107,7 +142,7 @@ class Transcription:
     def velocities(self, x) -> np.ndarray:
         """Each frame's velocity ``(N + 1, n, 3)``: ``v_0`` the problem's, then differences."""
         v = np.empty_like(x)
-        v[0] = self.problem.v0
+        v[0] = self.v_start
         v[1:] = np.diff(x, axis=0) / self.dt
         return v
 
@@ -117,12 +152,17 @@ class Transcription:
         before = np.concatenate([self.x_before[None], x[:-2]], axis=0)
         return [np.ascontiguousarray(a) for a in (before, x[:-1], x[1:])]
 
+    def scene_columns(self) -> np.ndarray:
+        """The scene of every step as the mapped step reads it: ``(N, k)``, C order (one
+        column of CasADi's ``k x N`` per step)."""
+        return np.ascontiguousarray(self.scene.T)
+
     # -- forces -----------------------------------------------------------------------------
     def forces(self, z) -> np.ndarray:
         """Every step's external force ``(N, n, 3)`` that moves the particles along ``z``
         (stored forces and controls together; constrained components' are meaningless)."""
         x = self.frames(z)
-        (E,) = self._step(*self._stacked(x), self.scene)
+        (E,) = self._step(*self._stacked(x), self.scene_columns())
         return E.reshape(self.N, self.n, 3)
 
     def controls(self, z) -> np.ndarray:
@@ -164,8 +204,7 @@ class ControlJacobianPattern:
         self.column = -np.ones(3 * n, np.int64)
         self.column[tr.free_flat] = np.arange(tr.nf)
         self.row = -np.ones(3 * n, np.int64)
-        idx = tr.problem.controls.idx
-        comps = (idx[:, None] * 3 + np.arange(3)).ravel()
+        comps = tr.row_components()
         self.row[comps] = np.arange(comps.size)
         self.width = comps.size
         self.shape = (N * comps.size, tr.size)

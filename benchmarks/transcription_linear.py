@@ -1,12 +1,12 @@
 """The search in positions with its step solved directly (CHOLMOD on the formed matrix) or
-iteratively (conjugate gradients on the operator, the per-step preconditioner:
-``positions/linear_solve.py``): per iteration the effort, the violation, the damping, the
+iteratively (conjugate gradients on the operator, the per-frame block preconditioner by
+default: ``positions/linear_solve.py``): per iteration the effort, the violation, the damping, the
 conjugate gradient iterations and the CPU seconds; at the end the misses, stretch, effort
 (rms and peak control acceleration), the replay's distance from the plan, CPU seconds and the
 process's peak memory.
 
     .venv/bin/python benchmarks/transcription_linear.py CASE [--linear iterative]
-        [--maxiter 40] [--preconditioner steps|jacobi|none] [--cpu-limit 600]
+        [--maxiter 40] [--preconditioner frames|steps|jacobi|none] [--cpu-limit 600]
     .venv/bin/python benchmarks/transcription_linear.py CASE --solves [--after 2]
         [--preconditioner frames,steps,jacobi,none]
 

@@ -18,7 +18,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...interrupts import OutOfTime, check
+from ...interrupts import check
 from ...objectives.paths import keyframe_path
 from ...state import SimulationError
 from ..finish.constraint import control_hessian
@@ -26,7 +26,7 @@ from ..options import TypedOptions, real
 from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
 from .collocation import run_defects
 from .goal import MARGIN, goal_constraints
-from .interior import PositionNLP, search
+from .interior import PositionNLP, each_iterate, search
 from .replay import replay_controls
 from .linear_solve import LINEAR, LinearChoice
 from .sqp import PositionSQP
@@ -141,17 +141,11 @@ def _interior(problem, tr, constraints, z0, call, offer, replayed):
 
     offered = []
 
-    def each(z):
-        try:  # an interior iterate may be a plan the simulation refuses (a torn cloth)
-            offer(z)
-            offered.append(z)
-        except SimulationError:
-            pass
-        check()
-        if call.deadline.passed():
-            raise OutOfTime(call.deadline)
-        call.on_iteration()
+    def kept(z):
+        offer(z)
+        offered.append(z)
 
+    each = each_iterate(kept, call)
     status, z, iterations = search(nlp, z0, maxiter=call.maxiter, tol=call.options.settle,
                                    deadline=call.deadline, on_iteration=each)
     if not offered or not np.array_equal(offered[-1], z):

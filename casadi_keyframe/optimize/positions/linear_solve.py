@@ -37,7 +37,8 @@ from ... import progress
 from ...interrupts import check
 
 LINEAR = ("auto", "direct", "iterative")
-AUTO_SIZE = 60_000  # unknowns above which linear="auto" solves iteratively (docs/search_notes.md)
+AUTO_FACTOR = 8e7  # unknowns times one frame's above which linear="auto" solves iteratively:
+# the factor frame after frame holds about that many non-zeros (docs/search_notes.md)
 CG_TOL = 1e-6  # relative residual at which conjugate gradients stop
 CG_MAXITER = 400  # conjugate gradient iterations per solve at most
 CG_SETTLE = 1e-3  # stop once the model falls by less than this share over WINDOW iterations
@@ -48,7 +49,8 @@ PRECONDITIONERS = ("steps", "frames", "jacobi", "none")
 @dataclass
 class LinearChoice:
     """How the step's system is solved: ``linear`` one of :data:`LINEAR`; ``auto`` is
-    iterative above :data:`AUTO_SIZE` unknowns."""
+    iterative where the unknowns times one frame's unknowns (the size of the factor frame
+    after frame, about) exceed :data:`AUTO_FACTOR`."""
 
     linear: str = "auto"
     tol: float = CG_TOL
@@ -63,8 +65,10 @@ class LinearChoice:
             raise ValueError(f"preconditioner={self.preconditioner!r}: give one of "
                              f"{', '.join(PRECONDITIONERS)}")
 
-    def iterative(self, size: int) -> bool:
-        return self.linear == "iterative" or (self.linear == "auto" and size > AUTO_SIZE)
+    def iterative(self, size: int, frame: int) -> bool:
+        """Whether ``size`` unknowns, ``frame`` of them per frame, are solved iteratively."""
+        return self.linear == "iterative" or (self.linear == "auto"
+                                              and size * frame > AUTO_FACTOR)
 
 
 class StepOperator:

@@ -278,7 +278,7 @@ class PositionSQP:
         while the matrix does not factor)."""
         while True:  # a matrix that does not factor (round-off): more damping
             try:
-                if self.linear.iterative(self.tr.size):
+                if self.linear.iterative(self.tr.size, self.tr.nf):
                     system = iterative_system(self, x, lam, mu, self.linear)
                     self.solves = system.solves
                     return system.solve, system.curvature, mu

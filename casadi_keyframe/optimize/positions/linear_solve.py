@@ -111,10 +111,11 @@ class StepOperator:
 
 class StepPreconditioner:
     """The module docstring's ``"steps"``, ``(L^T Q L)^-1`` for a transcription ``tr`` whose control
-    Hessian is ``Q`` and whose damping metric weighs a force by ``weight``: :meth:`update`
+    Hessian is ``Q`` and whose damping metric weighs a force by ``weight`` and a component by
+    ``scale`` (:func:`~.sqp.inertial_scale`): :meth:`update`
     at each iterate (``J``, ``mu``), then called on residuals ``(size,)`` or ``(size, k)``."""
 
-    def __init__(self, tr, Q, weight: float, metric):
+    def __init__(self, tr, Q, weight: float, metric, scale):
         self.N, self.nf = tr.N, tr.nf
         idx = tr.problem.controls.idx
         comps = (idx[:, None] * 3 + np.arange(3)).ravel()
@@ -127,7 +128,6 @@ class StepPreconditioner:
         q = np.asarray(sp.csr_matrix(Q).diagonal())[self.rows] if self.usable else None
         self.q = q
         self.weight = weight
-        scale = np.repeat(tr.problem.model.masses, 3)[tr.free_flat] / tr.dt ** 2
         self.S = sp.kron(_lower_root(metric, tr.N, tr.nf, weight * scale[0] ** 2),
                          sp.diags(scale)).tocsr()
         self.blocks = self.lower = self.upper = None
@@ -241,7 +241,8 @@ def iterative_system(sqp, x, lam, mu: float, choice: LinearChoice) -> IterativeS
     kind = choice.preconditioner
     if kind == "steps":
         if getattr(sqp, "_preconditioner", None) is None:
-            sqp._preconditioner = StepPreconditioner(sqp.tr, sqp.Q, sqp.weight, sqp.metric)
+            sqp._preconditioner = StepPreconditioner(sqp.tr, sqp.Q, sqp.weight, sqp.metric,
+                                                     sqp.scale)
         pre = sqp._preconditioner
         if pre.usable:
             pre.update(x.J, mu)

@@ -78,7 +78,7 @@ def search(prob, args):
                          LinearChoice(args.linear, preconditioner=args.preconditioner))
     z0 = tr.unknowns(start_positions(prob, "rest", None))
     print(f"{prob.name}: {tr.size} unknowns, linear={args.linear}"
-          f" ({'iterative' if solver.linear.iterative(tr.size) else 'direct'})", flush=True)
+          f" ({'iterative' if solver.linear.iterative(tr.size, tr.nf) else 'direct'})", flush=True)
     print("| it | effort | violation | misses mm | mu | kept | CG iterations | CPU s |")
     print("|---|---|---|---|---|---|---|---|")
     t0 = time.process_time()

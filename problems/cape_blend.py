@@ -15,7 +15,9 @@ searches stall far off or tear the cape, so the default start is a tracking gues
 forces ``SOLVE`` asks for multiple shooting.  ``contact`` > 1 makes the body's contact that
 many times softer and thicker (a homotopy level); ``collision`` how the body is touched;
 ``friction`` the Coulomb coefficient of the body and the ground (0: frictionless).
-``body`` what it is: its capsules ("capsules"), their surface as a triangle mesh animated per
+``rest_band``: the strain band below rest over which the linearized step's spring stiffness
+turns smoothly (``ClothParams.rest_band``; 0, the default, is the paper's step).  ``body``
+what it is: its capsules ("capsules"), their surface as a triangle mesh animated per
 frame ("mesh"), or a mesh file read as the character (a PC2 cache beside its rest OBJ at one
 frame per ``dt``, or a time-sampled USD; t = 0 is the blend's start, as
 ``scenes.body_meshes.write_body`` writes it).  Measurements behind these choices:
@@ -32,7 +34,7 @@ from casadi_keyframe.scenes.animations import fall, transition
 from casadi_keyframe.scenes.body_meshes import cape_body, cape_body_file
 from casadi_keyframe.scenes.cape_tracking import (blend_steps, check_attached, reference_path,
                                                   tracking_guess)
-from casadi_keyframe.scenes.capes import cached_clip, cape_contacts, cape_model
+from casadi_keyframe.scenes.capes import CAPE_PARAMS, cached_clip, cape_contacts, cape_model
 from casadi_keyframe.scenes.cloths import cloth_problem
 from casadi_keyframe.scenes.skeleton import Character
 from casadi_keyframe.views import BlendView, Clip
@@ -64,7 +66,7 @@ RANGES = {"rows": "[2, inf)", "cols": "[3, inf)", "steps": "[2, inf)", "dt": "(0
           "t_a": "[0, inf)", "t_b": "[0, inf)", "window": "(0, inf)",
           "position_weight": "[0, inf)", "velocity_weight": "[0, inf)", "alpha": "[0, inf)",
           "temporal": "[0, inf)", "guess": GUESSES, "contact": "[1, inf)",
-          "collision": COLLISIONS, "friction": "[0, inf)"}
+          "collision": COLLISIONS, "friction": "[0, inf)", "rest_band": "[0, 1)"}
 
 
 def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 1 / 60,
@@ -72,7 +74,7 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
           position_weight: float = 400.0, velocity_weight: float = 4.0, alpha: float = 1e-4,
           temporal: float = 1e-7, guess: str = "tracking", contact: float = 1.0,
           collision: str = DEFAULT_COLLISION, friction: float = 0.0,
-          body: str = "capsules"):
+          body: str = "capsules", rest_band: float = 0.0):
     steps = blend_steps(steps, window, dt)
     contacts = _contacts(rows, cols, dt, contact, friction)
     given = cape_body_file("cape_blend", body, dt, contacts["body"])  # before any simulation
@@ -90,6 +92,7 @@ def build(rows: int = 26, cols: int = 16, steps: int | None = None, dt: float = 
     motion = transition(fall_motion, walk_motion, t_a, t_b, window)
     model = cape_model(character, motion.shifted(-t_a), rows=rows, cols=cols, dt=dt,
                        contacts=contacts, collision=collision,
+                       params=replace(CAPE_PARAMS, rest_band=rest_band) if rest_band else None,
                        body=cape_body("cape_blend", body, character, motion.shifted(-t_a),
                                       window, dt, contacts["body"], given))
     x0, v0 = fall_traj.x[fall_start], fall_traj.v[fall_start]

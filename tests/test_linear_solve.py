@@ -98,10 +98,12 @@ def test_the_search_with_the_iterative_solve_meets_the_goal_as_the_direct_one():
 
 
 def test_auto_chooses_by_size_and_a_bad_value_is_refused_by_name():
-    assert not ls.LinearChoice("auto").iterative(ls.AUTO_SIZE)
-    assert ls.LinearChoice("auto").iterative(ls.AUTO_SIZE + 1)
-    assert ls.LinearChoice("iterative").iterative(10)
-    assert not ls.LinearChoice("direct").iterative(10 ** 9)
+    mesh12, sheet16, sheet20 = (34_080, 426), (60_960, 762), (95_520, 1_194)  # 80 frames
+    assert not ls.LinearChoice("auto").iterative(*mesh12)
+    assert not ls.LinearChoice("auto").iterative(*sheet16)
+    assert ls.LinearChoice("auto").iterative(*sheet20)
+    assert ls.LinearChoice("iterative").iterative(10, 1)
+    assert not ls.LinearChoice("direct").iterative(10 ** 9, 10 ** 4)
     with pytest.raises(ValueError, match="linear"):
         ck.solve(sheet_problem(), method="transcription", options={"linear": "cg"})
     with pytest.raises(ValueError, match="preconditioner"):

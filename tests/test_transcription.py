@@ -287,3 +287,37 @@ def test_contact_that_holds_particles_on_a_body_is_refused_with_what_to_give_ins
     prob = ck.load_problem("mesh_keyframes", spheres=(0.5, -0.3, -0.6, 0.1), guess="none")
     with pytest.raises(TranscriptionError, match="collision='penalty'"):
         Transcription(prob)
+
+
+def test_a_heavily_damped_step_moves_every_particle_by_its_share_of_the_miss():
+    """The keyframe counts every particle alike, and so does the damping metric: at a
+    damping that leaves the model out, the step moves each free particle of the keyframe's
+    frame in proportion to its miss, the light corners of a lumped mesh no further (a metric
+    weighed by each particle's mass squared threw them past their targets)."""
+    from casadi_keyframe.meshes import check_mesh
+    from casadi_keyframe.optimize.finish.constraint import control_hessian
+    from casadi_keyframe.optimize.positions.method import start_positions
+    from casadi_keyframe.optimize.positions.sqp import PositionSQP
+    from casadi_keyframe.scenes.mesh_cloths import mesh_keyframe_problem
+    from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet
+
+    v, q = hanging_sheet(5, 5)
+    prob = mesh_keyframe_problem(
+        cloth=check_mesh(v, q), keyframes=[(20, check_mesh(fold(v), q))], steps=None,
+        dt=1 / 60, mass=0.3, pinned=[0, 4], control="forces", colliders=[], weight=100.0,
+        alpha=1e-4, align=False, strain_limit=1.2, strain_weight=1e3, guess="none",
+        rest_band=0.05)
+    masses = prob.model.masses
+    assert masses.max() > 3 * masses.min()  # the corners are light
+    tr = Transcription(prob)
+    solver = PositionSQP(tr, goal_constraints(tr), control_hessian(prob))
+    x = solver.point(tr.unknowns(start_positions(prob, "rest", None)))
+    step = solver._step(x, np.zeros(len(solver.constraints)), 1e10, 0.5)[0]
+    frames = tr.frames(x.z + step) - tr.frames(x.z)
+    target = prob.objective_terms.state_terms[0].position_target
+    at = tr.frames(x.z)[20]
+    missed = np.flatnonzero(tr.free.any(axis=1) & (np.linalg.norm(target - at, axis=1) > 1e-3))
+    assert masses[missed].min() == masses[tr.free.any(axis=1)].min()  # a light corner in
+    miss = target[missed] - at[missed]
+    share = np.einsum("ia,ia->i", frames[20][missed], miss) / np.einsum("ia,ia->i", miss, miss)
+    assert share.min() > 0 and share.max() < 1.05 * share.min()

@@ -7,6 +7,7 @@ in what it gives (its fixed pairs and stencils, whether it holds).
 """
 from __future__ import annotations
 
+import copy
 import functools
 
 import casadi as ca
@@ -45,6 +46,21 @@ class FamilyModel(BlockJacobians, StepHold):
                 return family
         raise KeyError(f"this model has no {name!r} family; it has "
                        f"{[f.name for f in self.families]}")
+
+    def restricted(self, keep) -> "FamilyModel":
+        """A copy of this model with only the families ``keep(family)`` accepts (the same
+        family objects; what is derived from the families is derived again): for a route
+        that writes part of the step itself and leaves the rest to ``simulate``."""
+        families = tuple(f for f in self.families if keep(f))
+        if len(families) == len(self.families):
+            return self
+        out = copy.copy(self)
+        state = vars(out)
+        for name in [k for k, v in vars(FamilyModel).items()
+                     if isinstance(v, functools.cached_property)]:
+            state.pop(name, None)
+        state["families"] = check_families(families)
+        return out
 
     # -- structure -----------------------------------------------------------------------
     @functools.cached_property

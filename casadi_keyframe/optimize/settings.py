@@ -83,6 +83,11 @@ class SolveSettings:
             raise ValueError("the finish holds the keyframes after one search; augmented-"
                              "Lagrangian rounds (--rounds, --weight-growth, or the file's) "
                              "hold them their own way: choose one (--finish none)")
+        if self.shooting is not None and not get_method(self.method).shoots:
+            raise ValueError(f"multiple shooting (--segments, --shooting) searches segments' "
+                             f"controls and nodes, which {get_method(self.method).label} does "
+                             "not: it poses every step itself; drop --segments, or choose "
+                             "another --method")
         if self.rounds is not None and self.resolutions and not self.coarser_only:
             raise ValueError("coarse meshes (--resolution) and augmented-Lagrangian rounds "
                              "(--rounds, --weight-growth) do not combine: choose one")
@@ -136,8 +141,10 @@ def settings_from(file: Mapping | None = None, given: Mapping | None = None) -> 
     a sweep point (``given``: the values asked for; None is not asked) ask for: what is
     given wins, then the file's, then the defaults; the file's method options hold for its
     own method only; multiple shooting's options go over the file's (``segments`` 1 or less:
-    none); rounds asked for replace the file's default meshes, and meshes asked for its
-    rounds (both asked: refused); ``finish`` ``"none"`` drops the file's."""
+    none; the file's left out for a method that does not shoot,
+    :attr:`~.methods.Method.shoots`); rounds asked for replace the file's default meshes,
+    and meshes asked for its rounds (both asked: refused); ``finish`` ``"none"`` drops the
+    file's."""
     file = dict(file or {})
     given = {k: v for k, v in (given or {}).items() if v is not None}
     for where, values in (("the problem file's SOLVE", file), ("a solve request", given)):
@@ -164,7 +171,9 @@ def settings_from(file: Mapping | None = None, given: Mapping | None = None) -> 
         values["resolutions"] = given["resolutions"]
     elif not rounds and file.get("resolutions"):
         values["resolutions"], values["coarser_only"] = file["resolutions"], True
-    values["shooting"] = _merged_shooting(file.get("shooting"), given.get("shooting"))
+    shoots = get_method(values.get("method", SolveSettings.method)).shoots
+    values["shooting"] = _merged_shooting(file.get("shooting") if shoots else None,
+                                          given.get("shooting"))
     finish = given.get("finish", file.get("finish"))
     if isinstance(finish, str) and finish != "none" and split_top(finish)[:1] == ["none"]:
         raise ValueError(f"--finish none drops the finish and takes no options; got "

@@ -24,7 +24,7 @@ METHODS: dict[str, Method] = {
                             least_squares.LeastSquaresOptions),
     "transcription": Method("the transcription in positions", transcription.run,
                             transcription.TranscriptionOptions, stop="method",
-                            ranks="effort"),
+                            ranks="effort", shoots=False),
 }
 
 __all__ = ["METHODS", "LibraryOptions", "Method", "SearchCall", "TypedOptions",

@@ -68,6 +68,10 @@ class Method:
     ranks: str = "objective"
     """How the points that meet the goal are ranked: by the objective, or ("effort") by
     their control cost, for a method that minimises the effort under the goal."""
+    shoots: bool = True
+    """Whether it can search multiple shooting's segments (their controls and nodes); a
+    method that poses the whole motion its own way (the transcription: every step met
+    step by step) does not, and a problem file's multiple shooting is left out for it."""
 
 
 class LibraryOptions:

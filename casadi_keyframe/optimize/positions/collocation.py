@@ -15,13 +15,12 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from ...interrupts import OutOfTime, check
 from ...state import SimulationError
 from ..finish.constraint import control_hessian
 from ..outcome import ipopt_outcome
 from .defects import StepDefects
 from .goal import goal_constraints
-from .interior import PositionNLP, ones_pattern, search
+from .interior import PositionNLP, each_iterate, ones_pattern, search
 from .strain import StrainPenalty
 from .stretch import StretchLimit
 from .transcription import TranscriptionError
@@ -166,16 +165,7 @@ def run_defects(problem, ev, u0, call, start_positions):
     u_start = problem.initial_controls() if u0 is None else np.asarray(u0, float)
     w0 = np.concatenate([d.unknowns(start_positions(problem, start, u_start)), u_start])
 
-    def each(w):
-        try:  # an interior iterate's controls may make a run the simulation refuses
-            ev.offer(d.split(w)[1])
-        except SimulationError:
-            pass
-        check()
-        if call.deadline.passed():
-            raise OutOfTime(call.deadline)
-        call.on_iteration()
-
+    each = each_iterate(lambda w: ev.offer(d.split(w)[1]), call)
     status, w, iterations = search(nlp, w0, maxiter=call.maxiter, tol=options.settle,
                                    deadline=call.deadline, on_iteration=each)
     z, u = d.split(w)

@@ -23,7 +23,7 @@ def weighted_step_hessian(tr):
     ``<W, e_n>`` in the three frames stacked (``9n`` square, sparse; ``e_n`` the inverse step
     of :mod:`.transcription`) and its pattern's triplets."""
     n = tr.n
-    step = inverse_step_function(tr.problem.model, tr.dt).expand()
+    step = inverse_step_function(tr.model, tr.dt).expand()
     frames = [ca.SX.sym(name, 3, n) for name in ("before", "now", "next")]
     scene = ca.SX.sym("scene", tr.scene.shape[0])
     weights = ca.SX.sym("w", 3, n)

@@ -42,6 +42,14 @@ def check_defects(problem) -> None:
         raise TranscriptionError(
             f"{problem.name}: per-step forces on every free particle follow from the "
             "positions in closed form: use Transcription, not StepDefects")
+    found = [f.name for f in getattr(problem.model, "families", ())
+             if not getattr(f, "fixed_pairs", True)]
+    if found:
+        raise TranscriptionError(
+            f"{problem.name}: its {', '.join(found)} acts over pairs found per state, which "
+            "the defects (the step as a constraint) cannot write, and its controls are "
+            "fewer than a force per free particle, so no replay can write it instead: "
+            "build it without (self_contact=None), or solve it with method='lbfgsb'")
 
 
 def _sparse(fn: ca.Function, arg) -> sp.csc_matrix:
@@ -95,7 +103,7 @@ class StepDefects(Transcription):
         self.scale = np.tile(self.dt ** 2 / m, self.N)
         self._B_free = self.B[(np.arange(self.N)[:, None] * 3 * self.n
                                + self.free_flat[None, :]).ravel()]
-        step = inverse_step_function(problem.model, self.dt)
+        step = inverse_step_function(self.model, self.dt)
         frames = [ca.MX.sym(s, 3, self.n) for s in ("before", "now", "next")]
         scene = ca.MX.sym("scene", self.scene.shape[0])
         behind = ca.jacobian(step(*frames, scene), ca.vec(frames[0]))

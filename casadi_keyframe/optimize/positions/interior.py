@@ -24,7 +24,8 @@ import casadi as ca
 import numpy as np
 import scipy.sparse as sp
 
-from ...interrupts import Interrupted, OutOfTime, catching
+from ...interrupts import Interrupted, OutOfTime, catching, check
+from ...state import SimulationError
 from ..ipopt_callbacks import IterationHook, NumericFunction
 from .curvature import EffortCurvature
 from .strain import StrainPenalty
@@ -203,6 +204,23 @@ def _derivatives(nlp: PositionNLP) -> dict:
             "hess_lag", [x, p, one, ca.Sparsity.dense(m, 1)], [hess_pattern],
             lambda z, _, sigma, lam: (nlp.hessian(z, sigma[0], lam).data,))
     return derivatives
+
+
+def each_iterate(offer, call):
+    """IPOPT's per-iteration callback for a call: ``offer(w)`` the iterate to the run's
+    keeper (an interior iterate the simulation refuses, a torn cloth, is skipped), then a
+    safe point for signals, the deadline and the call's progress."""
+    def each(w):
+        try:
+            offer(w)
+        except SimulationError:
+            pass
+        check()
+        if call.deadline.passed():
+            raise OutOfTime(call.deadline)
+        call.on_iteration()
+
+    return each
 
 
 def search(nlp: PositionNLP, z0, *, maxiter: int, tol: float, deadline, on_iteration):

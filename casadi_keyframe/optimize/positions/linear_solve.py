@@ -37,7 +37,8 @@ from ... import progress
 from ...interrupts import check
 
 LINEAR = ("auto", "direct", "iterative")
-AUTO_SIZE = 60_000  # unknowns above which linear="auto" solves iteratively (docs/search_notes.md)
+AUTO_FACTOR = 8e7  # unknowns times one frame's above which linear="auto" solves iteratively:
+# the factor frame after frame holds about that many non-zeros (docs/search_notes.md)
 CG_TOL = 1e-6  # relative residual at which conjugate gradients stop
 CG_MAXITER = 400  # conjugate gradient iterations per solve at most
 CG_SETTLE = 1e-3  # stop once the model falls by less than this share over WINDOW iterations
@@ -48,7 +49,8 @@ PRECONDITIONERS = ("steps", "frames", "jacobi", "none")
 @dataclass
 class LinearChoice:
     """How the step's system is solved: ``linear`` one of :data:`LINEAR`; ``auto`` is
-    iterative above :data:`AUTO_SIZE` unknowns."""
+    iterative where the unknowns times one frame's unknowns (the size of the factor frame
+    after frame, about) exceed :data:`AUTO_FACTOR`."""
 
     linear: str = "auto"
     tol: float = CG_TOL
@@ -63,8 +65,10 @@ class LinearChoice:
             raise ValueError(f"preconditioner={self.preconditioner!r}: give one of "
                              f"{', '.join(PRECONDITIONERS)}")
 
-    def iterative(self, size: int) -> bool:
-        return self.linear == "iterative" or (self.linear == "auto" and size > AUTO_SIZE)
+    def iterative(self, size: int, frame: int) -> bool:
+        """Whether ``size`` unknowns, ``frame`` of them per frame, are solved iteratively."""
+        return self.linear == "iterative" or (self.linear == "auto"
+                                              and size * frame > AUTO_FACTOR)
 
 
 class StepOperator:
@@ -107,10 +111,11 @@ class StepOperator:
 
 class StepPreconditioner:
     """The module docstring's ``"steps"``, ``(L^T Q L)^-1`` for a transcription ``tr`` whose control
-    Hessian is ``Q`` and whose damping metric weighs a force by ``weight``: :meth:`update`
+    Hessian is ``Q`` and whose damping metric weighs a force by ``weight`` and a component by
+    ``scale`` (:func:`~.sqp.inertial_scale`): :meth:`update`
     at each iterate (``J``, ``mu``), then called on residuals ``(size,)`` or ``(size, k)``."""
 
-    def __init__(self, tr, Q, weight: float, metric):
+    def __init__(self, tr, Q, weight: float, metric, scale):
         self.N, self.nf = tr.N, tr.nf
         idx = tr.problem.controls.idx
         comps = (idx[:, None] * 3 + np.arange(3)).ravel()
@@ -123,7 +128,6 @@ class StepPreconditioner:
         q = np.asarray(sp.csr_matrix(Q).diagonal())[self.rows] if self.usable else None
         self.q = q
         self.weight = weight
-        scale = np.repeat(tr.problem.model.masses, 3)[tr.free_flat] / tr.dt ** 2
         self.S = sp.kron(_lower_root(metric, tr.N, tr.nf, weight * scale[0] ** 2),
                          sp.diags(scale)).tocsr()
         self.blocks = self.lower = self.upper = None
@@ -237,7 +241,8 @@ def iterative_system(sqp, x, lam, mu: float, choice: LinearChoice) -> IterativeS
     kind = choice.preconditioner
     if kind == "steps":
         if getattr(sqp, "_preconditioner", None) is None:
-            sqp._preconditioner = StepPreconditioner(sqp.tr, sqp.Q, sqp.weight, sqp.metric)
+            sqp._preconditioner = StepPreconditioner(sqp.tr, sqp.Q, sqp.weight, sqp.metric,
+                                                     sqp.scale)
         pre = sqp._preconditioner
         if pre.usable:
             pre.update(x.J, mu)

@@ -5,7 +5,8 @@ It minimises the problem's control cost (and its strain penalty, :mod:`.strain`)
 positions of every frame with every keyframe held within ``margin`` of its tolerance
 (:mod:`.sqp`), starting from the motion of
 the start controls (``start="controls"``: the problem's guess, or zero forces), the start
-state held still (``"rest"``) or the positions blended between the keyframes' targets
+state held still (``"rest"``; where particles are led along paths, held still relative to
+them: :mod:`.rest`) or the positions blended between the keyframes' targets
 (``"blend"``); controls handed in (``--resume``, ``u0=``) override ``start``: the search
 goes on from their motion.  Each kept iterate's controls are replayed along its positions
 (:mod:`.replay`) and offered to the evaluator, which judges and keeps the best as for any
@@ -18,7 +19,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from ...interrupts import OutOfTime, check
+from ...interrupts import check
 from ...objectives.paths import keyframe_path
 from ...state import SimulationError
 from ..finish.constraint import control_hessian
@@ -26,8 +27,9 @@ from ..options import TypedOptions, real
 from ..outcome import CONVERGED, FAILED, LIMIT, ipopt_outcome
 from .collocation import run_defects
 from .goal import MARGIN, goal_constraints
-from .interior import PositionNLP, search
+from .interior import PositionNLP, each_iterate, search
 from .replay import replay_controls
+from .rest import carried_rest
 from .linear_solve import LINEAR, LinearChoice
 from .sqp import PositionSQP
 from .stretch import StretchLimit
@@ -70,8 +72,8 @@ class TranscriptionOptions(TypedOptions):
 
 def start_positions(problem, start: str, u0) -> np.ndarray:
     """The positions ``(steps + 1, n, 3)`` a search in positions starts from."""
-    if start == "rest":
-        return np.repeat(problem.x0[None], problem.steps + 1, axis=0)
+    if start == "rest":  # held still, relative to the particles led along paths if any
+        return carried_rest(problem)
     if start == "blend":
         terms = sorted((t for t in problem.objective_terms.state_terms
                         if getattr(t, "position_target", None) is not None),
@@ -141,17 +143,11 @@ def _interior(problem, tr, constraints, z0, call, offer, replayed):
 
     offered = []
 
-    def each(z):
-        try:  # an interior iterate may be a plan the simulation refuses (a torn cloth)
-            offer(z)
-            offered.append(z)
-        except SimulationError:
-            pass
-        check()
-        if call.deadline.passed():
-            raise OutOfTime(call.deadline)
-        call.on_iteration()
+    def kept(z):
+        offer(z)
+        offered.append(z)
 
+    each = each_iterate(kept, call)
     status, z, iterations = search(nlp, z0, maxiter=call.maxiter, tol=call.options.settle,
                                    deadline=call.deadline, on_iteration=each)
     if not offered or not np.array_equal(offered[-1], z):

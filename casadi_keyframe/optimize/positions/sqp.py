@@ -176,6 +176,7 @@ class PositionSQP:
         self._fill = None
         self.mu_used = None
         self.weight = float(np.mean(Q.diagonal()))
+        self.scale = inertial_scale(tr)  # the metric's weight of a component
         self.metric = damping_metric(tr, self.weight)
 
     def point(self, z, jacobian: bool = True) -> Point:
@@ -278,7 +279,7 @@ class PositionSQP:
         while the matrix does not factor)."""
         while True:  # a matrix that does not factor (round-off): more damping
             try:
-                if self.linear.iterative(self.tr.size):
+                if self.linear.iterative(self.tr.size, self.tr.nf):
                     system = iterative_system(self, x, lam, mu, self.linear)
                     self.solves = system.solves
                     return system.solve, system.curvature, mu
@@ -351,19 +352,31 @@ class PositionSQP:
 
 def damping_metric(tr, weight: float, share: float = POSITION_SHARE) -> sp.csr_matrix:
     """The damping's metric: the control cost (``weight`` per unit force squared) of the
-    inertial forces ``M (p_{n+1} - 2 p_n + p_{n-1}) / dt^2`` a change ``p`` of the positions
-    asks, plus ``share`` of the cost of ``M p / dt^2`` itself.  The first damps a change
-    that jerks a frame (a snap onto a keyframe) hard and one spread smoothly over many
-    frames lightly, where a metric of the positions alone prefers the snap (it moves the
-    fewest frames); the second bounds the smooth changes too, the directions in which a
-    buckling sheet's forces change the least to first order and the linear model fails
-    soonest."""
+    inertial forces ``m (p_{n+1} - 2 p_n + p_{n-1}) / dt^2`` a change ``p`` of the positions
+    asks, plus ``share`` of the cost of ``m p / dt^2`` itself, ``m`` the free particles'
+    mean mass (:func:`inertial_scale`).  The first damps a change that jerks a frame (a snap
+    onto a keyframe) hard and one spread smoothly over many frames lightly, where a metric
+    of the positions alone prefers the snap (it moves the fewest frames); the second bounds
+    the smooth changes too, the directions in which a buckling sheet's forces change the
+    least to first order and the linear model fails soonest.  One mass for all: the
+    keyframes count every particle alike, and a metric weighing each by its own mass
+    squared makes a light one (a corner holds a quarter of an inner particle's mass) many
+    times cheaper to move, so the damped step, along ``D^-1`` of the keyframes' gradients,
+    throws a sheet's free corners and edges far past their targets in the last frames and
+    stretches their springs beyond any model (docs/search_notes.md)."""
     N = tr.N
     T = sp.diags([np.ones(N), -2 * np.ones(N - 1), np.ones(N - 2)], [0, -1, -2],
                  shape=(N, N))  # row: step n; column: frame n+1, n, n-1 (frames 1..N)
-    scale = np.repeat(tr.problem.model.masses, 3)[tr.free_flat] / tr.dt ** 2
+    scale = inertial_scale(tr)
     S = sp.kron(T, sp.diags(scale)).tocsr()
     return (weight * (S.T @ S + share * sp.diags(np.tile(scale ** 2, N)))).tocsr()
+
+
+def inertial_scale(tr) -> np.ndarray:
+    """``m / dt^2`` for every free component of a frame, ``m`` the free particles' mean mass:
+    the damping metric's weight of a particle (:func:`damping_metric`)."""
+    masses = np.repeat(tr.problem.model.masses, 3)[tr.free_flat]
+    return np.full(tr.nf, masses.mean() / tr.dt ** 2)
 
 
 def _active_set(c, A, p0, W):

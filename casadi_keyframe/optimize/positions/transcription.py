@@ -16,7 +16,10 @@ matrix whose pattern is fixed.
 
 The step's discrete decisions (springs taken taut at a stop, particles held by a body) are
 not decided here: :mod:`.replay` computes the controls a result returns by the integrator's
-own inverse step along the replay, which decides them as ``simulate`` does.
+own inverse step along the replay, which decides them as ``simulate`` does.  Families that
+act over pairs found per state (self-contact) have no fixed pattern and are left out of the
+plan (:func:`planned_model`): the replay's inverse step writes their forces into the
+controls, so the result still replays its positions.
 """
 from __future__ import annotations
 
@@ -52,6 +55,15 @@ def check_steps(problem) -> None:
             "'constraint'), a decision of the step the inverse step cannot write in "
             "positions: give collision='penalty' (the paper's penalty springs, which it "
             "writes), or solve it without --method (the problem's own SOLVE)")
+
+
+def planned_model(model):
+    """The model whose step the transcription writes: ``model`` without its families over
+    pairs found per state (self-contact: no fixed pattern, and over all pairs its symbolic
+    step grows with the square of the particles), left to the replay (module docstring)."""
+    restricted = getattr(model, "restricted", None)
+    return model if restricted is None else restricted(lambda f: getattr(f, "fixed_pairs",
+                                                                         True))
 
 
 def full_forces(problem) -> bool:
@@ -103,7 +115,7 @@ class Transcription:
     def __init__(self, problem):
         self.check(problem)
         self.problem = problem
-        model = problem.model
+        model = self.model = planned_model(problem.model)
         self.n, self.N, self.dt = model.n, problem.steps, problem.dt
         self.free = model.free_mask().reshape(self.n, 3)
         self.free_flat = np.flatnonzero(self.free.ravel())
@@ -178,7 +190,7 @@ class Transcription:
         x = self.frames(z)
         v = self.velocities(x)
         w, q = v[1:], v[1:] - v[:-1]
-        parts = self.problem.model.step_jacobians(x[:-1], v[:-1], w, q, self.times, self.dt)
+        parts = self.model.step_jacobians(x[:-1], v[:-1], w, q, self.times, self.dt)
         values = [self._mass_values()] + [_frame_blocks(blocks, self.dt).ravel()
                                           for _, blocks in parts]
         if self._jacobian is None:
@@ -188,7 +200,7 @@ class Transcription:
     def _mass_values(self) -> np.ndarray:
         """The masses' part of each step's three frame blocks, ``M / dt^2 (1, -2, 1)``, per
         step, particle, frame and component (the diagonal)."""
-        m = np.repeat(self.problem.model.masses, 3) / self.dt ** 2
+        m = np.repeat(self.model.masses, 3) / self.dt ** 2
         return np.broadcast_to(np.array([1.0, -2.0, 1.0])[None, :, None] * m[None, None, :],
                                (self.N, 3, 3 * self.n)).ravel()
 

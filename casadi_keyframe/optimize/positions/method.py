@@ -51,7 +51,7 @@ class TranscriptionOptions(TypedOptions):
     IPOPT's ``tol``); ``hessian``: IPOPT's Hessian of the effort, its Gauss-Newton matrix
     or the exact one (:mod:`.curvature`); ``linear``: the SQP's step solved by a sparse
     factorisation ("direct"), by preconditioned conjugate gradients without forming its
-    matrix ("iterative", :mod:`.linear_solve`) or by the number of unknowns ("auto")."""
+    matrix ("iterative", :mod:`.linear_solve`) or by the size of the factor ("auto")."""
 
     label: ClassVar[str] = "the transcription"
     CHECKS: ClassVar[dict] = {

@@ -360,7 +360,8 @@ def damping_metric(tr, weight: float, share: float = POSITION_SHARE) -> sp.csr_m
     the smooth changes too, the directions in which a buckling sheet's forces change the
     least to first order and the linear model fails soonest.  One mass for all: the
     keyframes count every particle alike, and a metric weighing each by its own mass
-    squared makes a light one (a corner holds a quarter of an inner particle's mass) many
+    squared makes a light one (a sheet's corner holds a quarter to a sixth of an inner
+    particle's mass) many
     times cheaper to move, so the damped step, along ``D^-1`` of the keyframes' gradients,
     throws a sheet's free corners and edges far past their targets in the last frames and
     stretches their springs beyond any model (docs/search_notes.md)."""

@@ -361,10 +361,9 @@ def damping_metric(tr, weight: float, share: float = POSITION_SHARE) -> sp.csr_m
     least to first order and the linear model fails soonest.  One mass for all: the
     keyframes count every particle alike, and a metric weighing each by its own mass
     squared makes a light one (a sheet's corner holds a quarter to a sixth of an inner
-    particle's mass) many
-    times cheaper to move, so the damped step, along ``D^-1`` of the keyframes' gradients,
-    throws a sheet's free corners and edges far past their targets in the last frames and
-    stretches their springs beyond any model (docs/search_notes.md)."""
+    particle's mass) many times cheaper to move, so the damped step, along ``D^-1`` of the
+    keyframes' gradients, throws a sheet's free corners and edges far past their targets in
+    the last frames and stretches their springs beyond any model (docs/search_notes.md)."""
     N = tr.N
     T = sp.diags([np.ones(N), -2 * np.ones(N - 1), np.ones(N - 2)], [0, -1, -2],
                  shape=(N, N))  # row: step n; column: frame n+1, n, n-1 (frames 1..N)

@@ -17,20 +17,63 @@ class Smoothness(ControlTerm):
     |du/dt|^2 dt``, so a weight means the same physical cost at any dt (a force held constant
     has the same alpha-cost on a grid twice as fine; a jump between steps costs more on it).
     For initial velocities: ``0.5 alpha |u|^2``.
+
+    ``weights`` (one per controlled particle, the paper's ``C_n``): each particle's share
+    of both sums is weighed by its own (:meth:`in_accelerations` makes the cost one of
+    accelerations).  None weighs every particle by 1.
     """
 
     label = "Smoothness"
 
-    def __init__(self, alpha: float, *, temporal: float = 0.0):
+    def __init__(self, alpha: float, *, temporal: float = 0.0, weights=None):
         if alpha < 0 or temporal < 0:
             raise ValueError("Smoothness weights must be non-negative")
         self.alpha, self.temporal = float(alpha), float(temporal)
+        self.weights = None
+        if weights is not None:
+            self.weights = np.asarray(weights, dtype=float).ravel()
+            if not np.all(np.isfinite(self.weights)) or np.any(self.weights <= 0):
+                raise ValueError("Smoothness weights: give one positive finite number per "
+                                 "controlled particle")
+
+    @classmethod
+    def in_accelerations(cls, alpha: float, masses, *, temporal: float = 0.0) -> "Smoothness":
+        """The cost of the control accelerations ``u / m`` (``masses``: the controlled
+        particles', in their order), each particle's force weighed by ``(mean mass / m)^2``:
+        a particle of the mean mass costs what it costs unweighted.  Unweighted, a particle
+        a sixth as heavy (a mesh's corner) is thirty-six times cheaper to accelerate, and a
+        least-effort search jerks the light ones."""
+        masses = np.asarray(masses, dtype=float).ravel()
+        if masses.size == 0 or np.any(masses <= 0):
+            raise ValueError("Smoothness.in_accelerations: give the controlled particles' "
+                             "masses, every one positive")
+        return cls(alpha, temporal=temporal, weights=(masses.mean() / masses) ** 2)
+
+    def _roots_of_weights(self, controls) -> np.ndarray | None:
+        """``sqrt(weight)`` of every entry of one step's block (None: unweighted)."""
+        if self.weights is None:
+            return None
+        if self.weights.size != controls.idx.size:
+            raise ValueError(f"Smoothness weights: {self.weights.size} given, the controls "
+                             f"move {controls.idx.size} particles; give one per controlled "
+                             "particle, in the controls' order")
+        return np.repeat(np.sqrt(self.weights), controls.block_shape[-1])
+
+    def _scaled(self, u, controls) -> np.ndarray:
+        """The flat controls ``u`` with every entry times its particle's ``sqrt(weight)``:
+        the weighted term is the unweighted one of these."""
+        root = self._roots_of_weights(controls)
+        u = np.asarray(u, float)
+        return u if root is None else u * np.tile(root, controls.size // root.size)
 
     def symbolic(self, U, controls, dt):
         """The term as a CasADi expression of the flat control vector ``U``."""
+        root = self._roots_of_weights(controls)
         blocks = controls.step_blocks(U)  # (block, steps) matrix, or None for no steps
         if blocks is None:
-            return 0.5 * self.alpha * ca.sumsqr(U)
+            return 0.5 * self.alpha * ca.sumsqr(U if root is None else ca.DM(root) * U)
+        if root is not None:
+            blocks = ca.DM(root) * blocks  # each row (a particle's component) weighed
         val = 0.5 * self.alpha * dt * ca.sumsqr(blocks)
         if self.temporal and blocks.shape[1] > 1:
             val += 0.5 * self.temporal / dt * ca.sumsqr(blocks[:, 1:] - blocks[:, :-1])
@@ -48,7 +91,7 @@ class Smoothness(ControlTerm):
 
     def residual(self, u, controls, dt) -> np.ndarray:
         root, change, steps = self._roots(controls, dt)
-        u = np.asarray(u, float)
+        u = self._scaled(u, controls)
         if not change:
             return root * u
         blocks = u.reshape(steps, -1)
@@ -66,4 +109,4 @@ class Smoothness(ControlTerm):
             blocks = out.reshape(steps, -1)  # a view: adds into out
             blocks[1:] += diff
             blocks[:-1] -= diff
-        return out
+        return self._scaled(out, controls)

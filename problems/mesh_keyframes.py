@@ -26,8 +26,12 @@ gradient grows by orders of magnitude per second on fine meshes
 (``control``: ``velocity`` for initial velocities only; ``smoothing`` metres searches in a
 metric smooth over the mesh).  The objective: each keyframe at ``weight`` per particle,
 ``Smoothness(alpha)`` (``alpha``) and ``StrainLimit`` (``strain_limit``,
-``strain_weight``).  ``rest_band`` makes the linearized step's spring stiffness turn smoothly
-across rest over that strain band (``ClothParams.rest_band``; 0 is the paper's step): the
+``strain_weight``).  ``effort`` is what the control cost measures: "acceleration" (the
+default: each particle's force over its mass, as a result's effort is judged) or "force"
+(the paper's ``alpha |u|^2``, under which a mesh's light corners, a quarter to a sixth of
+an inner particle's mass, are the cheapest to jerk, and least-effort searches do).
+``rest_band`` makes the linearized step's spring stiffness turn smoothly across rest over
+that strain band (``ClothParams.rest_band``; 0 is the paper's step): the
 motion is then a continuous function of the forces, which the search from zero forces
 needs on a buckling sheet (``SOLVE``: scipy's trust-region least squares on the exact
 residual products).  By default it is 0.05 with ``guess=none`` and 0 otherwise: along a
@@ -44,6 +48,13 @@ so sensitive to the forces between the keyframes (the sheet buckles) that the ex
 gradient grows by many orders of magnitude over the horizon, and the search often finds
 no better point than its start (a run that ends short of the keyframes exits with code 1, its
 result written; ``docs/search_notes.md`` has what was measured and tried).
+``--method transcription`` searches in positions instead: least effort with the keyframes
+held, from the zero-force motion or ``--option start=rest`` (the sheet held still), no
+controller needed and no exact gradient over the horizon.  ``SOLVE`` does not choose it:
+from the aimed controller the goal is met at the start in seconds, and from zero forces
+the least squares meets it in about the same time at a lower rms effort (the transcription
+at a lower peak, with a margin on the tolerance); on the 30 x 30 walkthrough from rest it
+takes the better part of an hour (``docs/problem_notes.md``).
 
     casadi-keyframe solve mesh_keyframes --set cloth=sheet.obj \\
         --set keyframes=40:wave.obj,80:fold.obj --set pins=0,29 --out results/mine
@@ -54,7 +65,8 @@ vertex count or other faces, a pin out of range or a frame beyond ``steps`` is r
 the option's name (exit code 2).  The Blender add-on in ``blender/`` runs this problem.
 """
 from casadi_keyframe.meshes import check_mesh
-from casadi_keyframe.scenes.mesh_cloths import (bodies_of, colliders_of, mesh_keyframe_problem,
+from casadi_keyframe.scenes.mesh_cloths import (EFFORTS, bodies_of, colliders_of,
+                                                 mesh_keyframe_problem,
                                                  parse_keyframes, pin_body_of, pinned_of,
                                                  read_option, refuse)
 from casadi_keyframe.scenes.mesh_targets import fold, hanging_sheet, wave
@@ -74,7 +86,7 @@ def SOLVE(guess: str = "aim", **_) -> dict:
 RANGES = {"ground": "(-inf, inf)", "steps": "[1, inf)", "dt": "(0, inf)", "mass": "(0, inf)", "weight": "[0, inf)",
           "alpha": "[0, inf)", "strain_limit": "[1, inf)", "strain_weight": "[0, inf)",
           "smoothing": "(0, inf)", "wrinkle": "[0, inf)", "rest_band": "[0, 1)", "control": ("forces", "velocity"),
-          "guess": ("aim", "track", "land", "none")}
+          "guess": ("aim", "track", "land", "none"), "effort": EFFORTS}
 
 
 def build(cloth: str | None = None, keyframes: str | None = None,
@@ -87,7 +99,7 @@ def build(cloth: str | None = None, keyframes: str | None = None,
           weight: float = 100.0, alpha: float = 1e-4, align: bool = False,
           strain_limit: float = 1.2, strain_weight: float = 1e3,
           smoothing: float | None = None, wrinkle: float = 0.002, guess: str = "aim",
-          rest_band: float | None = None):
+          rest_band: float | None = None, effort: str = "acceleration"):
     if cloth is None:
         if keyframes is not None:
             raise refuse("keyframes", "targets need the cloth they shape: give cloth=FILE too")
@@ -116,4 +128,4 @@ def build(cloth: str | None = None, keyframes: str | None = None,
                                  strain_weight=strain_weight, smoothing=smoothing,
                                  wrinkle=wrinkle, guess=guess,
                                  rest_band=(ZERO_START_BAND if guess == "none" else 0.0)
-                                 if rest_band is None else rest_band)
+                                 if rest_band is None else rest_band, effort=effort)

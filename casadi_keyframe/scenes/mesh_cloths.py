@@ -30,6 +30,7 @@ from ..objectives.paths import keyframe_path
 PROBLEM = "mesh_keyframes"
 EXAMPLE = "40:wave.obj,80:fold.obj"
 AIM_RUNS = 2  # guess "aim": the tracking controller's learning runs before the one it keeps
+EFFORTS = ("acceleration", "force")  # the control cost's measure of per-step forces
 
 
 def refuse(option: str, message: str):
@@ -272,7 +273,7 @@ def _tracked(prob, terms, aims) -> np.ndarray:
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
                           smoothing=None, wrinkle=0.0, guess="aim", rest_band=0.0,
-                          pin_motion=None, pin_body=None):
+                          pin_motion=None, pin_body=None, effort="acceleration"):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
@@ -281,7 +282,9 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     without, or aimed by :data:`AIM_RUNS` learning runs, with "none" from zero forces;
     ``rest_band`` the springs' rest band in the step (:class:`~..models.ClothParams`);
     ``pin_motion`` or ``pin_body``: the pinned vertices move (:func:`moving_pins`), start
-    where their path starts and at the velocity of its first step."""
+    where their path starts and at the velocity of its first step; ``effort`` the control
+    cost's measure of per-step forces, "acceleration" (each force over its particle's mass:
+    :meth:`~..objectives.Smoothness.in_accelerations`) or "force" (the paper's)."""
     steps = max(f for f, _ in keyframes) if steps is None else steps
     moving = moving_pins(cloth, pinned, steps, dt, pin_motion, pin_body)
     model = ClothModel.from_file(cloth, pinned=pinned if moving is None else (), mass=mass,
@@ -293,7 +296,11 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
         raise refuse("pins", "every vertex is pinned: nothing can move")
     controls = (StepForces(agents=free, smoothing=smoothing) if control == "forces"
                 else InitialVelocity(agents=free, smoothing=smoothing))
-    objective = sum(terms, Smoothness(alpha) + StrainLimit(strain_limit, strain_weight))
+    if effort not in EFFORTS:
+        raise refuse("effort", f"give one of {', '.join(EFFORTS)}, got {effort!r}")
+    smooth = (Smoothness.in_accelerations(alpha, model.masses[free])
+              if effort == "acceleration" and control == "forces" else Smoothness(alpha))
+    objective = sum(terms, smooth + StrainLimit(strain_limit, strain_weight))
     x0, v0 = wrinkled(model, wrinkle), np.zeros((model.n, 3))
     if moving is not None:
         x0[pinned] = moving.positions(0.0)

@@ -21,6 +21,7 @@ rest state, each row against the forces that made it by control cost, rms and pe
 problems have no strain penalty (their runs stretch past the walkthrough's strain limit 1.2
 but not past the physical limit): the search minimises the control cost alone, the measure
 it is compared by, and the problem's judge still refuses a result past the physical limit.
+Their keyframes count as met within 1 cm (``KNOWN_TOL``).
 """
 import argparse
 import itertools
@@ -41,6 +42,8 @@ from casadi_keyframe.scenes.mesh_cloths import mesh_keyframe_problem  # noqa: E4
 from casadi_keyframe.scenes.mesh_targets import hanging_sheet  # noqa: E402
 
 ROWS, KNOWN_RMS = 12, 6.0
+KNOWN_TOL = 0.01  # m: the known targets' keyframes are met within 1 cm (their default, 1 %
+# of a target's extent, is up to 11.4 mm on these moved sheets)
 
 CASES = {"aim": ("aim", "controls"), "blend": ("none", "blend"), "rest": ("none", "rest"),
          "zero": ("none", "controls")}
@@ -93,7 +96,7 @@ def known_targets(seed: int):
                                                       for f in (40, 80)],
         steps=None, dt=base.dt, mass=0.3, pinned=base.model.pinned, control="forces",
         colliders=[], weight=100.0, alpha=1e-4, align=False, strain_limit=1.2,
-        strain_weight=0.0, wrinkle=0.002, guess="none", rest_band=0.05)
+        strain_weight=0.0, wrinkle=0.002, guess="none", rest_band=0.05, tolerance=KNOWN_TOL)
     return problem, forces
 
 

@@ -84,10 +84,13 @@ def pinned_of(mesh: Mesh, pins, pin_group, pin_box):
     return np.unique(np.concatenate(chosen))
 
 
-def targets_of(model, keyframes, steps, *, weight, align, cloth=None) -> list[MeshKeyframe]:
+def targets_of(model, keyframes, steps, *, weight, align, cloth=None,
+               tolerance=None) -> list[MeshKeyframe]:
     """One :class:`MeshKeyframe` per ``(frame, file)``, each checked against the cloth's
     vertices and faces and the horizon here, so the message names the option; a target
-    that is the ``cloth``'s own file is refused (a mistyped name, most likely)."""
+    that is the ``cloth``'s own file is refused (a mistyped name, most likely).
+    ``tolerance``: the rms position miss each counts as met (None: the keyframes' default,
+    1 % of the target's extent)."""
     terms = []
     for frame, target in keyframes:
         path = target.label() if isinstance(target, Mesh) else target
@@ -107,7 +110,8 @@ def targets_of(model, keyframes, steps, *, weight, align, cloth=None) -> list[Me
             raise refuse("keyframes", f"the target {path} (frame {frame}) has the cloth's "
                                       f"{model.n} vertices but other faces; export it from the "
                                       f"cloth's own mesh")
-        terms.append(MeshKeyframe(frame, mesh, weight=weight / model.n, align=align))
+        terms.append(MeshKeyframe(frame, mesh, weight=weight / model.n, align=align,
+                                  tolerance=tolerance))
     return terms
 
 
@@ -273,7 +277,8 @@ def _tracked(prob, terms, aims) -> np.ndarray:
 def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, control,
                           colliders, weight, alpha, align, strain_limit, strain_weight,
                           smoothing=None, wrinkle=0.0, guess="aim", rest_band=0.0,
-                          pin_motion=None, pin_body=None, effort="acceleration"):
+                          pin_motion=None, pin_body=None, effort="acceleration",
+                          tolerance=None):
     """The control problem: the cloth hangs from ``pinned`` and starts at rest in the
     file's shape (``wrinkle`` metres out of it, see :func:`wrinkled`); per-step forces (or
     initial velocities) on the free particles aim at each :class:`MeshKeyframe`, with a
@@ -284,13 +289,15 @@ def mesh_keyframe_problem(*, cloth: Mesh, keyframes, steps, dt, mass, pinned, co
     ``pin_motion`` or ``pin_body``: the pinned vertices move (:func:`moving_pins`), start
     where their path starts and at the velocity of its first step; ``effort`` the control
     cost's measure of per-step forces, "acceleration" (each force over its particle's mass:
-    :meth:`~..objectives.Smoothness.in_accelerations`) or "force" (the paper's)."""
+    :meth:`~..objectives.Smoothness.in_accelerations`) or "force" (the paper's);
+    ``tolerance`` the keyframes' (:func:`targets_of`)."""
     steps = max(f for f, _ in keyframes) if steps is None else steps
     moving = moving_pins(cloth, pinned, steps, dt, pin_motion, pin_body)
     model = ClothModel.from_file(cloth, pinned=pinned if moving is None else (), mass=mass,
                                  colliders=colliders, params=ClothParams(rest_band=rest_band),
                                  attachments=() if moving is None else (moving,))
-    terms = targets_of(model, keyframes, steps, weight=weight, align=align, cloth=cloth)
+    terms = targets_of(model, keyframes, steps, weight=weight, align=align, cloth=cloth,
+                       tolerance=tolerance)
     free = np.flatnonzero(model.free_mask()[::3])
     if free.size == 0:
         raise refuse("pins", "every vertex is pinned: nothing can move")

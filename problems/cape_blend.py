@@ -12,9 +12,13 @@ weights are divided by the particle count and the mean particle mass, so they me
 at every resolution.  From zero forces (``guess="passive"``, the paper's start) gradient
 searches stall far off or tear the cape, so the default start is a tracking guess
 (:mod:`casadi_keyframe.scenes.cape_tracking`) that lands on the walk's state; from zero
-forces ``SOLVE`` asks for multiple shooting.  ``contact`` > 1 makes the body's contact that
-many times softer and thicker (a homotopy level); ``collision`` how the body is touched;
-``friction`` the Coulomb coefficient of the body and the ground (0: frictionless).
+forces ``SOLVE`` asks for multiple shooting.  ``--method transcription`` (with
+``collision=penalty``, the contact the plan pays for) meets the goal from the cape held
+still (``--option start=rest``) without either, in less time, but at many times the
+effort this route ends with, so ``SOLVE`` does not choose it.  ``contact`` > 1 makes the
+body's contact that many times softer and thicker (a homotopy level); ``collision`` how the
+body is touched; ``friction`` the Coulomb coefficient of the body and the ground (0:
+frictionless).
 ``rest_band``: the strain band below rest over which the linearized step's spring stiffness
 turns smoothly (``ClothParams.rest_band``; 0, the default, is the paper's step).  ``body``
 what it is: its capsules ("capsules"), their surface as a triangle mesh animated per

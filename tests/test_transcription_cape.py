@@ -25,13 +25,18 @@ def cape():
     return ck.load_problem("cape_blend", **SMALL)
 
 
-def test_the_files_multiple_shooting_is_left_out_for_the_transcription():
+def test_the_files_multiple_shooting_and_finish_are_left_out_for_the_transcription():
     """cape_blend's SOLVE from zero forces asks for multiple shooting, which the
     transcription cannot run (it crashed inside it); asked for on the command line, it is
-    refused by name."""
+    refused by name.  The file's finish (the effort lowered with the keyframe held, what
+    the transcription's own search does) is left out too; one asked for still runs."""
     file = {"method": "lbfgsb", "shooting": {"segments": 6}, "finish": "effort"}
     assert settings_from(file, {"method": "transcription"}).shooting is None
+    assert settings_from(file, {"method": "transcription"}).finish is None
+    assert settings_from(file, {"method": "transcription",
+                                "finish": "effort"}).finish is not None
     assert settings_from(file, {"method": "ipopt"}).shooting.segments == 6
+    assert settings_from(file, {"method": "ipopt"}).finish is not None
     with pytest.raises(ValueError, match="--segments"):
         SolveSettings(method="transcription", shooting=4)
 

@@ -144,7 +144,8 @@ def settings_from(file: Mapping | None = None, given: Mapping | None = None) -> 
     none; the file's left out for a method that does not shoot,
     :attr:`~.methods.Method.shoots`); rounds asked for replace the file's default meshes,
     and meshes asked for its rounds (both asked: refused); ``finish`` ``"none"`` drops the
-    file's."""
+    file's, which is left out too for a method that minimises the effort under the goal
+    itself (:attr:`~.methods.Method.finishes`)."""
     file = dict(file or {})
     given = {k: v for k, v in (given or {}).items() if v is not None}
     for where, values in (("the problem file's SOLVE", file), ("a solve request", given)):
@@ -171,10 +172,10 @@ def settings_from(file: Mapping | None = None, given: Mapping | None = None) -> 
         values["resolutions"] = given["resolutions"]
     elif not rounds and file.get("resolutions"):
         values["resolutions"], values["coarser_only"] = file["resolutions"], True
-    shoots = get_method(values.get("method", SolveSettings.method)).shoots
-    values["shooting"] = _merged_shooting(file.get("shooting") if shoots else None,
+    method = get_method(values.get("method", SolveSettings.method))
+    values["shooting"] = _merged_shooting(file.get("shooting") if method.shoots else None,
                                           given.get("shooting"))
-    finish = given.get("finish", file.get("finish"))
+    finish = given.get("finish", file.get("finish") if method.finishes else None)
     if isinstance(finish, str) and finish != "none" and split_top(finish)[:1] == ["none"]:
         raise ValueError(f"--finish none drops the finish and takes no options; got "
                          f"{finish!r}: give 'none' alone, or a kind with options such as "

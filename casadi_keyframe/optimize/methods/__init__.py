@@ -24,7 +24,7 @@ METHODS: dict[str, Method] = {
                             least_squares.LeastSquaresOptions),
     "transcription": Method("the transcription in positions", transcription.run,
                             transcription.TranscriptionOptions, stop="method",
-                            ranks="effort", shoots=False),
+                            ranks="effort", shoots=False, finishes=False),
 }
 
 __all__ = ["METHODS", "LibraryOptions", "Method", "SearchCall", "TypedOptions",

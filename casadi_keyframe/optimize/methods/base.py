@@ -72,6 +72,11 @@ class Method:
     """Whether it can search multiple shooting's segments (their controls and nodes); a
     method that poses the whole motion its own way (the transcription: every step met
     step by step) does not, and a problem file's multiple shooting is left out for it."""
+    finishes: bool = True
+    """Whether a problem file's finish (the effort lowered with the keyframes held) follows
+    it; a method that already minimises the effort under the goal (the transcription) ends
+    where that finish would, so the file's is left out for it (one asked for in the solve
+    request still runs)."""
 
 
 class LibraryOptions:

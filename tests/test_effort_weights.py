@@ -78,6 +78,8 @@ def test_weights_of_another_count_or_sign_are_refused_by_name():
         Smoothness(ALPHA, weights=[1.0, -1.0])
     with pytest.raises(ValueError, match="masses"):
         Smoothness.in_accelerations(ALPHA, [1.0, 0.0])
+    with pytest.raises(ValueError, match="alpha and temporal"):
+        Smoothness(-1.0)
 
 
 def test_mesh_keyframes_measures_its_effort_in_accelerations_unless_told_force():

@@ -27,7 +27,7 @@ class Smoothness(ControlTerm):
 
     def __init__(self, alpha: float, *, temporal: float = 0.0, weights=None):
         if alpha < 0 or temporal < 0:
-            raise ValueError("Smoothness weights must be non-negative")
+            raise ValueError("Smoothness: alpha and temporal must be non-negative")
         self.alpha, self.temporal = float(alpha), float(temporal)
         self.weights = None
         if weights is not None:
